@@ -1,0 +1,56 @@
+"""The one agent interface that every planner and baseline implements.
+
+Open-loop (Table I, figures): ``fit(dataset)`` then ``predict(receiver_history) -> (H, 3)``, the
+predicted giver (= robot target) positions for the next H frames at the dataset rate.
+Closed-loop (the envs): ``reset()`` at episode start, then ``act(obs) -> (4,)`` once per 30 Hz
+env step, a Cartesian target (x, y, z, yaw) for the impedance controller.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from handover_env.data.dataset import HandoverDataset
+
+
+def validate_history(receiver_history: np.ndarray, min_frames: int = 1) -> np.ndarray:
+    """Return ``receiver_history`` as a float64 (T, 2) array or raise a clear ``ValueError``."""
+    arr = np.asarray(receiver_history, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f"receiver_history must have shape (T, 2), got {arr.shape}")
+    if arr.shape[0] < min_frames:
+        raise ValueError(f"receiver_history needs at least {min_frames} frame(s), got {arr.shape[0]}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("receiver_history contains NaN or inf")
+    return arr
+
+
+class Agent(ABC):
+    """Base class of all agents. Subclasses set ``horizon`` (H, frames at 30 Hz)."""
+
+    horizon: int = 30
+
+    def fit(self, dataset: HandoverDataset) -> Agent:  # noqa: B027 - reactive agents need no data
+        """Learn from demonstrations; returns ``self``. Agents without a learned model skip it."""
+        return self
+
+    @abstractmethod
+    def predict(self, receiver_history: np.ndarray) -> np.ndarray:
+        """Predict the giver trajectory for the next ``horizon`` frames.
+
+        Args:
+            receiver_history: (T, 2) observed receiver base xy up to now at 30 Hz, oldest first.
+
+        Returns:
+            (horizon, 3) predicted giver wrist xyz; row 0 is the current frame's target.
+        """
+
+    @abstractmethod
+    def reset(self) -> None:
+        """Forget the previous episode (streaming state, ensemble buffers)."""
+
+    @abstractmethod
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """One 30 Hz decision in an env: (x, y, z, yaw) float32 Cartesian target."""

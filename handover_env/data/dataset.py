@@ -1,0 +1,258 @@
+"""The canonical handover dataset: one format for the public recordings and our synthetic demos.
+
+Every learning method in the paper (Sec. IV-A, "Data Collection") learns from pairs
+(xi^r_k, xi^g_k): the receiver base xy trajectory and the giver wrist xyz trajectory of demo k,
+both sampled at 30 Hz. :class:`HandoverDataset` holds those pairs plus the receiver's hand, the
+object orientation, an ID/OOD flag and a source id, and saves them as one compressed ``.npz``
+that is read back with ``allow_pickle=False`` (nothing in the file can execute).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+FORMAT_VERSION = 1
+DEFAULT_RATE_HZ = 30.0
+
+_ARRAY_FIELDS: dict[str, int] = {
+    "receiver_xy": 2,
+    "receiver_hand_xyz": 3,
+    "giver_xyz": 3,
+    "object_quat": 4,
+}
+
+
+class DatasetError(ValueError):
+    """A dataset file or episode is malformed; the message names the file or episode."""
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One handover demonstration, all arrays at the dataset rate and of equal length T.
+
+    Attributes:
+        receiver_xy: (T, 2) receiver base (pelvis) xy in metres, the paper's input x^r.
+        receiver_hand_xyz: (T, 3) receiver right hand xyz in metres.
+        giver_xyz: (T, 3) giver wrist xyz in metres, the paper's x^g (the object position).
+        object_quat: (T, 4) object orientation quaternion (w, x, y, z).
+        is_ood: True for an out-of-distribution demo (the receiver wanders or pauses).
+        source_id: where the episode came from, e.g. ``motion_normal_12`` or ``synth_id_0007``.
+    """
+
+    receiver_xy: np.ndarray
+    receiver_hand_xyz: np.ndarray
+    giver_xyz: np.ndarray
+    object_quat: np.ndarray
+    is_ood: bool
+    source_id: str
+
+    def __post_init__(self) -> None:
+        lengths = set()
+        for name, width in _ARRAY_FIELDS.items():
+            arr = np.asarray(getattr(self, name), dtype=np.float64)
+            if arr.ndim != 2 or arr.shape[1] != width:
+                raise DatasetError(
+                    f"episode {self.source_id!r}: {name} must have shape (T, {width}), got {arr.shape}"
+                )
+            if not np.all(np.isfinite(arr)):
+                raise DatasetError(f"episode {self.source_id!r}: {name} contains NaN or inf")
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+            lengths.add(arr.shape[0])
+        if len(lengths) != 1:
+            raise DatasetError(f"episode {self.source_id!r}: arrays disagree in length: {sorted(lengths)}")
+        if next(iter(lengths)) < 2:
+            raise DatasetError(f"episode {self.source_id!r}: needs at least 2 frames")
+        object.__setattr__(self, "is_ood", bool(self.is_ood))
+        object.__setattr__(self, "source_id", str(self.source_id))
+
+    @property
+    def length(self) -> int:
+        """Number of frames T."""
+        return int(self.receiver_xy.shape[0])
+
+
+@dataclass
+class HandoverDataset:
+    """An ordered collection of :class:`Episode` at one sampling rate.
+
+    Args:
+        episodes: the demonstrations.
+        rate_hz: sampling rate shared by every episode (30 Hz in the public dataset).
+        name: free-text provenance, e.g. ``"public:/path/to/whole_motions"`` or ``"synthetic(seed=0)"``.
+    """
+
+    episodes: list[Episode]
+    rate_hz: float = DEFAULT_RATE_HZ
+    name: str = ""
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if not np.isfinite(self.rate_hz) or self.rate_hz <= 0:
+            raise DatasetError(f"rate_hz must be positive and finite, got {self.rate_hz}")
+        self.episodes = list(self.episodes)
+        for ep in self.episodes:
+            if not isinstance(ep, Episode):
+                raise DatasetError(f"expected Episode, got {type(ep).__name__}")
+
+    # ----------------------------------------------------------------- container protocol
+    def __len__(self) -> int:
+        return len(self.episodes)
+
+    def __iter__(self) -> Iterator[Episode]:
+        return iter(self.episodes)
+
+    def __getitem__(self, index: int) -> Episode:
+        return self.episodes[index]
+
+    @property
+    def n_frames(self) -> int:
+        """Total number of frames over all episodes."""
+        return int(sum(ep.length for ep in self.episodes))
+
+    @property
+    def ood_mask(self) -> np.ndarray:
+        """(N,) bool array, True for OOD episodes."""
+        return np.array([ep.is_ood for ep in self.episodes], dtype=bool)
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """(N,) int array of episode lengths."""
+        return np.array([ep.length for ep in self.episodes], dtype=np.int64)
+
+    @property
+    def dt(self) -> float:
+        """Seconds between frames."""
+        return 1.0 / self.rate_hz
+
+    def subset(self, indices: Sequence[int] | np.ndarray) -> HandoverDataset:
+        """A new dataset holding the episodes at ``indices`` (in that order)."""
+        idx = np.asarray(indices, dtype=np.int64).reshape(-1)
+        if idx.size and (idx.min() < -len(self) or idx.max() >= len(self)):
+            raise IndexError(f"index out of range for a dataset of {len(self)} episodes")
+        return HandoverDataset([self.episodes[i] for i in idx], rate_hz=self.rate_hz, name=self.name)
+
+    # ----------------------------------------------------------------- splits
+    def stratified_kfold(self, k: int, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Stratified k-fold split by the ID/OOD flag, as in the paper's Table I protocol.
+
+        Each stratum (ID, OOD) is shuffled with ``seed`` and dealt round-robin into ``k`` folds,
+        so every fold holds about 1/k of the ID and 1/k of the OOD episodes.
+
+        Returns:
+            ``k`` pairs ``(train_indices, test_indices)``; the test sets partition the dataset.
+        """
+        if not isinstance(k, (int, np.integer)) or k < 2:
+            raise ValueError(f"k must be an integer >= 2, got {k!r}")
+        mask = self.ood_mask
+        for label, count in (("ID", int((~mask).sum())), ("OOD", int(mask.sum()))):
+            if 0 < count < k:
+                raise ValueError(
+                    f"cannot make {k} stratified folds: only {count} {label} episodes "
+                    f"(each fold needs at least one); use fewer folds or more data"
+                )
+        if len(self) < k:
+            raise ValueError(f"cannot make {k} folds from {len(self)} episodes")
+        rng = np.random.default_rng(seed)
+        fold_of = np.empty(len(self), dtype=np.int64)
+        for stratum in (np.flatnonzero(~mask), np.flatnonzero(mask)):
+            perm = rng.permutation(stratum)
+            fold_of[perm] = np.arange(perm.size) % k
+        all_idx = np.arange(len(self))
+        return [(all_idx[fold_of != f], all_idx[fold_of == f]) for f in range(k)]
+
+    def subsample(self, ratio: float, seed: int = 0) -> HandoverDataset:
+        """A stratified random fraction of the episodes (the sample-efficiency figure).
+
+        Keeps ``max(1, round(ratio * n))`` episodes of each non-empty stratum (ID, OOD).
+        """
+        if not (0.0 < float(ratio) <= 1.0):
+            raise ValueError(f"ratio must be in (0, 1], got {ratio!r}")
+        rng = np.random.default_rng(seed)
+        mask = self.ood_mask
+        keep: list[np.ndarray] = []
+        for stratum in (np.flatnonzero(~mask), np.flatnonzero(mask)):
+            if stratum.size:
+                n = max(1, int(round(ratio * stratum.size)))
+                keep.append(np.sort(rng.choice(stratum, size=n, replace=False)))
+        return self.subset(np.sort(np.concatenate(keep)) if keep else np.array([], dtype=np.int64))
+
+    # ----------------------------------------------------------------- persistence
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write one compressed ``.npz`` (format version :data:`FORMAT_VERSION`); returns the path."""
+        path = Path(path)
+        if path.suffix != ".npz":
+            raise ValueError(f"dataset files end in .npz, got {path}")
+        if not self.episodes:
+            raise DatasetError("refusing to save an empty dataset")
+        lengths = self.lengths
+        arrays = {name: np.concatenate([getattr(ep, name) for ep in self.episodes]) for name in _ARRAY_FIELDS}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez_compressed(
+            tmp,
+            format_version=np.array(FORMAT_VERSION, dtype=np.int64),
+            rate_hz=np.array(self.rate_hz, dtype=np.float64),
+            name=np.array(self.name),
+            lengths=lengths,
+            is_ood=self.ood_mask,
+            source_id=np.array([ep.source_id for ep in self.episodes]),
+            **arrays,
+        )
+        os.replace(tmp, path)  # never leave a half-written file under the real name
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> HandoverDataset:
+        """Read a file written by :meth:`save`, validating every array.
+
+        Raises:
+            FileNotFoundError: the path does not exist.
+            DatasetError: the file is not a valid dataset; the message names the file and the problem.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no dataset file at {path}")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                content = {key: z[key] for key in z.files}
+        except Exception as exc:  # zipfile/ValueError/EOFError on a corrupt or non-npz file
+            raise DatasetError(f"{path}: not a readable .npz dataset ({exc})") from exc
+        required = {"format_version", "rate_hz", "lengths", "is_ood", "source_id", *_ARRAY_FIELDS}
+        missing = sorted(required - content.keys())
+        if missing:
+            raise DatasetError(f"{path}: missing keys {missing}")
+        version = int(content["format_version"])
+        if version != FORMAT_VERSION:
+            raise DatasetError(f"{path}: format version {version}, this code reads {FORMAT_VERSION}")
+        lengths = content["lengths"].astype(np.int64)
+        n = lengths.size
+        if lengths.ndim != 1 or np.any(lengths < 2):
+            raise DatasetError(f"{path}: invalid episode lengths")
+        if content["is_ood"].shape != (n,) or content["source_id"].shape != (n,):
+            raise DatasetError(f"{path}: is_ood/source_id do not match {n} episodes")
+        total = int(lengths.sum())
+        for name, width in _ARRAY_FIELDS.items():
+            if content[name].shape != (total, width):
+                raise DatasetError(f"{path}: {name} has shape {content[name].shape}, expected {(total, width)}")
+        bounds = np.concatenate([[0], np.cumsum(lengths)])
+        episodes = []
+        for i in range(n):
+            sl = slice(bounds[i], bounds[i + 1])
+            try:
+                episodes.append(
+                    Episode(
+                        **{name: content[name][sl] for name in _ARRAY_FIELDS},
+                        is_ood=bool(content["is_ood"][i]),
+                        source_id=str(content["source_id"][i]),
+                    )
+                )
+            except DatasetError as exc:
+                raise DatasetError(f"{path}: {exc}") from exc
+        name = str(content["name"]) if "name" in content else ""
+        return cls(episodes, rate_hz=float(content["rate_hz"]), name=name)

@@ -1,0 +1,115 @@
+"""The flat observation layout shared by both handover envs and every agent.
+
+The env returns one float32 vector (SB3 works out of the box); :class:`ObsLayout` names its
+parts. Agents call ``layout.unflatten(obs)`` instead of hard-coding offsets.
+
+| key                    | shape   | unit / meaning                                                    |
+|------------------------|---------|-------------------------------------------------------------------|
+| receiver_xy_history    | (W, 2)  | m, camera track of the receiver base xy at 30 Hz, oldest first    |
+| receiver_frames_seen   | (1,)    | number of camera frames observed so far (history is valid from    |
+|                        |         | index W - min(W, n) on; earlier rows repeat the first frame)      |
+| ee_pos                 | (3,)    | m, gripper TCP position                                           |
+| ee_quat                | (4,)    | TCP orientation (w, x, y, z)                                      |
+| ee_linvel              | (3,)    | m/s                                                               |
+| ee_angvel              | (3,)    | rad/s                                                             |
+| object_pos             | (3,)    | m                                                                 |
+| object_held            | (1,)    | 1 while the gripper holds the object, else 0                      |
+| wrist_force            | (3,)    | N, external force at the wrist F/T sensor (gravity-compensated)   |
+| wrist_torque           | (3,)    | N*m, external torque at the wrist sensor                          |
+| gripper_open           | (1,)    | 1 once the gripper has released                                    |
+| time                   | (1,)    | s since reset                                                     |
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+POS_LIMIT = 10.0  # m; the scene fits well inside a 20 m square
+VEL_LIMIT = 20.0  # m/s and rad/s
+FORCE_LIMIT = 1000.0  # N
+TORQUE_LIMIT = 500.0  # N*m
+TIME_LIMIT = 3600.0  # s
+
+
+@dataclass(frozen=True)
+class ObsLayout:
+    """Named slices of the flat observation vector.
+
+    Args:
+        history: W, the number of 30 Hz camera frames of receiver history in each observation.
+    """
+
+    history: int = 30
+    fields: tuple[tuple[str, tuple[int, ...], float], ...] = field(init=False)
+
+    def __post_init__(self) -> None:
+        if self.history < 2:
+            raise ValueError(f"history must be >= 2 frames, got {self.history}")
+        object.__setattr__(
+            self,
+            "fields",
+            (
+                ("receiver_xy_history", (self.history, 2), POS_LIMIT),
+                ("receiver_frames_seen", (1,), 1e6),
+                ("ee_pos", (3,), POS_LIMIT),
+                ("ee_quat", (4,), 1.0),
+                ("ee_linvel", (3,), VEL_LIMIT),
+                ("ee_angvel", (3,), VEL_LIMIT),
+                ("object_pos", (3,), POS_LIMIT),
+                ("object_held", (1,), 1.0),
+                ("wrist_force", (3,), FORCE_LIMIT),
+                ("wrist_torque", (3,), TORQUE_LIMIT),
+                ("gripper_open", (1,), 1.0),
+                ("time", (1,), TIME_LIMIT),
+            ),
+        )
+
+    @property
+    def size(self) -> int:
+        """Length of the flat vector."""
+        return int(sum(np.prod(shape) for _, shape, _ in self.fields))
+
+    def slices(self) -> dict[str, tuple[slice, tuple[int, ...]]]:
+        """Name -> (slice into the flat vector, shape)."""
+        out, start = {}, 0
+        for name, shape, _ in self.fields:
+            n = int(np.prod(shape))
+            out[name] = (slice(start, start + n), shape)
+            start += n
+        return out
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Finite float32 (low, high) for the observation Box."""
+        high = np.concatenate([np.full(int(np.prod(s)), lim, dtype=np.float32) for _, s, lim in self.fields])
+        low = -high
+        for name in ("receiver_frames_seen", "object_held", "gripper_open", "time"):
+            low[self.slices()[name][0]] = 0.0
+        return low, high
+
+    def unflatten(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """Split a flat observation into named copies (they never share memory with ``obs``)."""
+        obs = np.asarray(obs)
+        if obs.shape != (self.size,):
+            raise ValueError(f"observation must have shape ({self.size},), got {obs.shape}")
+        return {name: obs[sl].reshape(shape).copy() for name, (sl, shape) in self.slices().items()}
+
+    def flatten(self, parts: dict[str, np.ndarray]) -> np.ndarray:
+        """Pack named parts into a float32 vector clipped to :meth:`bounds`."""
+        missing = [name for name, _, _ in self.fields if name not in parts]
+        if missing:
+            raise KeyError(f"missing observation parts: {missing}")
+        out = np.concatenate(
+            [np.asarray(parts[name], dtype=np.float64).reshape(-1) for name, _, _ in self.fields]
+        ).astype(np.float32)
+        if out.shape != (self.size,):
+            raise ValueError(f"parts give {out.shape[0]} values, layout needs {self.size}")
+        low, high = self.bounds()
+        return np.clip(out, low, high)
+
+    def receiver_track(self, obs: np.ndarray) -> np.ndarray:
+        """The valid part of the receiver history in ``obs``: (n, 2) with n = min(W, frames seen)."""
+        parts = self.unflatten(obs)
+        n = int(min(self.history, max(1, round(float(parts["receiver_frames_seen"][0])))))
+        return parts["receiver_xy_history"][-n:]
