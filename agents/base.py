@@ -47,6 +47,21 @@ class Agent(ABC):
             (horizon, 3) predicted giver wrist xyz; row 0 is the current frame's target.
         """
 
+    def predict_sequence(self, receiver_xy: np.ndarray, query_times: np.ndarray) -> np.ndarray:
+        """Open-loop predictions at several times of one episode: (Q, horizon, 3).
+
+        Row q is ``predict(receiver_xy[: query_times[q] + 1])``. The default loops over
+        :meth:`predict`; streaming agents (the SPGP planner) and batched networks override it
+        with a faster equivalent that must give the same numbers.
+        """
+        receiver_xy = validate_history(receiver_xy)
+        times = np.asarray(query_times, dtype=np.int64).reshape(-1)
+        if times.size and (times.min() < 0 or times.max() >= receiver_xy.shape[0]):
+            raise ValueError(f"query times must lie in [0, {receiver_xy.shape[0] - 1}]")
+        return np.stack([self.predict(receiver_xy[: t + 1]) for t in times]) if times.size else (
+            np.zeros((0, self.horizon, 3))
+        )
+
     @abstractmethod
     def reset(self) -> None:
         """Forget the previous episode (streaming state, ensemble buffers)."""
