@@ -1,0 +1,150 @@
+"""The Cartesian impedance controller on the Menagerie UR5e, without a receiver."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from handover_env.config import HandoverParams
+from handover_env.controller import ControllerConfig, ImpedanceController, inverse_kinematics, target_rotation
+from handover_env.menagerie import MenagerieNotFoundError, model_path
+from handover_env.scene import (
+    TORQUE_LIMITS,
+    SceneConfig,
+    build_model,
+    place_object_in_gripper,
+    scene_ids,
+)
+
+READY = np.array([0.2, -0.45, 1.15])
+HOME = np.array([-1.5708, -1.5708, 1.5708, -1.5708, -1.5708, 0.0])
+
+
+@pytest.fixture(scope="module")
+def model():
+    return build_model()
+
+
+def _setup(model, pos=READY, yaw=-math.pi / 2, with_object=True, params=None):
+    ids = scene_ids(model)
+    data = mujoco.MjData(model)
+    q = inverse_kinematics(model, mujoco.MjData(model), ids, pos, yaw, np.array([-2.3, -1.8, 2.1, -0.3, -3.9, 0.0]))
+    data.qpos[ids.arm_qpos] = q
+    data.ctrl[ids.gripper_act] = 255.0
+    mujoco.mj_forward(model, data)
+    ctrl = ImpedanceController(model, ids, params or HandoverParams(), rest_qpos=q)
+    if with_object:
+        place_object_in_gripper(model, data, ids)
+        ctrl.payload_mass = float(model.body_mass[ids.object_body])
+    mujoco.mj_forward(model, data)
+    ctrl.reset(data)
+    return ids, data, ctrl
+
+
+def _run(model, data, ids, ctrl, ticks, record=None):
+    peak = 0.0
+    for _ in range(ticks):
+        tau = ctrl.compute(data)
+        data.ctrl[ids.arm_act] = tau
+        peak = max(peak, float(np.max(np.abs(data.ctrl[ids.arm_act]) / TORQUE_LIMITS)))
+        mujoco.mj_step(model, data, nstep=ctrl.config.ticks)
+        peak = max(peak, float(np.max(np.abs(data.actuator_force[ids.arm_act]) / TORQUE_LIMITS)))
+        if record is not None:
+            record.append(data.site_xpos[ids.tcp_site].copy())
+    return peak
+
+
+def test_menagerie_models_found():
+    assert model_path("universal_robots_ur5e", "ur5e.xml").is_file()
+    assert model_path("robotiq_2f85", "2f85.xml").is_file()
+    with pytest.raises(MenagerieNotFoundError, match="tried"):
+        model_path("no_such_robot", "robot.xml")
+
+
+def test_torque_motors_have_ur5e_limits(model):
+    ids = scene_ids(model)
+    np.testing.assert_allclose(model.actuator_ctrlrange[ids.arm_act, 1], TORQUE_LIMITS)
+    np.testing.assert_allclose(model.actuator_gainprm[ids.arm_act, 0], 1.0)
+    assert np.all(model.actuator_biastype[ids.arm_act] == 0)
+    assert model.opt.timestep == pytest.approx(1 / 600)
+
+
+def test_holds_pose_against_gravity_with_object(model):
+    ids, data, ctrl = _setup(model)
+    start = data.site_xpos[ids.tcp_site].copy()
+    rot0 = data.site_xmat[ids.tcp_site].reshape(3, 3).copy()
+    peak = _run(model, data, ids, ctrl, ticks=400)  # 2 s
+    drift = np.linalg.norm(data.site_xpos[ids.tcp_site] - start)
+    assert drift < 2e-3, f"drift {drift * 1000:.2f} mm"
+    assert np.linalg.norm(data.site_xmat[ids.tcp_site].reshape(3, 3) - rot0) < 1e-2
+    assert np.linalg.norm(data.xpos[ids.object_body] - data.site_xpos[ids.tcp_site]) < 2e-3
+    assert peak < 1.0
+
+
+def test_gripper_is_horizontal_and_yaw_follows():
+    for yaw in (-math.pi / 2, -1.0, 0.3):
+        rot = target_rotation(yaw)
+        np.testing.assert_allclose(rot.T @ rot, np.eye(3), atol=1e-12)
+        assert rot[2, 2] == pytest.approx(0.0)  # approach axis horizontal
+        assert math.atan2(rot[1, 2], rot[0, 2]) == pytest.approx(yaw)
+
+
+def test_step_target_settles_without_overshoot(model):
+    ids, data, ctrl = _setup(model)
+    start = data.site_xpos[ids.tcp_site].copy()
+    step = np.array([0.12, -0.08, 0.06])
+    ctrl.set_target(start + step, -math.pi / 2 + 0.3)
+    track: list[np.ndarray] = []
+    peak = _run(model, data, ids, ctrl, ticks=400, record=track)
+    err = np.array(track) - (start + step)
+    along = (np.array(track) - start) @ step / (step @ step)
+    assert along.max() < 1.10, f"overshoot {100 * (along.max() - 1):.1f}%"
+    settle = np.linalg.norm(err, axis=1)
+    assert settle[200:].max() < 5e-3  # within 5 mm after 1 s and stays there
+    assert np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))
+    z = data.site_xmat[ids.tcp_site].reshape(3, 3)[:, 2]
+    assert math.atan2(z[1], z[0]) == pytest.approx(-math.pi / 2 + 0.3, abs=0.02)
+    assert abs(z[2]) < 0.02
+    assert peak <= 1.0 + 1e-9
+
+
+def test_never_exceeds_torque_limits_on_a_large_jump(model):
+    ids, data, ctrl = _setup(model)
+    stiff = ImpedanceController(model, ids, HandoverParams(stiffness=140.0, damping=10.0),
+                                ControllerConfig(max_linear_speed=5.0, ref_omega=80.0), rest_qpos=data.qpos[ids.arm_qpos])
+    stiff.reset(data)
+    stiff.payload_mass = ctrl.payload_mass
+    stiff.set_target(np.array([0.5, -0.8, 1.36]), 0.0)
+    peak = _run(model, data, ids, stiff, ticks=300)
+    assert peak <= 1.0 + 1e-9
+    assert np.all(np.abs(stiff.last_torque) <= TORQUE_LIMITS + 1e-9)
+
+
+@pytest.mark.parametrize("corner", [(0.5, -0.3, 1.0), (0.5, -0.3, 1.36), (0.5, -0.8, 1.0), (0.5, -0.8, 1.36),
+                                    (0.0, -0.8, 1.0), (0.0, -0.8, 1.36), (0.25, -0.55, 1.2), (0.2, -0.45, 1.0)])
+def test_workspace_covers_the_dataset_handover_box(model, corner):
+    """Handovers happen at x 0..0.5, y -0.3..-0.8, z 1.0..1.36 (data README); the gripper points
+    toward the receiver's path (-y). Only points whose wrist would fall into the column around the
+    base axis (x ~ 0 and y > -0.6, i.e. right against the pedestal) are out of reach for a
+    horizontal gripper, as for the real arm (shoulder singularity)."""
+    ids, data, ctrl = _setup(model)
+    yaw = -math.pi / 2
+    for _ in range(12):  # re-issue the target at 30 Hz like the env, 2.4 s in all
+        ctrl.set_target(np.array(corner), yaw)
+        _run(model, data, ids, ctrl, ticks=40)
+    err = np.linalg.norm(data.site_xpos[ids.tcp_site] - corner)
+    assert err < 0.01, f"corner {corner} missed by {err * 1000:.1f} mm"
+
+
+def test_config_validation():
+    with pytest.raises(ValueError):
+        ControllerConfig(ticks=0)
+    with pytest.raises(ValueError):
+        ControllerConfig(rot_omega=float("nan"))
+    with pytest.raises(ValueError):
+        SceneConfig(timestep=0.1)
+    with pytest.raises(ValueError):
+        SceneConfig(object_mass=10.0)
