@@ -26,6 +26,10 @@ We implement it as a torque controller, run every ``ticks`` physics steps on a g
   ``τ_posture = k_n (q_rest - q) - d_n q̇`` pulling toward the elbow-up rest posture. The UR5e
   has 6 joints for a 6-D task, so N vanishes away from singularities; with the damped Λ it acts
   only near a singularity, where it keeps the elbow from flipping.
+* **Cost.** Λ(q), J M^-1 and the posture torque are refreshed at each replan of the reference
+  (about 30 Hz; they change slowly with q); J, the pose and velocity errors, J̇ q̇ and the bias
+  forces are updated at every 200 Hz tick. The reference filter is linear, so its next ticks
+  are precomputed in one matrix product per replan.
 """
 
 from __future__ import annotations
@@ -141,6 +145,9 @@ class ImpedanceController:
         self._have_prev = False
         self._zero6 = np.zeros(6)
         self._err = np.zeros(6)
+        self._tcp = ids.tcp_site
+        self._stale = True
+        self._tau_posture = np.zeros(6)
         self._verr = np.zeros(6)
         self._posture = self.config.posture_stiffness > 0.0 or self.config.posture_damping > 0.0
         self._kn, self._dn = self.config.posture_stiffness, self.config.posture_damping
@@ -188,8 +195,8 @@ class ImpedanceController:
         c = self.config
         self._kvec = np.array([params.stiffness] * 3 + [0.0] * 3, dtype=float)
         self._bvec = np.array([params.damping] * 3 + [0.0] * 3, dtype=float)
-        self._kr = c.rot_omega**2
-        self._br = 2.0 * c.rot_zeta * c.rot_omega
+        self._kr6 = np.array([0.0] * 3 + [c.rot_omega**2] * 3)
+        self._br6 = np.array([0.0] * 3 + [2.0 * c.rot_zeta * c.rot_omega] * 3)
 
     def reset(self, data: mujoco.MjData, rest_qpos: np.ndarray | None = None) -> None:
         """Start the reference at the current TCP pose with zero velocity."""
@@ -203,6 +210,7 @@ class ImpedanceController:
         z = data.site_xmat[self.ids.tcp_site].reshape(3, 3)[:, 2]
         self.yaw_d = math.atan2(z[1], z[0])
         self.yaw_rate_d = 0.0
+        self._plan_i = 0
         self.set_target(pos, self.yaw_d)
         self.last_torque[:] = 0.0
         self._have_prev = False
@@ -221,6 +229,12 @@ class ImpedanceController:
         starts with acceleration ``a_max``. Replanning every ``plan_ticks`` (about one 30 Hz
         step) lets the reference approach far goals at a bounded speed and acceleration.
         """
+        i = self._plan_i - 1
+        if i >= 0:  # the reference state reached by the last tick of the current plan
+            self.x_d = self._x_plan[i]
+            self.v_d = self._v_plan[i]
+            self.yaw_d = float(self._yaw_plan[i])
+            self.yaw_rate_d = float(self._yaw_rate_plan[i])
         step = self.goal_pos - self.x_d
         dist = math.sqrt(float(step @ step))
         if dist > self._max_step:
@@ -237,38 +251,56 @@ class ImpedanceController:
         self._yaw_plan = yaw_traj[:, 0] + self.target_yaw
         self._yaw_rate_plan = yaw_traj[:, 1]
         self._rot_plan = target_rotation_batch(self._yaw_plan)
+        n = self._x_plan.shape[0]
+        self._vd6_plan = np.zeros((n, 6))
+        self._vd6_plan[:, :3] = self._v_plan
+        self._vd6_plan[:, 5] = self._yaw_rate_plan
+        self._a6_plan = np.zeros((n, 6))
+        self._a6_plan[:, :3] = self._a_plan
         self._plan_i = 0
+        self._stale = True
 
-    def _advance_reference(self) -> None:
-        i = self._plan_i
-        if i >= self._x_plan.shape[0]:
-            self._plan()
-            i = 0
-        self.x_d = self._x_plan[i]
-        self.v_d = self._v_plan[i]
-        self.a_d = self._a_plan[i]
-        self.yaw_d = float(self._yaw_plan[i])
-        self.yaw_rate_d = float(self._yaw_rate_plan[i])
-        self._rot_d = self._rot_plan[i]
-        self._plan_i = i + 1
+    def _refresh_dynamics(self, data: mujoco.MjData) -> None:
+        """Λ(q) (as a Cholesky factor of Λ^-1), J M^-1 and the null-space posture torque.
+
+        Refreshed at every replan of the reference (about 30 Hz): Λ and the projector change
+        slowly with q, while J, the errors and the bias forces are updated at every tick.
+        """
+        m, ids, dof = self.model, self.ids, self._dof
+        jac = self._jac
+        mujoco.mj_jacSite(m, data, self._jacp, self._jacr, ids.tcp_site)
+        mujoco.mj_solveM(m, data, self._minv_jt, jac)  # rows of J M^-1
+        j = jac[:, dof]
+        x = self._minv_jt[:, dof]
+        lam_inv = x @ j.T
+        lam_inv += self._damp6
+        mujoco.mju_cholFactor(lam_inv, 0.0)  # Λ^-1 = L Lᵀ; Λ v = cholSolve(v)
+        self._lam_chol = lam_inv
+        # Null-space posture term, N = I - Jᵀ J̄ᵀ with J̄ᵀ = Λ J M^-1.
+        if self._posture:
+            tau0 = self._kn * (self._rest - data.qpos[self._qpos_adr]) - self._dn * data.qvel[dof]
+            mujoco.mju_cholSolve(self._tmp6b, lam_inv, x @ tau0)
+            self._tau_posture = tau0 - j.T @ self._tmp6b
+        else:
+            self._tau_posture = self._zero6
+        self._stale = False
 
     def compute(self, data: mujoco.MjData) -> np.ndarray:
         """One control update: advance the reference, return the clipped joint torques (6,).
 
         The returned array is an internal buffer, overwritten by the next call.
         """
-        m, ids = self.model, self.ids
-        self._advance_reference()
-        jac = self._jac
-        mujoco.mj_jacSite(m, data, self._jacp, self._jacr, ids.tcp_site)
-        mujoco.mj_solveM(m, data, self._minv_jt, jac)  # rows of J M^-1
+        i = self._plan_i
+        if i >= self._x_plan.shape[0]:
+            self._plan()
+            i = 0
+        self._plan_i = i + 1
+        if self._stale:
+            self._refresh_dynamics(data)
+        self.x_d = self._x_plan[i]
+        mujoco.mj_jacSite(self.model, data, self._jacp, self._jacr, self._tcp)
         dof = self._dof
-        j = jac[:, dof]
-        x = self._minv_jt[:, dof]
-        lam_inv = x @ j.T
-        lam_inv += self._damp6
-        mujoco.mju_cholFactor(lam_inv, 0.0)  # Λ^-1 = L Lᵀ; Λ v = cholSolve(v)
-
+        j = self._jac[:, dof]
         qvel = data.qvel[dof]
         twist = j @ qvel
         # J̇ q̇ by a backward difference of J over one tick (cheaper than mj_jacDot).
@@ -280,45 +312,32 @@ class ImpedanceController:
         self._prev_j[:] = j
         # Pose error: translation, and rotation from R_d Rᵀ (exact axis, sin-scaled magnitude).
         err = self._err
-        np.subtract(self.x_d, data.site_xpos[ids.tcp_site], out=err[:3])
-        r_err = self._rot_d @ data.site_xmat[ids.tcp_site].reshape(3, 3).T
+        np.subtract(self.x_d, data.site_xpos[self._tcp], out=err[:3])
+        r_err = self._rot_plan[i] @ data.site_xmat[self._tcp].reshape(3, 3).T
         err[3] = 0.5 * (r_err[2, 1] - r_err[1, 2])
         err[4] = 0.5 * (r_err[0, 2] - r_err[2, 0])
         err[5] = 0.5 * (r_err[1, 0] - r_err[0, 1])
         if r_err[0, 0] + r_err[1, 1] + r_err[2, 2] < -0.5:  # beyond ~120 deg: push at full strength
             err[3:] *= 2.0 / max(float(np.linalg.norm(err[3:])), 1e-9)
-        verr = self._verr
-        verr[:3] = self.v_d
-        verr[3:5] = 0.0
-        verr[5] = self.yaw_rate_d
-        verr -= twist
-        # Translation: F = K Δx + B Δẋ with K, B from Θ ...
+        verr = self._vd6_plan[i] - twist
+        # Translation: F = K Δx + B Δẋ with K, B from Θ, plus M Δẍ of Eq. 1 as feed-forward with
+        # M = Λ(q) (including -Λ J̇ q̇); rotation: Λ (ω² e_r + 2ζω Δω), fixed gains on the
+        # decoupled rotational dynamics.
         wrench = self._kvec * err
         wrench += self._bvec * verr
-        # ... + M Δẍ of Eq. 1 as feed-forward with M = Λ(q), including -Λ J̇ q̇; rotation:
-        # Λ (ω² e_r + 2ζω Δω), i.e. fixed gains on the decoupled rotational dynamics.
-        rhs = self._rhs
-        rhs[:3] = self.a_d
-        rhs[3:] = self._kr * err[3:] + self._br * verr[3:]
-        rhs -= jdot_qdot
-        mujoco.mju_cholSolve(self._tmp6, lam_inv, rhs)
+        rhs = self._a6_plan[i] - jdot_qdot
+        rhs += self._kr6 * err
+        rhs += self._br6 * verr
+        mujoco.mju_cholSolve(self._tmp6, self._lam_chol, rhs)
         wrench += self._tmp6
         if self.payload_mass > 0.0:  # the held object's inertia and weight at the TCP
             wrench[:3] += self.payload_mass * (rhs[:3] - GRAVITY)
-
         tau = j.T @ wrench
         tau += data.qfrc_bias[dof]
-        # Null-space posture term, N = I - Jᵀ J̄ᵀ with J̄ᵀ = Λ J M^-1.
-        if self._posture:
-            tau0 = self._kn * (self._rest - data.qpos[self._qpos_adr])
-            tau0 -= self._dn * qvel
-            mujoco.mju_cholSolve(self._tmp6b, lam_inv, x @ tau0)
-            tau0 -= j.T @ self._tmp6b
-            tau += tau0
-
-        self.last_unclipped[:] = tau
-        np.minimum(tau, self._limits, out=tau)
-        np.maximum(tau, self._neg_limits, out=self.last_torque)
+        tau += self._tau_posture
+        self.last_unclipped = tau
+        np.minimum(tau, self._limits, out=self.last_torque)
+        np.maximum(self.last_torque, self._neg_limits, out=self.last_torque)
         return self.last_torque
 
 

@@ -167,7 +167,7 @@ def build_spec(config: SceneConfig | None = None) -> mujoco.MjSpec:
                        solref=[0.01, 1.0], solimp=[0.95, 0.99, 0.001, 0.5, 2])
     world.add_equality(name="receiver_grasp", type=mujoco.mjtEq.mjEQ_WELD, name1="receiver_hand",
                        name2="object", objtype=mujoco.mjtObj.mjOBJ_BODY, active=False,
-                       solref=[0.03, 1.0], solimp=[0.9, 0.95, 0.001, 0.5, 2])
+                       solref=[0.06, 1.0], solimp=[0.9, 0.95, 0.001, 0.5, 2])
     return world
 
 

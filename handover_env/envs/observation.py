@@ -18,6 +18,10 @@ parts. Agents call ``layout.unflatten(obs)`` instead of hard-coding offsets.
 | wrist_torque           | (3,)    | N*m, external torque at the wrist sensor                          |
 | gripper_open           | (1,)    | 1 once the gripper has released                                    |
 | time                   | (1,)    | s since reset                                                     |
+| receiver_hand_xyz      | (3,)    | m, camera estimate of the receiver's right hand (same latency and |
+|                        |         | noise as the base track)                                          |
+| robot_enabled          | (1,)    | 1 once the robot may move (static env: after the hand was         |
+|                        |         | detected and the stabilisation delay passed; dynamic env: always) |
 """
 
 from __future__ import annotations
@@ -63,6 +67,8 @@ class ObsLayout:
                 ("wrist_torque", (3,), TORQUE_LIMIT),
                 ("gripper_open", (1,), 1.0),
                 ("time", (1,), TIME_LIMIT),
+                ("receiver_hand_xyz", (3,), POS_LIMIT),
+                ("robot_enabled", (1,), 1.0),
             ),
         )
 
@@ -84,7 +90,7 @@ class ObsLayout:
         """Finite float32 (low, high) for the observation Box."""
         high = np.concatenate([np.full(int(np.prod(s)), lim, dtype=np.float32) for _, s, lim in self.fields])
         low = -high
-        for name in ("receiver_frames_seen", "object_held", "gripper_open", "time"):
+        for name in ("receiver_frames_seen", "object_held", "gripper_open", "time", "robot_enabled"):
             low[self.slices()[name][0]] = 0.0
         return low, high
 

@@ -1,0 +1,462 @@
+"""Shared core of the handover envs: physics loop, wrist F/T, release, outcomes, observation.
+
+The two registered envs (:mod:`.dynamic_handover_v0`, :mod:`.static_handover_v0`) are thin
+subclasses that differ in the receiver (walking past vs. stopping and raising a hand) and in when
+the robot may move. Everything below is common.
+
+Timing: physics dt = 1/600 s; the impedance controller runs every 3 physics steps (200 Hz) on a
+global step counter, so its rate holds across env steps; one env step = 1/30 s = 20 physics steps
+(6 or 7 controller ticks). The receiver's mocap bodies are moved at every tick.
+
+Wrist force: the ``force``/``torque`` sensors on the gripper mounting plate measure what the
+gripper, plus anything it holds, exerts on the flange. The static load is subtracted with the
+payload's known mass and the ``accelerometer`` at the same site (which reads a - g):
+``F_ext = R (m_payload * acc - F_sensor)``, the force the world applies to gripper and object; the torque likewise with the payload's centre of mass.
+The force estimate is low-pass filtered (first order, ``force_filter_tau``) at every tick, like
+a real F/T signal; the torque is estimated at the env rate for the observation.
+When its magnitude exceeds f_r the gripper opens (paper Sec. IV-C).
+
+Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
+
+* ``success``: the robot released the object while the receiver held it, and 0.1 s later the
+  receiver still holds it.
+* ``dropped``: nobody holds the object (gripper weld off, receiver not holding) and it has fallen
+  0.15 m below where it was last held, or touches the floor.
+* ``unsafe_force``: the peak contact force on the receiver exceeded ``safety_force`` (default
+  140 N: ISO/TS 15066, Annex A, maximum permissible quasi-static force for the hand and fingers).
+  Contact forces counted: the external force at the wrist (what the receiver's pull puts on the
+  object) and every robot-receiver body contact.
+* ``missed``: the receiver walked past without taking the object: not holding it, and its pelvis
+  is more than ``miss_distance`` behind the object along its walking direction, or its scripted
+  walk ended (+1 s). The static receiver waits; there only the TimeLimit ends an episode.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import EzPickle
+
+from handover_env.config import HandoverParams
+from handover_env.controller import ControllerConfig, ImpedanceController, inverse_kinematics
+from handover_env.envs.observation import ObsLayout
+from handover_env.receiver import CAMERA_RATE, Receiver, ReceiverConfig
+from handover_env.scene import (
+    ARM_PREFIX,
+    GRIPPER_PREFIX,
+    SceneConfig,
+    build_model,
+    place_object_in_gripper,
+    scene_ids,
+)
+
+FRAME_SKIP = 20  # physics steps per env step (1/30 s at dt = 1/600 s)
+GRIPPER_CLOSED_CTRL = 90.0  # 2F-85 command at which the pads meet the 66 mm bottle
+GRIPPER_OPEN_CTRL = 0.0
+GRIPPER_OPEN_ANGLE = 0.2  # driver angle (rad) below which the pads have left the bottle
+READY_POS = np.array([0.3, -0.4, 1.15])
+READY_YAW = -math.pi / 2
+HOME_Q = np.array([-2.3, -1.8, 2.1, -0.3, -3.9, 0.0])
+ACTION_LOW = np.array([-0.3, -1.1, 0.8, -math.pi], dtype=np.float32)
+ACTION_HIGH = np.array([0.9, 0.1, 1.6, math.pi], dtype=np.float32)
+OUTCOMES = ("running", "success", "dropped", "unsafe_force", "missed")
+
+
+class HandoverEnvBase(gym.Env, EzPickle):
+    """Common implementation; use ``DynamicHandoverEnv`` or ``StaticHandoverEnv``."""
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
+    static: bool = False
+
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        stiffness: float = 114.3,
+        damping: float = 17.1,
+        forecast_time: float = 0.14,
+        release_force: float = 7.1,
+        safety_force: float = 140.0,
+        history: int = 30,
+        obs_noise: float = 0.0,
+        obs_latency: int = 0,
+        default_receiver: str = "id",
+        stabilisation_delay: float = 2.0,
+        object_mass: float = 0.4,
+        miss_distance: float = 0.8,
+        force_filter_tau: float = 0.015,
+        width: int = 640,
+        height: int = 480,
+        camera: str = "overview",
+    ) -> None:
+        EzPickle.__init__(
+            self, render_mode, stiffness, damping, forecast_time, release_force, safety_force, history,
+            obs_noise, obs_latency, default_receiver, stabilisation_delay, object_mass, miss_distance,
+            force_filter_tau, width, height, camera,
+        )
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if default_receiver not in ("id", "ood"):
+            raise ValueError(f"default_receiver must be 'id' or 'ood', got {default_receiver!r}")
+        for name, v in (("safety_force", safety_force), ("obs_noise", obs_noise),
+                        ("stabilisation_delay", stabilisation_delay), ("miss_distance", miss_distance),
+                        ("force_filter_tau", force_filter_tau)):
+            if not math.isfinite(v) or v < 0:
+                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        if int(obs_latency) != obs_latency or obs_latency < 0:
+            raise ValueError(f"obs_latency must be a whole number of frames >= 0, got {obs_latency!r}")
+        self.params = HandoverParams(stiffness, damping, forecast_time, release_force)
+        self.render_mode = render_mode
+        self.safety_force = float(safety_force)
+        self.obs_noise = float(obs_noise)
+        self.obs_latency = int(obs_latency)
+        self.default_receiver = default_receiver
+        self.stabilisation_delay = float(stabilisation_delay)
+        self.miss_distance = float(miss_distance)
+        self.width, self.height, self.camera = int(width), int(height), camera
+
+        self.model = build_model(SceneConfig(object_mass=object_mass))
+        self.data = mujoco.MjData(self.model)
+        self.ids = scene_ids(self.model)
+        self.layout = ObsLayout(history=history)
+        self.controller = ImpedanceController(self.model, self.ids, self.params, ControllerConfig())
+        self.receiver = Receiver(self.model, self.ids, ReceiverConfig())
+        self.dt = self.model.opt.timestep * FRAME_SKIP
+        self._ticks = self.controller.config.ticks
+        # Fractions of an env step at which ticks fall, by the global step phase at its start.
+        self._tick_alphas = [
+            np.array([k / FRAME_SKIP for k in range(FRAME_SKIP) if (phase + k) % self._ticks == 0])
+            for phase in range(self._ticks)
+        ]
+        self._filter_alpha = (self._ticks * self.model.opt.timestep) / (force_filter_tau + self._ticks * self.model.opt.timestep)
+
+        low, high = self.layout.bounds()
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self.action_space = spaces.Box(ACTION_LOW.copy(), ACTION_HIGH.copy(), dtype=np.float32)
+        self._obs_low, self._obs_high = low, high
+        self._slices = {k: v[0] for k, v in self.layout.slices().items()}
+        self._obs = np.zeros(self.layout.size, dtype=np.float64)
+
+        # Geom classes for the contact scan: 1 robot, 2 receiver body.
+        self._geom_class = np.zeros(self.model.ngeom, dtype=np.int8)
+        self._geom_class[self.ids.robot_geoms] = 1
+        self._geom_class[self.ids.receiver_geoms] = 2
+        self._force6 = np.zeros(6)
+        self._gripper_qpos = self.ids.gripper_driver_qpos
+        self._acc_sl = slice(self.ids.ft_acc_adr, self.ids.ft_acc_adr + 3)
+        self._force_sl = slice(self.ids.ft_force_adr, self.ids.ft_force_adr + 3)
+        self._torque_sl = slice(self.ids.ft_torque_adr, self.ids.ft_torque_adr + 3)
+        self._ft_site = self.ids.ft_site
+        self._init_state, self._ready_q = self._settled_start()
+        self._renderer: Any = None
+        self._viewer: Any = None
+        self._global_step = 0
+        self._reset_episode_state()
+
+    # ------------------------------------------------------------------ start state
+    def _settled_start(self) -> tuple[np.ndarray, np.ndarray]:
+        """The robot at the ready pose holding the object, settled for 0.5 s (computed once)."""
+        m, d, ids = self.model, self.data, self.ids
+        mujoco.mj_resetData(m, d)
+        q = inverse_kinematics(m, mujoco.MjData(m), ids, READY_POS, READY_YAW, HOME_Q)
+        d.qpos[ids.arm_qpos] = q
+        # Close the fingers to the bottle width before placing the object.
+        d.ctrl[ids.gripper_act] = GRIPPER_CLOSED_CTRL
+        mujoco.mj_forward(m, d)
+        place_object_in_gripper(m, d, ids)
+        ctrl = ImpedanceController(m, ids, self.params, ControllerConfig(), rest_qpos=q)
+        ctrl.payload_mass = float(m.body_mass[ids.object_body])
+        mujoco.mj_forward(m, d)
+        ctrl.reset(d)
+        ctrl.set_target(READY_POS, READY_YAW)
+        d.mocap_pos[ids.base_mocap] = (5.0, -3.0, 0.0)
+        d.mocap_pos[ids.hand_mocap] = (5.0, -3.0, 1.0)
+        for _ in range(100):
+            d.ctrl[ids.arm_act] = ctrl.compute(d)
+            mujoco.mj_step(m, d, nstep=ctrl.config.ticks)
+        d.time = 0.0
+        state = np.empty(mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_INTEGRATION))
+        mujoco.mj_getState(m, d, state, mujoco.mjtState.mjSTATE_INTEGRATION)
+        self._gripper_eq_data = m.eq_data[ids.eq_gripper].copy()
+        return state, q
+
+    def _reset_episode_state(self) -> None:
+        self.outcome = "running"
+        self.released = False
+        self.t_release = math.nan
+        self.release_force = math.nan
+        self.peak_contact_force = 0.0
+        self.f_ext = np.zeros(3)
+        self.tau_ext = np.zeros(3)
+        self._gripper_holds = True
+        self._last_held_z = float(READY_POS[2])
+        self.t_enabled = 0.0
+        self.t_detect = math.nan
+        self._receiver_frames = np.zeros((1, 2))
+        self._hand_frames: list[np.ndarray] = []
+        self._step_count = 0
+
+    # ------------------------------------------------------------------ gym API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        kind = options.get("receiver", self.default_receiver)
+        m, d, ids = self.model, self.data, self.ids
+        mujoco.mj_resetData(m, d)
+        mujoco.mj_setState(m, d, self._init_state, mujoco.mjtState.mjSTATE_INTEGRATION)
+        m.eq_data[ids.eq_gripper] = self._gripper_eq_data
+        d.eq_active[ids.eq_gripper] = 1
+        d.eq_active[ids.eq_receiver] = 0
+        d.ctrl[ids.gripper_act] = GRIPPER_CLOSED_CTRL
+        self._reset_episode_state()
+        self._configure_receiver(kind, options)
+        mujoco.mj_forward(m, d)
+        self._last_held_z = float(d.xpos[ids.object_body, 2])
+        self.receiver.place(d, 0.0, d.xpos[ids.object_body].copy())
+        mujoco.mj_forward(m, d)
+        self.controller.reset(d, rest_qpos=self._ready_q)
+        self.controller.payload_mass = float(m.body_mass[ids.object_body])
+        self._update_payload()
+        # Camera frames (with noise drawn once per frame from np_random).
+        frames = self.receiver._frames_xy
+        noise = self.np_random.normal(0.0, self.obs_noise, size=frames.shape) if self.obs_noise > 0 else 0.0
+        self._receiver_frames = frames + noise
+        self._hand_noise = (self.np_random.normal(0.0, self.obs_noise, size=(frames.shape[0] + 600, 3))
+                            if self.obs_noise > 0 else None)
+        self._hand_frames = [d.mocap_pos[ids.hand_mocap].copy()]
+        self.t_enabled = math.inf if self.static else 0.0
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), self._info()
+
+    def _configure_receiver(self, kind: str, options: dict[str, Any]) -> None:
+        self.receiver.reset(
+            self.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
+            episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
+        )
+
+    def step(self, action: np.ndarray):
+        if self.outcome != "running":
+            raise RuntimeError("step() called after the episode ended; call reset()")
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.shape != (4,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be 4 finite numbers (x, y, z, yaw), got {action!r}")
+        np.clip(a, ACTION_LOW, ACTION_HIGH, out=a)
+        m, d, ids = self.model, self.data, self.ids
+        t0 = d.time
+        if t0 >= self.t_enabled:
+            self.controller.set_target(a[:3], float(a[3]))
+        else:
+            self.controller.set_target(READY_POS, READY_YAW)
+        t1 = t0 + self.dt
+        self.receiver.plan_step(t0, t1, d.xpos[ids.object_body].copy(), object_free=not self._receiver_holds)
+        self.receiver.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
+
+        k = 0
+        ticks = self._ticks
+        while k < FRAME_SKIP:
+            n = ticks - (self._global_step % ticks)  # steps until (and including) the next tick
+            if self._global_step % ticks == 0:
+                self.receiver.apply_tick(d)
+                self._tick()
+                n = ticks
+            n = min(n, FRAME_SKIP - k)
+            mujoco.mj_step(m, d, nstep=n)
+            k += n
+            self._global_step += n
+        self.receiver.apply(d, 1.0)
+        self.receiver.end_step()
+        self._step_count += 1
+        self._hand_frames.append(d.mocap_pos[ids.hand_mocap].copy())
+        self._after_step()
+        reward = self._reward()
+        terminated = self.outcome != "running"
+        if self.render_mode == "human":
+            self.render()
+        return self._observation(), reward, terminated, False, self._info()
+
+    # ------------------------------------------------------------------ internals
+    @property
+    def _receiver_holds(self) -> bool:
+        return bool(self.data.eq_active[self.ids.eq_receiver])
+
+    def _update_payload(self) -> None:
+        """Mass and centre of mass (in the F/T site frame) of what hangs below the sensor."""
+        m, d, ids = self.model, self.data, self.ids
+        mass = float(m.body_subtreemass[ids.gripper_root_body])
+        com = d.subtree_com[ids.gripper_root_body] * mass
+        if self._gripper_holds:
+            mo = float(m.body_mass[ids.object_body])
+            com = com + d.xipos[ids.object_body] * mo
+            mass += mo
+        com = com / mass
+        rot = d.site_xmat[ids.ft_site].reshape(3, 3)
+        self._payload_mass = mass
+        self._payload_com = rot.T @ (com - d.site_xpos[ids.ft_site])
+
+    def _tick(self) -> None:
+        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques."""
+        m, d, ids = self.model, self.data, self.ids
+        sd = d.sensordata
+        f_site = self._payload_mass * sd[self._acc_sl] - sd[self._force_sl]
+        f_world = d.site_xmat[self._ft_site].reshape(3, 3) @ f_site
+        f_world -= self.f_ext
+        f_world *= self._filter_alpha
+        self.f_ext += f_world
+        f_mag = math.sqrt(self.f_ext[0] ** 2 + self.f_ext[1] ** 2 + self.f_ext[2] ** 2)
+        if f_mag > self.peak_contact_force:
+            self.peak_contact_force = f_mag
+        if not self.released and f_mag > self.params.release_force:
+            self.released = True
+            self.t_release = float(d.time)
+            self.release_force = f_mag
+            d.ctrl[ids.gripper_act] = GRIPPER_OPEN_CTRL
+        if self.released and self._gripper_holds and d.qpos[self._gripper_qpos] < GRIPPER_OPEN_ANGLE:
+            d.eq_active[ids.eq_gripper] = 0
+            self._gripper_holds = False
+            self.controller.payload_mass = 0.0
+            self._update_payload()
+        if self.receiver.state == "reaching" or (self.receiver.hand_mode == "recorded" and not self._receiver_holds):
+            self.receiver.try_grasp(m, d)
+        if d.ncon:
+            self._scan_contacts()
+        if self._gripper_holds or self._receiver_holds:
+            self._last_held_z = float(d.xpos[ids.object_body, 2])
+        d.ctrl[ids.arm_act] = self.controller.compute(d)
+
+    def _wrist_torque(self) -> np.ndarray:
+        """External torque at the wrist sensor (world frame), static load removed (per env step)."""
+        d = self.data
+        sd = d.sensordata
+        load = self._payload_mass * sd[self._acc_sl]
+        c = self._payload_com
+        t_site = np.array([c[1] * load[2] - c[2] * load[1], c[2] * load[0] - c[0] * load[2],
+                           c[0] * load[1] - c[1] * load[0]]) - sd[self._torque_sl]
+        self.tau_ext = d.site_xmat[self._ft_site].reshape(3, 3) @ t_site
+        return self.tau_ext
+
+    def _scan_contacts(self) -> None:
+        m, d = self.model, self.data
+        cls = self._geom_class
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if cls[c.geom1] | cls[c.geom2] == 3:  # robot <-> receiver body
+                mujoco.mj_contactForce(m, d, i, self._force6)
+                f = abs(float(self._force6[0]))
+                if f > self.peak_contact_force:
+                    self.peak_contact_force = f
+
+    def _after_step(self) -> None:
+        d, ids = self.data, self.ids
+        t = float(d.time)
+        obj = d.xpos[ids.object_body]
+        holds = self._receiver_holds
+        if self.peak_contact_force > self.safety_force:
+            self.outcome = "unsafe_force"
+        elif self.released and holds and t - self.t_release >= 0.1 - 1e-9:
+            self.outcome = "success"
+        elif not self._gripper_holds and not holds and (obj[2] < self._last_held_z - 0.15 or obj[2] < 0.1):
+            self.outcome = "dropped"
+        elif not holds and not self.released and self._receiver_passed(obj, t):
+            self.outcome = "missed"
+
+    def _receiver_passed(self, obj: np.ndarray, t: float) -> bool:
+        if self.static:
+            return False
+        xy, heading = self.receiver.base_at(t)
+        behind = (obj[0] - xy[0]) * math.cos(heading) + (obj[1] - xy[1]) * math.sin(heading)
+        return behind < -self.miss_distance or t > self.receiver.duration + 1.0
+
+    def _reward(self) -> float:
+        """-dt per step (time), -dt * excess force over 2 f_r / 10 N, +10 success, -10 failure."""
+        r = -self.dt
+        excess = math.sqrt(float(self.f_ext @ self.f_ext)) - 2.0 * self.params.release_force
+        if excess > 0:
+            r -= self.dt * excess / 10.0
+        if self.outcome == "success":
+            r += 10.0
+        elif self.outcome != "running":
+            r -= 10.0
+        return float(r)
+
+    def _observation(self) -> np.ndarray:
+        d, ids, sl, obs = self.data, self.ids, self._slices, self._obs
+        t = float(d.time)
+        n_true = min(int(math.floor(t * CAMERA_RATE + 1e-6)) + 1, self._receiver_frames.shape[0])
+        n = max(1, n_true - self.obs_latency)
+        w = self.layout.history
+        frames = self._receiver_frames[max(0, n - w):n]
+        hist = obs[sl["receiver_xy_history"]].reshape(w, 2)
+        hist[w - frames.shape[0]:] = frames
+        hist[: w - frames.shape[0]] = frames[0]
+        obs[sl["receiver_frames_seen"]] = n if t * CAMERA_RATE + 1e-6 >= self.obs_latency else 0
+        obs[sl["ee_pos"]] = d.site_xpos[ids.tcp_site]
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, d.site_xmat[ids.tcp_site])
+        obs[sl["ee_quat"]] = quat
+        jac_vel = np.empty(6)
+        mujoco.mj_objectVelocity(self.model, d, mujoco.mjtObj.mjOBJ_SITE, ids.tcp_site, jac_vel, 0)
+        obs[sl["ee_linvel"]] = jac_vel[3:]
+        obs[sl["ee_angvel"]] = jac_vel[:3]
+        obs[sl["object_pos"]] = d.xpos[ids.object_body]
+        obs[sl["object_held"]] = 1.0 if self._gripper_holds else 0.0
+        obs[sl["wrist_force"]] = self.f_ext
+        obs[sl["wrist_torque"]] = self._wrist_torque()
+        obs[sl["gripper_open"]] = 1.0 if self.released else 0.0
+        obs[sl["time"]] = t
+        k = max(0, len(self._hand_frames) - 1 - self.obs_latency)
+        hand = self._hand_frames[k]
+        if self._hand_noise is not None:
+            hand = hand + self._hand_noise[min(k, self._hand_noise.shape[0] - 1)]
+        obs[sl["receiver_hand_xyz"]] = hand
+        obs[sl["robot_enabled"]] = 1.0 if t >= self.t_enabled else 0.0
+        return np.clip(obs, self._obs_low, self._obs_high).astype(np.float32)
+
+    def _info(self) -> dict[str, Any]:
+        t_rel = self.t_release
+        delay = self.stabilisation_delay if self.static else 0.0
+        return {
+            "is_success": self.outcome == "success",
+            "outcome": self.outcome,
+            "handover_time": (t_rel - delay) if self.outcome == "success" else math.nan,
+            "handover_time_with_delay": t_rel if self.outcome == "success" else math.nan,
+            "release_force": self.release_force,
+            "released": self.released,
+            "peak_contact_force": self.peak_contact_force,
+            "receiver_id": f"{self.receiver.kind}:{self.receiver.source_id}",
+            "receiver_state": self.receiver.state,
+            "receiver_grasp_time": self.receiver.t_grasp,
+            "time": float(self.data.time),
+        }
+
+    # ------------------------------------------------------------------ rendering
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        if self.render_mode == "rgb_array":
+            if self._renderer is None:
+                self._renderer = mujoco.Renderer(self.model, self.height, self.width)
+            self._renderer.update_scene(self.data, camera=self.camera)
+            return self._renderer.render().copy()
+        if self._viewer is None:
+            import mujoco.viewer
+
+            self._viewer = mujoco.viewer.launch_passive(self.model, self.data)
+        self._viewer.sync()
+        return None
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+
+    def __getstate__(self):  # EzPickle rebuilds from the constructor kwargs
+        return EzPickle.__getstate__(self)

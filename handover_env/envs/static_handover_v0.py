@@ -1,0 +1,52 @@
+"""``handover_env/StaticHandover-v0``: the paper's static baseline (after Meng et al. 2022)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from handover_env.envs.base_handover import HandoverEnvBase
+
+STOP_XY = (0.45, -0.95)  # the predefined area where the receiver stops, m
+
+
+class StaticHandoverEnv(HandoverEnvBase):
+    """The static handover baseline: the receiver walks into a predefined area, stops and raises
+    the right hand; the robot may move only after it has detected the hand and waited
+    ``stabilisation_delay`` (2 s) for the detection to stabilise (paper Sec. V-C, after Meng et
+    al. 2022).
+
+    Same robot, action and observation spaces, rewards and outcomes as
+    :class:`handover_env.envs.dynamic_handover_v0.DynamicHandoverEnv` (see there), except:
+
+    ## Receiver
+    A scripted walker whose walk ends at ``STOP_XY`` = (0.45, -0.95) (replayed tracks stop at their
+    last frame). There it raises the right hand; the hand counts as detected when fully raised.
+    Until ``detect + stabilisation_delay`` the robot holds its ready pose whatever the action
+    (``robot_enabled`` = 0 in the observation). The receiver waits; only the TimeLimit (600 steps,
+    20 s) ends an episode without a handover.
+
+    ## Timing
+    ``info["handover_time"]`` excludes the stabilisation delay, as the paper does;
+    ``info["handover_time_with_delay"]`` includes it.
+
+    ## Arguments
+    As the dynamic env, plus ``stabilisation_delay`` (s, default 2.0).
+    """
+
+    static = True
+
+    def _configure_receiver(self, kind: str, options: dict[str, Any]) -> None:
+        overrides = {"end_x": STOP_XY[0], "pass_y": STOP_XY[1]} if kind in ("id", "ood") else None
+        self.receiver.reset(
+            self.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
+            episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
+            walker_overrides=overrides,
+        )
+        self.receiver.present_after_walk = True
+
+    def _after_step(self) -> None:
+        if math.isinf(self.t_enabled) and not math.isnan(self.receiver.t_hand_raised):
+            self.t_detect = self.receiver.t_hand_raised
+            self.t_enabled = self.t_detect + self.stabilisation_delay
+        super()._after_step()
