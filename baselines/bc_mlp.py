@@ -1,0 +1,498 @@
+"""BC-MLP: behaviour cloning with a multi-layer perceptron (the paper's Table I baseline).
+
+A torch MLP maps the shared baseline features of one frame (:mod:`baselines.features`: the W-frame
+receiver base-xy history and the current giver xyz) to the giver xyz chunk of the next H = 30
+frames. Inputs and outputs are standardised with mean/std statistics of the training frames, kept
+as buffers of the module so they are saved with the weights (``model.safetensors``). Training uses
+a masked MSE on the standardised chunk (rows past an episode end are masked), Adam, and early
+stopping on a validation split of whole episodes (stratified by ID/OOD). Everything is seeded and
+deterministic on CPU.
+
+Checkpoint folder (``save``/``load``):
+
+* ``config.json``        -- ``{"type": "bc_mlp", "format": 1, "config": BCMLPConfig fields, ...}``
+* ``model.safetensors``  -- best weights and the normalisation statistics
+* ``training_state/``    -- last weights, optimizer state (LeRobot's safetensors format) and
+  ``state.json`` (epoch, best validation loss, patience counter, loss curves, split) for resuming
+
+In an env (``act``) the predicted chunk is smoothed with LeRobot's ``ACTTemporalEnsembler``
+(coefficient 0.01, as ACT), and the target is the ensembled position ``forecast_time`` seconds ahead
+(the paper's t_f).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+from torch import nn
+
+from agents.base import Agent, validate_history
+from baselines.features import (
+    CheckpointError,
+    FeatureSpec,
+    FrameArrays,
+    dataset_frames,
+    encode_history,
+    episode_frames,
+    facing_yaw,
+    split_train_val,
+    validate_giver,
+)
+from handover_env.data.dataset import Episode, HandoverDataset
+
+CHECKPOINT_TYPE = "bc_mlp"
+CHECKPOINT_FORMAT = 1
+
+
+@dataclass
+class BCMLPConfig:
+    """Configuration of the BC-MLP baseline.
+
+    Args:
+        history: W, frames of receiver history in the input (see :mod:`baselines.features`).
+        horizon: H, frames of future giver xyz predicted (30 = 1 s, the paper's chunk).
+        hidden: widths of the hidden layers.
+        dropout: dropout after each hidden layer (0 keeps training fully deterministic).
+        lr: Adam learning rate.
+        weight_decay: Adam weight decay.
+        batch_size: frames per gradient step.
+        max_epochs: upper bound on passes over the training frames.
+        patience: stop after this many epochs without a better validation loss.
+        val_fraction: fraction of episodes held out for validation / early stopping.
+        seed: seeds initialisation, shuffling and the split.
+        device: torch device (the baselines are meant to run on ``cpu``).
+        temporal_ensemble_coeff: ``ACTTemporalEnsembler`` coefficient used by ``act``.
+        forecast_time: t_f in seconds, how far ahead of now ``act`` targets (0 = the current frame).
+    """
+
+    history: int = 10
+    horizon: int = 30
+    hidden: tuple[int, ...] = (256, 256, 256)
+    dropout: float = 0.0
+    lr: float = 1e-3
+    weight_decay: float = 0.0
+    batch_size: int = 256
+    max_epochs: int = 100
+    patience: int = 8
+    val_fraction: float = 0.1
+    seed: int = 0
+    device: str = "cpu"
+    temporal_ensemble_coeff: float = 0.01
+    forecast_time: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.hidden = tuple(int(h) for h in self.hidden)
+        FeatureSpec(history=self.history, horizon=self.horizon)  # validates W and H
+        if not self.hidden or min(self.hidden) < 1:
+            raise ValueError(f"hidden must be a non-empty list of positive widths, got {self.hidden}")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
+        for name in ("lr", "batch_size", "max_epochs", "patience"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)!r}")
+        if self.weight_decay < 0:
+            raise ValueError(f"weight_decay must be >= 0, got {self.weight_decay}")
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+        if not 0.0 <= self.forecast_time * 30.0 < self.horizon:
+            raise ValueError(f"forecast_time must be in [0, horizon/30) s, got {self.forecast_time}")
+
+    @property
+    def spec(self) -> FeatureSpec:
+        return FeatureSpec(history=self.history, horizon=self.horizon)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> BCMLPConfig:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise CheckpointError(f"unknown BCMLPConfig fields {unknown}")
+        return cls(**d)
+
+
+class BCMLPNet(nn.Module):
+    """Standardise -> MLP -> un-standardise; the statistics are buffers (saved with the weights)."""
+
+    def __init__(self, env_dim: int, horizon: int, hidden: tuple[int, ...], dropout: float = 0.0):
+        super().__init__()
+        self.horizon = horizon
+        in_dim = env_dim + 3
+        layers: list[nn.Module] = []
+        for width in hidden:
+            layers += [nn.Linear(in_dim, width), nn.ReLU()]
+            if dropout > 0:
+                layers.append(nn.Dropout(dropout))
+            in_dim = width
+        layers.append(nn.Linear(in_dim, horizon * 3))
+        self.mlp = nn.Sequential(*layers)
+        self.register_buffer("in_mean", torch.zeros(env_dim + 3))
+        self.register_buffer("in_std", torch.ones(env_dim + 3))
+        self.register_buffer("out_mean", torch.zeros(3))
+        self.register_buffer("out_std", torch.ones(3))
+
+    def set_stats(self, frames: FrameArrays) -> None:
+        """Set the normalisation statistics from training frames (valid chunk rows only)."""
+        x = np.concatenate([frames.env_state, frames.state], axis=1).astype(np.float64)
+        y = frames.action[~frames.action_is_pad].astype(np.float64)
+        eps = 1e-6
+        self.in_mean.copy_(torch.as_tensor(x.mean(0)))
+        self.in_std.copy_(torch.as_tensor(np.maximum(x.std(0), eps)))
+        self.out_mean.copy_(torch.as_tensor(y.mean(0)))
+        self.out_std.copy_(torch.as_tensor(np.maximum(y.std(0), eps)))
+
+    def forward_normalized(self, env_state: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        """(B, H, 3) standardised chunk."""
+        x = (torch.cat([env_state, state], dim=-1) - self.in_mean) / self.in_std
+        return self.mlp(x).view(-1, self.horizon, 3)
+
+    def forward(self, env_state: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
+        """(B, H, 3) giver xyz chunk in metres."""
+        return self.forward_normalized(env_state, state) * self.out_std + self.out_mean
+
+    def loss(self, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Masked MSE of the standardised chunk."""
+        pred = self.forward_normalized(batch["env_state"], batch["state"])
+        target = (batch["action"] - self.out_mean) / self.out_std
+        valid = (~batch["action_is_pad"]).unsqueeze(-1).to(pred.dtype)
+        return ((pred - target) ** 2 * valid).sum() / (valid.sum() * 3).clamp_min(1.0)
+
+
+def _tensors(frames: FrameArrays, device: str) -> dict[str, torch.Tensor]:
+    return {
+        "env_state": torch.as_tensor(frames.env_state, device=device),
+        "state": torch.as_tensor(frames.state, device=device),
+        "action": torch.as_tensor(frames.action, device=device),
+        "action_is_pad": torch.as_tensor(frames.action_is_pad, device=device),
+    }
+
+
+@torch.no_grad()
+def _eval_loss(net: BCMLPNet, data: dict[str, torch.Tensor], batch_size: int = 4096) -> float:
+    net.eval()
+    n = data["env_state"].shape[0]
+    total, weight = 0.0, 0.0
+    for i in range(0, n, batch_size):
+        b = {k: v[i : i + batch_size] for k, v in data.items()}
+        w = float((~b["action_is_pad"]).sum())
+        total += float(net.loss(b)) * w
+        weight += w
+    return total / max(weight, 1.0)
+
+
+class BCMLPAgent(Agent):
+    """The BC-MLP baseline behind the common :class:`Agent` interface.
+
+    ``predict`` and ``predict_sequence`` need the current giver position (see
+    :mod:`baselines.features`); ``predict_episode`` takes it from an episode, ``act`` from the
+    robot's ``ee_pos``.
+    """
+
+    def __init__(self, config: BCMLPConfig | None = None):
+        self.config = config or BCMLPConfig()
+        self.horizon = self.config.horizon
+        torch.manual_seed(self.config.seed)
+        self.net = BCMLPNet(self.config.spec.env_dim, self.config.horizon, self.config.hidden, self.config.dropout)
+        self.net.eval()
+        self.fitted = False
+        self.train_log: dict = {}
+        self._layout = None
+        self._ensembler = None
+
+    # ------------------------------------------------------------------ training
+    def fit(
+        self,
+        dataset: HandoverDataset,
+        out_dir: str | os.PathLike | None = None,
+        resume: bool = False,
+        progress: bool = False,
+        max_epochs: int | None = None,
+        log: Callable[[str], None] | None = None,
+    ) -> BCMLPAgent:
+        """Train on ``dataset`` with early stopping; optionally checkpoint every epoch to ``out_dir``.
+
+        Args:
+            dataset: demonstrations; a validation split of whole episodes is held out.
+            out_dir: checkpoint folder, rewritten after every epoch (best weights + training state).
+            resume: continue from the training state in ``out_dir``.
+            progress: show a tqdm bar per epoch with the loss.
+            max_epochs: overrides ``config.max_epochs``.
+            log: called with one line per epoch.
+        """
+        cfg = self.config
+        torch.set_num_threads(max(1, min(torch.get_num_threads(), 2)))
+        train_idx, val_idx = split_train_val(dataset, cfg.val_fraction, cfg.seed)
+        train = dataset_frames(dataset.subset(train_idx), cfg.spec)
+        val = dataset_frames(dataset.subset(val_idx), cfg.spec)
+        max_epochs = cfg.max_epochs if max_epochs is None else int(max_epochs)
+
+        torch.manual_seed(cfg.seed)
+        self.net = BCMLPNet(cfg.spec.env_dim, cfg.horizon, cfg.hidden, cfg.dropout).to(cfg.device)
+        self.net.set_stats(train)
+        opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        state = {
+            "epoch": 0,
+            "best_val": math.inf,
+            "best_epoch": -1,
+            "bad_epochs": 0,
+            "train_loss": [],
+            "val_loss": [],
+            "stopped_early": False,
+            "wall_time_s": 0.0,
+            "split": {
+                "train": [dataset[i].source_id for i in train_idx],
+                "val": [dataset[i].source_id for i in val_idx],
+            },
+        }
+        best = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
+        if resume:
+            if out_dir is None:
+                raise CheckpointError("resume needs the checkpoint folder (out_dir)")
+            state, best = self._load_training_state(Path(out_dir), opt, state["split"])
+
+        tr = _tensors(train, cfg.device)
+        va = _tensors(val, cfg.device)
+        n = len(train)
+        t_start = time.perf_counter() - state["wall_time_s"]
+        while state["epoch"] < max_epochs and state["bad_epochs"] < cfg.patience:
+            epoch = state["epoch"]
+            self.net.train()
+            gen = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)  # resumable shuffling
+            perm = torch.randperm(n, generator=gen)
+            batches = range(0, n, cfg.batch_size)
+            bar = None
+            if progress:
+                from tqdm import tqdm
+
+                bar = tqdm(batches, desc=f"bc-mlp epoch {epoch + 1}/{max_epochs}", leave=False)
+                batches = bar
+            running = 0.0
+            for j, i in enumerate(batches):
+                idx = perm[i : i + cfg.batch_size]
+                loss = self.net.loss({k: v[idx] for k, v in tr.items()})
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                running += float(loss)
+                if bar is not None and j % 20 == 0:
+                    bar.set_postfix(loss=f"{running / (j + 1):.4f}")
+            if bar is not None:
+                bar.close()
+            train_loss = running / max(1, math.ceil(n / cfg.batch_size))
+            val_loss = _eval_loss(self.net, va)
+            state["epoch"] = epoch + 1
+            state["train_loss"].append(train_loss)
+            state["val_loss"].append(val_loss)
+            if val_loss < state["best_val"]:
+                state["best_val"], state["best_epoch"], state["bad_epochs"] = val_loss, epoch + 1, 0
+                best = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
+            else:
+                state["bad_epochs"] += 1
+            state["stopped_early"] = state["bad_epochs"] >= cfg.patience
+            state["wall_time_s"] = time.perf_counter() - t_start
+            if log is not None:
+                log(
+                    f"epoch {epoch + 1:3d}  train {train_loss:.5f}  val {val_loss:.5f}  "
+                    f"best {state['best_val']:.5f} @ {state['best_epoch']}"
+                )
+            if out_dir is not None:
+                self._save(Path(out_dir), best, opt, state)
+
+        self.net.load_state_dict(best)
+        self.net.eval()
+        self.fitted = True
+        self.train_log = state
+        return self
+
+    # ------------------------------------------------------------------ inference
+    def _require_fitted(self) -> None:
+        if not self.fitted:
+            raise RuntimeError("BCMLPAgent is not trained: call fit(dataset) or BCMLPAgent.load(dir)")
+
+    @torch.no_grad()
+    def predict_batch(self, env_state: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """(B, H, 3) giver chunks for B feature rows (env_state (B, 2W), state (B, 3))."""
+        self._require_fitted()
+        env = torch.as_tensor(np.asarray(env_state, dtype=np.float32), device=self.config.device)
+        st = torch.as_tensor(np.asarray(state, dtype=np.float32), device=self.config.device)
+        if env.ndim != 2 or env.shape[1] != self.config.spec.env_dim or st.shape != (env.shape[0], 3):
+            raise ValueError(
+                f"expected env_state (B, {self.config.spec.env_dim}) and state (B, 3), "
+                f"got {tuple(env.shape)} and {tuple(st.shape)}"
+            )
+        self.net.eval()
+        return self.net(env, st).cpu().numpy().astype(np.float64)
+
+    def predict(self, receiver_history: np.ndarray, giver_xyz: np.ndarray | None = None) -> np.ndarray:
+        """(H, 3) future giver xyz from the receiver history and the current giver xyz."""
+        hist = validate_history(receiver_history)
+        giver = validate_giver(giver_xyz)
+        env = encode_history(hist, self.config.history)
+        return self.predict_batch(env[None], giver[None])[0]
+
+    def predict_sequence(
+        self, receiver_xy: np.ndarray, query_times: np.ndarray, giver_xyz: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Batched open-loop predictions at ``query_times``: (Q, H, 3).
+
+        ``giver_xyz`` is the episode's (T, 3) giver trajectory; only its rows at the query times
+        (the current frames) are read.
+        """
+        receiver_xy = validate_history(receiver_xy)
+        if giver_xyz is None:
+            validate_giver(None)
+        giver = np.asarray(giver_xyz, dtype=np.float64)
+        if giver.shape != (receiver_xy.shape[0], 3):
+            raise ValueError(f"giver_xyz must have shape ({receiver_xy.shape[0]}, 3), got {giver.shape}")
+        return self.predict_episode(
+            Episode(receiver_xy, np.zeros((len(giver), 3)), giver, np.tile([1.0, 0, 0, 0], (len(giver), 1)),
+                    False, "query"),
+            query_times,
+        )
+
+    def predict_episode(self, episode: Episode, query_times: np.ndarray) -> np.ndarray:
+        """Open-loop predictions at frames ``query_times`` of ``episode`` (its giver gives the state)."""
+        f = episode_frames(episode, self.config.spec, query_times)
+        if len(f) == 0:
+            return np.zeros((0, self.horizon, 3))
+        return self.predict_batch(f.env_state, f.state)
+
+    # ------------------------------------------------------------------ closed loop
+    def reset(self) -> None:
+        from lerobot.policies.act.modeling_act import ACTTemporalEnsembler
+
+        self._ensembler = ACTTemporalEnsembler(self.config.temporal_ensemble_coeff, self.config.horizon)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """(x, y, z, yaw): the ensembled target ``forecast_time`` ahead; yaw faces the receiver."""
+        obs = np.asarray(obs, dtype=np.float64).reshape(-1)
+        if self._layout is None or self._layout.size != obs.size:
+            self._layout = _layout_for(obs.size)
+        if self._ensembler is None:
+            self.reset()
+        track = self._layout.receiver_track(obs)
+        ee = self._layout.unflatten(obs)["ee_pos"]
+        chunk = torch.as_tensor(self.predict(track, ee)[None], dtype=torch.float64)
+        now = self._ensembler.update(chunk)
+        target = ensembled_ahead(self._ensembler, now, self.config.forecast_time)
+        return np.array([*target, facing_yaw(target, track[-1])], dtype=np.float32)
+
+    # ------------------------------------------------------------------ checkpoints
+    def _save(self, out: Path, best: dict, opt: torch.optim.Optimizer, state: dict) -> None:
+        from lerobot.optim.optimizers import save_optimizer_state
+
+        out.mkdir(parents=True, exist_ok=True)
+        ts = out / "training_state"
+        ts.mkdir(exist_ok=True)
+        save_file({k: v.contiguous().cpu() for k, v in best.items()}, out / "model.safetensors")
+        save_file({k: v.contiguous().cpu() for k, v in self.net.state_dict().items()}, ts / "last.safetensors")
+        save_optimizer_state(opt, ts)
+        (ts / "state.json").write_text(json.dumps(state, indent=1))
+        (out / "config.json").write_text(json.dumps(self._config_json(state), indent=1))
+
+    def _config_json(self, state: dict | None = None) -> dict:
+        d = {
+            "type": CHECKPOINT_TYPE,
+            "format": CHECKPOINT_FORMAT,
+            "config": {**asdict(self.config), "hidden": list(self.config.hidden)},
+            "features": self.config.spec.to_dict(),
+        }
+        if state:
+            d["training"] = {k: state[k] for k in ("epoch", "best_epoch", "best_val", "stopped_early", "wall_time_s")}
+        return d
+
+    def _load_training_state(self, out: Path, opt: torch.optim.Optimizer, split: dict) -> tuple[dict, dict]:
+        from lerobot.optim.optimizers import load_optimizer_state
+
+        ts = out / "training_state"
+        if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
+            raise CheckpointError(f"cannot resume: no training state in {ts}")
+        saved = _read_config(out)
+        if saved["config"] != {**asdict(self.config), "hidden": list(self.config.hidden)}:
+            diff = sorted(k for k, v in saved["config"].items() if asdict(self.config).get(k) != v and k != "hidden")
+            raise CheckpointError(f"cannot resume from {out}: its config differs in {diff or ['hidden']}")
+        state = json.loads((ts / "state.json").read_text())
+        if state["split"] != split:
+            raise CheckpointError(f"cannot resume from {out}: it was trained on a different dataset/split")
+        self.net.load_state_dict(load_file(ts / "last.safetensors"))
+        load_optimizer_state(opt, ts)
+        return state, load_file(out / "model.safetensors")
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write ``config.json`` + ``model.safetensors`` (weights and normalisation) to ``path``."""
+        self._require_fitted()
+        out = Path(path)
+        out.mkdir(parents=True, exist_ok=True)
+        save_file({k: v.contiguous().cpu() for k, v in self.net.state_dict().items()}, out / "model.safetensors")
+        (out / "config.json").write_text(json.dumps(self._config_json(self.train_log), indent=1))
+        return out
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, device: str = "cpu") -> BCMLPAgent:
+        """Load a checkpoint written by :meth:`save` or by ``train.py bc-mlp``."""
+        path = Path(path)
+        saved = _read_config(path)
+        cfg = BCMLPConfig.from_dict({**saved["config"], "device": device})
+        agent = cls(cfg)
+        weights = path / "model.safetensors"
+        if not weights.is_file():
+            raise CheckpointError(f"{path}: missing model.safetensors")
+        try:
+            agent.net.load_state_dict(load_file(weights))
+        except RuntimeError as exc:
+            raise CheckpointError(f"{weights} does not match its config.json: {exc}") from exc
+        agent.net.to(device).eval()
+        agent.fitted = True
+        agent.train_log = saved.get("training", {})
+        return agent
+
+
+def _read_config(path: Path) -> dict:
+    if not path.is_dir():
+        raise CheckpointError(f"no BC-MLP checkpoint folder at {path}")
+    cfg_file = path / "config.json"
+    if not cfg_file.is_file():
+        raise CheckpointError(f"{path}: missing config.json (not a BC-MLP checkpoint)")
+    try:
+        saved = json.loads(cfg_file.read_text())
+    except json.JSONDecodeError as exc:
+        raise CheckpointError(f"{cfg_file}: not valid JSON ({exc})") from exc
+    if saved.get("type") != CHECKPOINT_TYPE:
+        raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {CHECKPOINT_TYPE!r}")
+    if saved.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"{path}: checkpoint format {saved.get('format')}, this code reads {CHECKPOINT_FORMAT}")
+    return saved
+
+
+def _layout_for(size: int):
+    """The ObsLayout whose flat size is ``size`` (the env's history W is inferred)."""
+    from handover_env.envs.observation import ObsLayout
+
+    rest = ObsLayout(history=2).size - 4
+    w, rem = divmod(size - rest, 2)
+    if rem or w < 2:
+        raise ValueError(f"observation of size {size} matches no ObsLayout")
+    return ObsLayout(history=w)
+
+
+def ensembled_ahead(ensembler, now: torch.Tensor, forecast_time: float, rate_hz: float = 30.0) -> np.ndarray:
+    """The ensembled position ``forecast_time`` s ahead: ``now`` (k = 0) or the ensembler's k-th future row.
+
+    After ``ACTTemporalEnsembler.update`` consumed the current action, ``ensembled_actions[:, k-1]``
+    is the running weighted average of every prediction made so far for frame t + k.
+    """
+    k = int(round(forecast_time * rate_hz))
+    if k <= 0 or ensembler.ensembled_actions is None or ensembler.ensembled_actions.shape[1] < k:
+        return now[0].cpu().numpy().astype(np.float64)
+    return ensembler.ensembled_actions[0, k - 1].cpu().numpy().astype(np.float64)
+
+
+__all__ = ["BCMLPAgent", "BCMLPConfig", "BCMLPNet", "ensembled_ahead"]
