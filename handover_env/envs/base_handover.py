@@ -213,6 +213,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         d.eq_active[ids.eq_receiver] = 0
         d.ctrl[ids.gripper_act] = GRIPPER_CLOSED_CTRL
         self._reset_episode_state()
+        self._global_step = 0  # the controller's tick clock restarts with the episode
         self._configure_receiver(kind, options)
         mujoco.mj_forward(m, d)
         self._last_held_z = float(d.xpos[ids.object_body, 2])
@@ -417,19 +418,20 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return np.clip(obs, self._obs_low, self._obs_high).astype(np.float32)
 
     def _info(self) -> dict[str, Any]:
-        t_rel = self.t_release
+        """Episode facts; values not yet defined (no release, no grasp) are ``None``."""
+        ok = self.outcome == "success"
         delay = self.stabilisation_delay if self.static else 0.0
         return {
-            "is_success": self.outcome == "success",
+            "is_success": ok,
             "outcome": self.outcome,
-            "handover_time": (t_rel - delay) if self.outcome == "success" else math.nan,
-            "handover_time_with_delay": t_rel if self.outcome == "success" else math.nan,
-            "release_force": self.release_force,
+            "handover_time": (self.t_release - delay) if ok else None,
+            "handover_time_with_delay": self.t_release if ok else None,
+            "release_force": None if math.isnan(self.release_force) else self.release_force,
             "released": self.released,
             "peak_contact_force": self.peak_contact_force,
             "receiver_id": f"{self.receiver.kind}:{self.receiver.source_id}",
             "receiver_state": self.receiver.state,
-            "receiver_grasp_time": self.receiver.t_grasp,
+            "receiver_grasp_time": None if math.isnan(self.receiver.t_grasp) else self.receiver.t_grasp,
             "time": float(self.data.time),
         }
 
@@ -444,9 +446,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._renderer.update_scene(self.data, camera=self.camera)
             return self._renderer.render().copy()
         if self._viewer is None:
-            import mujoco.viewer
+            from mujoco import viewer as mj_viewer
 
-            self._viewer = mujoco.viewer.launch_passive(self.model, self.data)
+            self._viewer = mj_viewer.launch_passive(self.model, self.data)
         self._viewer.sync()
         return None
 
