@@ -1,0 +1,481 @@
+"""How a person walks past the giver and reaches for the object: one model for the data and the env.
+
+The paper's receiver (Sec. IV-A, "Data Collection"; Sec. V-A) walks toward the giver, passes at
+their side and takes the object on the move. The same functions here drive
+
+* the synthetic dataset (:mod:`handover_env.data.synthetic`), and
+* the env's scripted ID/OOD receivers (:mod:`handover_env.receiver`),
+
+so the simulated people and the demonstrations cannot drift apart.
+
+Frame (the public dataset's): z up, floor at z = 0, giver/robot near the origin facing +x. The
+receiver starts about 2.5 m away on the giver's right-front, walks toward -x, passes the giver's
+side along ``y = pass_y`` (about -0.6 .. -1.2) and stops being recorded near ``x = -0.8``. While
+walking toward -x (heading yaw ~ pi) the receiver's RIGHT side, and right hand, face +y: the giver.
+
+All randomness lives in :func:`sample_walker`; :func:`base_trajectory` and the body functions are
+deterministic and pure numpy, so a seeded ``np.random.Generator`` reproduces a walker exactly.
+
+Calibration. Every distribution in :func:`sample_walker` is a piecewise-linear quantile function
+built from summary STATISTICS of the public Dynamic Handover Dataset (875-recording development
+copy; quantiles over recordings, never per-recording values): the receiver pelvis (ZED BODY_34
+joint 0) start point in polar form, its per-recording median walking speed, its y at the moment
+of transfer, and the shoulder height (joint 12). Body proportions (shoulder, hand) are expressed
+as fractions of body height, fitted to the same statistics with the standard anthropometric ratio
+shoulder height = 0.818 x body height.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+# --------------------------------------------------------------------------------------------
+# Calibration tables: (cumulative probability, value) pairs of quantiles over recordings.
+# Source: public Dynamic Handover Dataset, ID recordings ("motion_normal_*"), statistics only.
+# --------------------------------------------------------------------------------------------
+_P = (0.0, 0.01, 0.05, 0.25, 0.50, 0.75, 0.95, 0.99, 1.0)
+#: Start of the walk in polar form around the giver: bearing (deg) and distance (m) of the pelvis.
+#: Data: bearing 1%/50%/99% = -60.4/-19.8/1.6 deg, distance 1.70/2.51/3.02 m, rank correlation ~0.5.
+START_BEARING_DEG_Q = (_P, (-63.0, -60.4, -48.8, -34.7, -19.8, -7.9, -0.9, 1.6, 4.0))
+START_DISTANCE_Q = (_P, (1.55, 1.70, 1.93, 2.28, 2.51, 2.70, 2.88, 3.02, 3.10))
+START_RANK_CORRELATION = 0.5
+#: Bounding box of the data's start points (x range, y range), m.
+START_BOX = ((0.73, 3.13), (-1.86, 0.17))
+_START_CANDIDATES = 16
+#: Per-recording median pelvis speed (m/s). Data: 0.57 .. 1.13, median 0.83.
+SPEED_Q = (_P, (0.58, 0.633, 0.691, 0.769, 0.831, 0.90, 0.996, 1.078, 1.12))
+#: Pelvis y at the moment of transfer (m). Data: 1%/50%/99% = -1.20/-0.92/-0.58.
+PASS_Y_Q = (_P, (-1.25, -1.197, -1.108, -0.985, -0.92, -0.856, -0.748, -0.62, -0.58))
+#: Body height (m) = right-shoulder height / 0.818; data shoulder z 1.37 .. 1.44, median 1.41.
+HEIGHT_Q = (
+    (0.0, 0.05, 0.25, 0.5, 0.75, 0.95, 1.0),
+    (1.68, 1.70, 1.715, 1.725, 1.735, 1.746, 1.765),
+)
+#: The recordings end when the pelvis passes x = -0.77 .. -0.80.
+END_X_RANGE = (-0.80, -0.765)
+
+# Body proportions as fractions of height (anthropometry, fitted to the dataset's joint statistics).
+SHOULDER_HEIGHT_RATIO = 0.818  # acromion height / body height; data shoulder z median 1.41 m
+SHOULDER_HALF_WIDTH_RATIO = 0.10  # lateral pelvis -> right shoulder; data median 0.17 m
+HAND_REST_HEIGHT_RATIO = 0.50  # hand z while walking; data median 0.86 m
+HAND_REST_LATERAL_RATIO = 0.155  # lateral pelvis -> right hand while walking; data median 0.27 m
+HAND_SWING_RATIO = 0.06  # forward/back arm-swing amplitude; data hand forward std ~0.11 m
+ARM_REACH_RATIO = (
+    0.386  # shoulder -> grip centre (upper arm 0.186 + forearm 0.146 + half hand 0.054)
+)
+DEFAULT_HEIGHT = 1.725
+
+KINDS = ("id", "ood")
+OOD_MODES = ("wander", "pause")
+
+
+def _quantile_sample(
+    u: np.ndarray | float, table: tuple[tuple[float, ...], tuple[float, ...]]
+) -> np.ndarray:
+    """Map uniforms ``u`` in [0, 1] through a piecewise-linear quantile function."""
+    probs, values = table
+    return np.interp(u, probs, values)
+
+
+_erf = np.vectorize(math.erf, otypes=[np.float64])
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    """C1 ramp from 0 (x <= 0) to 1 (x >= 1)."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@dataclass(frozen=True)
+class WalkerParams:
+    """One receiver: where they start, how fast they walk, how tall they are and how they deviate.
+
+    Args:
+        kind: ``"id"`` (walks straight past) or ``"ood"`` (wanders or pauses, paper Sec. V-A).
+        start_xy: pelvis xy at t = 0, m.
+        speed: nominal walking speed, m/s (data: per-recording median 0.57 .. 1.13, median 0.83).
+        pass_y: y of the line along which the receiver passes the giver, m.
+        end_x: x where the walk ends, m (data: about -0.8).
+        height: body height, m; shoulder and hand heights scale with it.
+        ood_mode: None for ID; ``"wander"`` or ``"pause"`` for OOD.
+        approach_x: x by which the path has converged from ``start_y`` onto ``pass_y``.
+        step_length_ratio: step length / height; cadence = speed / step length (~1.7 steps/s).
+        sway_amplitude: lateral pelvis sway, m, one period per stride.
+        speed_ripple: relative speed oscillation at the step frequency.
+        drift_amplitude: relative slow speed variation over the walk.
+        drift_frequency: frequency of that slow variation, Hz.
+        drift_phase: its phase, rad.
+        gait_phase: stride phase at t = 0, rad.
+        pause_time: OOD "pause": seconds after the start at which the receiver begins to stop.
+        pause_duration: OOD "pause": seconds standing still.
+        pause_ramp: OOD "pause": seconds to decelerate to rest (and to accelerate again).
+        wander_amplitude: OOD "wander": lateral meander amplitude, m.
+        wander_wavelength: OOD "wander": meander wavelength along x, m.
+        wander_phase: OOD "wander": meander phase, rad.
+        wander_fade_x: OOD "wander": the meander fades out between ``approach_x + 0.6`` and this x
+            so the receiver is back on the passing line for the handover.
+    """
+
+    kind: str
+    start_xy: tuple[float, float]
+    speed: float
+    pass_y: float
+    end_x: float = -0.8
+    height: float = DEFAULT_HEIGHT
+    ood_mode: str | None = None
+    approach_x: float = 0.3
+    step_length_ratio: float = 0.28
+    sway_amplitude: float = 0.012
+    speed_ripple: float = 0.05
+    drift_amplitude: float = 0.05
+    drift_frequency: float = 0.25
+    drift_phase: float = 0.0
+    gait_phase: float = 0.0
+    pause_time: float = 1.5
+    pause_duration: float = 1.5
+    pause_ramp: float = 0.6
+    wander_amplitude: float = 0.3
+    wander_wavelength: float = 1.5
+    wander_phase: float = 0.0
+    wander_fade_x: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
+        if self.kind == "id" and self.ood_mode is not None:
+            raise ValueError(f"an ID walker has ood_mode=None, got {self.ood_mode!r}")
+        if self.kind == "ood" and self.ood_mode not in OOD_MODES:
+            raise ValueError(f"an OOD walker needs ood_mode in {OOD_MODES}, got {self.ood_mode!r}")
+        try:
+            start = tuple(float(v) for v in self.start_xy)
+        except TypeError as exc:
+            raise ValueError(f"start_xy must be a pair of numbers, got {self.start_xy!r}") from exc
+        if len(start) != 2:
+            raise ValueError(f"start_xy must be a pair of numbers, got {self.start_xy!r}")
+        object.__setattr__(self, "start_xy", start)
+        for f in fields(self):
+            if f.name in ("kind", "ood_mode", "start_xy"):
+                continue
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(
+                value, (int, float, np.integer, np.floating)
+            ):
+                raise TypeError(f"{f.name} must be a number, got {value!r}")
+            if not math.isfinite(float(value)):
+                raise ValueError(f"{f.name} must be finite, got {value!r}")
+            object.__setattr__(self, f.name, float(value))
+        if not all(math.isfinite(v) for v in start):
+            raise ValueError(f"start_xy must be finite, got {start}")
+        if self.speed <= 0:
+            raise ValueError(f"speed must be > 0, got {self.speed}")
+        if not 1.0 <= self.height <= 2.3:
+            raise ValueError(
+                f"height must be a human body height in [1.0, 2.3] m, got {self.height}"
+            )
+        if start[0] <= self.end_x + 0.1:
+            raise ValueError(
+                f"start x ({start[0]:.3f}) must be ahead of end_x ({self.end_x:.3f}) by > 0.1 m"
+            )
+        for name in ("step_length_ratio", "pause_ramp", "wander_wavelength", "drift_frequency"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in (
+            "sway_amplitude",
+            "pause_duration",
+            "pause_time",
+            "wander_amplitude",
+            "drift_amplitude",
+        ):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.speed_ripple < 0 or self.speed_ripple + self.drift_amplitude >= 0.9:
+            raise ValueError(
+                "speed_ripple >= 0 and speed_ripple + drift_amplitude < 0.9 are required"
+            )
+
+    @property
+    def step_length(self) -> float:
+        """Length of one step, m."""
+        return self.step_length_ratio * self.height
+
+    @property
+    def is_ood(self) -> bool:
+        """True for an out-of-distribution walker."""
+        return self.kind == "ood"
+
+
+def sample_walker(rng: np.random.Generator, kind: str = "id", **overrides: object) -> WalkerParams:
+    """Draw a walker from the seeded distributions calibrated to the public data.
+
+    The same number of random draws is made whatever the kind and overrides, so fixing one field
+    (e.g. ``speed=1.0``) leaves all the others as they would have been.
+
+    Args:
+        rng: the random generator (the env passes ``self.np_random``).
+        kind: ``"id"`` or ``"ood"``.
+        **overrides: fields of :class:`WalkerParams` to fix, e.g. ``height=1.8, speed=1.0``.
+
+    Raises:
+        ValueError: unknown kind or unknown override name, or an invalid resulting walker.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    known = {f.name for f in fields(WalkerParams)}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise ValueError(f"unknown WalkerParams field(s) {unknown}; known: {sorted(known)}")
+    # Start point: Gaussian copula of (bearing, distance) with the data's rank correlation,
+    # restricted to the region where recordings start (a fixed number of candidates, so the
+    # number of draws does not depend on the outcome).
+    z = rng.standard_normal((_START_CANDIDATES, 2))
+    rho = START_RANK_CORRELATION
+    z2 = rho * z[:, 0] + math.sqrt(1.0 - rho * rho) * z[:, 1]
+    u_bearing = 0.5 * (1.0 + _erf(z[:, 0] / math.sqrt(2.0)))
+    u_dist = 0.5 * (1.0 + _erf(z2 / math.sqrt(2.0)))
+    bearing = np.radians(_quantile_sample(u_bearing, START_BEARING_DEG_Q))
+    distance = _quantile_sample(u_dist, START_DISTANCE_Q)
+    cand = np.stack([distance * np.cos(bearing), distance * np.sin(bearing)], axis=-1)
+    (xlo, xhi), (ylo, yhi) = START_BOX
+    inside = (cand[:, 0] >= xlo) & (cand[:, 0] <= xhi) & (cand[:, 1] >= ylo) & (cand[:, 1] <= yhi)
+    pick = int(np.argmax(inside)) if inside.any() else 0
+    start = np.clip(cand[pick], (xlo, ylo), (xhi, yhi))
+    u = rng.random(8)
+    g = rng.random(10)
+    mode_draw = rng.random()
+    params: dict[str, object] = {
+        "kind": kind,
+        "start_xy": (float(start[0]), float(start[1])),
+        "speed": float(_quantile_sample(u[0], SPEED_Q)),
+        "pass_y": float(_quantile_sample(u[1], PASS_Y_Q)),
+        "end_x": END_X_RANGE[0] + (END_X_RANGE[1] - END_X_RANGE[0]) * float(u[2]),
+        "height": float(_quantile_sample(u[3], HEIGHT_Q)),
+        "ood_mode": None if kind == "id" else OOD_MODES[int(mode_draw < 0.5)],
+        "approach_x": 0.1 + 0.4 * float(u[4]),
+        "step_length_ratio": 0.26 + 0.04 * float(u[5]),
+        "sway_amplitude": 0.006 + 0.014 * float(u[6]),
+        "speed_ripple": 0.03 + 0.04 * float(u[7]),
+        "drift_amplitude": 0.08 * float(g[0]),
+        "drift_frequency": 0.15 + 0.2 * float(g[1]),
+        "drift_phase": 2.0 * math.pi * float(g[2]),
+        "gait_phase": 2.0 * math.pi * float(g[3]),
+        "pause_time": 0.8 + 1.4 * float(g[4]),
+        "pause_duration": 0.8 + 1.7 * float(g[5]),
+        "pause_ramp": 0.4 + 0.4 * float(g[6]),
+        "wander_amplitude": 0.15 + 0.3 * float(g[7]),
+        "wander_wavelength": 1.0 + 1.2 * float(g[8]),
+        "wander_phase": 2.0 * math.pi * float(g[9]),
+    }
+    params.update(overrides)
+    if "kind" in overrides and "ood_mode" not in overrides:
+        params["ood_mode"] = None if overrides["kind"] == "id" else OOD_MODES[int(mode_draw < 0.5)]
+    return WalkerParams(**params)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class BaseTrajectory:
+    """The receiver's pelvis track at a fixed rate.
+
+    Attributes:
+        t: (T,) seconds from 0.
+        xy: (T, 2) pelvis xy, m.
+        heading: (T,) walking-direction yaw, rad (pi = toward -x); smooth, from the path's
+            tangent, so it is defined even while standing still.
+        gait_phase: (T,) stride phase, rad: advances by 2 pi per stride (two steps) with the
+            distance walked and freezes while paused; feeds :func:`hand_position`'s arm swing.
+    """
+
+    t: np.ndarray
+    xy: np.ndarray
+    heading: np.ndarray
+    gait_phase: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = self.t.shape[0]
+        if self.xy.shape != (n, 2) or self.heading.shape != (n,) or self.gait_phase.shape != (n,):
+            raise ValueError("BaseTrajectory arrays must share their length T")
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+def _path(params: WalkerParams, n: int = 4001) -> tuple[np.ndarray, np.ndarray]:
+    """Dense path (x decreasing from start to end) as (xy (n, 2), cumulative arc length (n,))."""
+    x0, y0 = params.start_xy
+    x = np.linspace(x0, params.end_x, n)
+    # Converge from start_y onto pass_y over at least 1 m of x, done by approach_x (or later):
+    # a quadratic blend, so the walker starts out heading toward the passing line and joins it
+    # tangentially.
+    x_conv = min(params.approach_x, x0 - 1.0)
+    remaining = np.clip((x - x_conv) / (x0 - x_conv), 0.0, 1.0)
+    y = params.pass_y + (y0 - params.pass_y) * remaining**2
+    if params.ood_mode == "wander":
+        # Lateral meander along the way, zero at the start and faded out before the handover.
+        d = x0 - x
+        fade_start = max(params.wander_fade_x + 0.6, x0 - 0.5)
+        taper = _smoothstep(
+            (x - params.wander_fade_x) / max(fade_start - params.wander_fade_x, 1e-6)
+        )
+        onset = _smoothstep(d / 0.4)
+        y = (
+            y
+            + params.wander_amplitude
+            * np.sin(2 * math.pi * d / params.wander_wavelength)
+            * taper
+            * onset
+        )
+    xy = np.stack([x, y], axis=-1)
+    seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    return xy, np.concatenate([[0.0], np.cumsum(seg)])
+
+
+def _pause_factor(params: WalkerParams, t: np.ndarray) -> np.ndarray:
+    """Multiplier on speed: 1 normally, 0 while paused, C1 ramps in between (OOD "pause")."""
+    if params.ood_mode != "pause":
+        return np.ones_like(t)
+    t0, ramp, hold = params.pause_time, params.pause_ramp, params.pause_duration
+    down = _smoothstep((t - t0) / ramp)
+    up = _smoothstep((t - (t0 + ramp + hold)) / ramp)
+    return 1.0 - down + up
+
+
+def base_trajectory(params: WalkerParams, rate_hz: float = 30.0) -> BaseTrajectory:
+    """The full walk from ``start_xy`` to ``end_x``, sampled at ``rate_hz``.
+
+    Deterministic given ``params``. The pelvis moves along a smooth path that converges from the
+    start onto the passing line ``y = pass_y`` (OOD "wander" adds a lateral meander), at a speed
+    that carries a slow drift, a ripple at the step frequency and, for OOD "pause", a stop and
+    restart; a lateral gait sway of one period per stride is added on top.
+
+    Args:
+        params: the walker.
+        rate_hz: sampling rate (the dataset and the env's camera use 30 Hz).
+
+    Returns:
+        The trajectory; its last sample is the first at which the pelvis reaches ``end_x``.
+    """
+    if not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise ValueError(f"rate_hz must be positive and finite, got {rate_hz}")
+    path_xy, arc = _path(params)
+    total = float(arc[-1])
+    dt = 1.0 / rate_hz
+    pause_total = (
+        (params.pause_duration + 2 * params.pause_ramp) if params.ood_mode == "pause" else 0.0
+    )
+    t_max = (
+        params.pause_time
+        + pause_total
+        + total / (params.speed * (1.0 - params.speed_ripple - params.drift_amplitude))
+        + 1.0
+    )
+    t = np.arange(math.ceil(t_max * rate_hz) + 2) * dt
+    slow = 1.0 + params.drift_amplitude * np.sin(
+        2 * math.pi * params.drift_frequency * t + params.drift_phase
+    )
+    base_v = params.speed * slow * _pause_factor(params, t)
+
+    def integrate(v: np.ndarray) -> np.ndarray:
+        return np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+
+    # Step-frequency ripple needs the distance walked; one fixed-point pass is accurate to << 1 mm.
+    s = integrate(base_v)
+    step_phase = 2 * math.pi * s / params.step_length + params.gait_phase
+    s = integrate(base_v * (1.0 + params.speed_ripple * np.sin(2 * step_phase)))
+    n = int(np.searchsorted(s, total)) + 1
+    n = min(max(n, 2), t.size)
+    t, s = t[:n], np.minimum(s[:n], total)
+    xy = np.stack([np.interp(s, arc, path_xy[:, 0]), np.interp(s, arc, path_xy[:, 1])], axis=-1)
+    tangent = np.gradient(path_xy, arc, axis=0)
+    tx, ty = np.interp(s, arc, tangent[:, 0]), np.interp(s, arc, tangent[:, 1])
+    # Yaw relative to -x stays near 0, so heading = pi + it is continuous without wrapping.
+    heading = math.pi + np.unwrap(np.arctan2(-ty, -tx))
+    gait = 2 * math.pi * s / (2 * params.step_length) + params.gait_phase
+    # Lateral sway: one period per stride, vanishing while standing.
+    moving = np.clip(np.gradient(s, dt) / params.speed, 0.0, 1.0)
+    sway = params.sway_amplitude * np.sin(gait) * moving
+    right = np.stack([np.sin(heading), -np.cos(heading)], axis=-1)
+    xy = xy + sway[:, None] * right
+    return BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=np.mod(gait, 2 * math.pi))
+
+
+def arm_reach(height: float) -> float:
+    """Max distance from the right shoulder to the grip centre of the right hand, m."""
+    return ARM_REACH_RATIO * float(height)
+
+
+def _frame(heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit forward and right vectors (..., 2) for a walking yaw."""
+    c, s = np.cos(heading), np.sin(heading)
+    return np.stack([c, s], axis=-1), np.stack([s, -c], axis=-1)
+
+
+def shoulder_position(
+    base_xy: np.ndarray, heading: np.ndarray | float, height: np.ndarray | float
+) -> np.ndarray:
+    """Right shoulder xyz (..., 3) for pelvis xy (..., 2), yaw (...) and body height (scalar or (...))."""
+    base_xy = np.asarray(base_xy, dtype=np.float64)
+    heading = np.asarray(heading, dtype=np.float64)
+    height = np.asarray(height, dtype=np.float64)
+    _, right = _frame(heading)
+    xy = base_xy + (SHOULDER_HALF_WIDTH_RATIO * height)[..., None] * right
+    z = np.broadcast_to(SHOULDER_HEIGHT_RATIO * height, xy.shape[:-1])
+    return np.concatenate([xy, z[..., None]], axis=-1)
+
+
+def hand_position(
+    base_xy: np.ndarray,
+    heading: np.ndarray | float,
+    height: np.ndarray | float,
+    target_xyz: np.ndarray | None = None,
+    reach: np.ndarray | float = 0.0,
+    swing_phase: np.ndarray | float | None = None,
+) -> np.ndarray:
+    """Right hand xyz (..., 3), vectorised over leading dimensions.
+
+    With ``reach = 0`` the hand hangs beside the hip and swings forward and back once per stride
+    (a pendulum, so it also rises a little at the ends of the swing). As ``reach`` goes to 1 it
+    moves in a straight line toward ``target_xyz``; the result is always kept within
+    :func:`arm_reach` of the shoulder, so an out-of-reach target is approached but not reached.
+
+    Args:
+        base_xy: (..., 2) pelvis xy.
+        heading: (...) walking yaw, rad.
+        height: body height, m (scalar or (...)).
+        target_xyz: (..., 3) what the hand reaches for (the object); required when reach > 0.
+        reach: (...) fraction of the way from the rest pose to the target, clipped to [0, 1].
+        swing_phase: (...) stride phase (``BaseTrajectory.gait_phase``); by default derived from
+            the distance walked along -x, which is what the env has online.
+
+    Raises:
+        ValueError: ``reach > 0`` without a target.
+    """
+    base_xy = np.asarray(base_xy, dtype=np.float64)
+    heading = np.asarray(heading, dtype=np.float64)
+    h = np.asarray(height, dtype=np.float64)
+    forward, right = _frame(heading)
+    if swing_phase is None:
+        swing_phase = 2 * math.pi * (-base_xy[..., 0]) / (2 * 0.28 * h)
+    swing = HAND_SWING_RATIO * h * np.sin(np.asarray(swing_phase, dtype=np.float64))
+    arm = HAND_REST_HEIGHT_RATIO * h
+    rest_xy = (
+        base_xy + (HAND_REST_LATERAL_RATIO * h)[..., None] * right + swing[..., None] * forward
+    )
+    rest_z = arm + swing**2 / (2.0 * (SHOULDER_HEIGHT_RATIO - HAND_REST_HEIGHT_RATIO) * h)
+    rest = np.concatenate(
+        [rest_xy, np.broadcast_to(rest_z, rest_xy.shape[:-1])[..., None]], axis=-1
+    )
+    r = np.clip(np.asarray(reach, dtype=np.float64), 0.0, 1.0)
+    if target_xyz is None:
+        if np.any(r > 0):
+            raise ValueError("hand_position: reach > 0 needs a target_xyz")
+        return rest
+    target = np.asarray(target_xyz, dtype=np.float64)
+    hand = rest + r[..., None] * (target - rest)
+    shoulder = shoulder_position(base_xy, heading, h)
+    offset = hand - shoulder
+    dist = np.linalg.norm(offset, axis=-1, keepdims=True)
+    limit = ARM_REACH_RATIO * np.broadcast_to(h, dist.shape[:-1])[..., None]
+    scale = np.where(dist > limit, limit / np.maximum(dist, 1e-12), 1.0)
+    return shoulder + offset * scale
