@@ -1,0 +1,362 @@
+"""Gaussian-process motion flows, exact and sparse (FITC/SPGP), batched over demonstrations.
+
+The paper (Sec. IV-A, "Trajectory Similarity Measure") models, for every demo k, a flow function
+f_k: x -> xdot from the receiver base position (2D) to its velocity (2D) with a Sparse
+Pseudo-input GP (SPGP, Snelson & Ghahramani 2006, whose approximation is called FITC in
+Quinonero-Candela & Rasmussen 2005). IAAL (Choi et al. 2018) uses the exact GP instead. Both
+velocity components share one kernel, so they share every matrix below and differ only in
+their weight vectors.
+
+Kernel: squared exponential ``k(a, b) = s2 * exp(-|a - b|^2 / (2 l^2))``.
+
+**Exact GP** on inputs X (N, 2), outputs Y (N, 2), noise variance sn2::
+
+    mu(x)     = k_x^T (K_nn + sn2 I)^-1 Y
+    sigma2(x) = s2 - k_x^T (K_nn + sn2 I)^-1 k_x                     (latent f, no noise)
+
+**FITC / SPGP** with inducing inputs Z (M, 2) (Snelson & Ghahramani 2006, Eqs. 8-9)::
+
+    Lambda    = diag(K_nn - Q_nn) + sn2 I,   Q_nn = K_nm K_mm^-1 K_mn
+    Q         = K_mm + K_mn Lambda^-1 K_nm
+    mu(x)     = k_x^T Q^-1 K_mn Lambda^-1 Y
+    sigma2(x) = s2 - k_x^T (K_mm^-1 - Q^-1) k_x
+
+computed the numerically stable way (GPML's ``infFITC``): ``L = chol(K_mm)``,
+``V = L^-1 K_mn``, ``A = I + V Lambda^-1 V^T`` (eigenvalues >= 1), ``L_A = chol(A)``.
+When Z = X (inducing ratio 1.0) Q_nn = K_nn, Lambda = sn2 I and both formulas agree with the
+exact GP (tested to 1e-8).
+
+Both models therefore reduce to one *predictive form* per demo,
+``mu(x) = k(x, Z)^T alpha`` and ``sigma2(x) = s2 - k(x, Z)^T W k(x, Z)``, with everything
+query-independent (Z, alpha, W) precomputed at fit time. :class:`FlowBank` stacks the
+predictive forms of all demos into padded tensors (grouped into a few buckets of similar
+size so padding wastes little) and evaluates every demo's flow at a query in one batched
+kernel evaluation plus batched mat-vecs: per query O(M_k) for the mean and O(M_k^2) for the
+variance, against O(N_k) and O(N_k^2) for the exact GP.
+
+**Hyperparameters** are not fitted per demo: one shared triple (l, s2, sn2) is set by the
+documented rule in :meth:`GPHyperparameters.from_velocities`. The similarity compares the
+variance sigma2_k across demos, so all flows must share one prior scale; per-demo
+marginal-likelihood fits would make a demo with small fitted s2 look "close" everywhere.
+The same triple is used by the exact GP (IAAL), so FITC and exact differ only by the sparse
+approximation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import cho_solve, cholesky, eigh, solve_triangular
+
+DEFAULT_RCOND = 1e-14  # eigenvalues of K_mm below rcond * max are treated as zero (float64 round-off)
+
+
+@dataclass(frozen=True)
+class GPHyperparameters:
+    """Shared squared-exponential kernel hyperparameters of every flow GP.
+
+    Args:
+        lengthscale: l in metres (receiver base positions are in metres).
+        signal_var: s2, prior variance of each velocity component (in the GP's output units).
+        noise_var: sn2, observation noise variance of each velocity component (same units).
+    """
+
+    lengthscale: float
+    signal_var: float = 1.0
+    noise_var: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("lengthscale", "signal_var", "noise_var"):
+            value = float(getattr(self, name))
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be positive and finite, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_velocities(
+        cls, velocities: Sequence[np.ndarray], lengthscale: float, output_scale: float
+    ) -> GPHyperparameters:
+        """The fixed rule used by both the SPGP planner and IAAL.
+
+        Velocities are divided by ``output_scale`` before they enter the GP (the caller uses the
+        pooled standard deviation of all training velocity components, so the outputs have unit
+        variance and ``s2 = 1``: far from a demo sigma2 -> 1, on its path sigma2 -> ~0).
+        The noise variance is the classic difference-based estimate: if v_t = v*_t + e_t with
+        white e and a smooth v*, then Var(v_t - v_{t-1}) ~= 2 Var(e), so
+        ``sn2 = mean((v_t - v_{t-1})^2) / 2 / output_scale^2``, pooled over demos and axes and
+        floored at 1e-4. The lengthscale is a planner setting (metres) chosen on the open-loop
+        protocol.
+        """
+        diffs = [np.diff(np.asarray(v, dtype=np.float64), axis=0) for v in velocities if len(v) > 1]
+        if not diffs:
+            raise ValueError("need at least one velocity sequence with 2 or more frames")
+        d = np.concatenate(diffs)
+        sn2 = 0.5 * float(np.mean(d**2)) / float(output_scale) ** 2
+        return cls(lengthscale=lengthscale, signal_var=1.0, noise_var=max(sn2, 1e-4))
+
+
+def se_kernel(a: np.ndarray, b: np.ndarray, hyp: GPHyperparameters) -> np.ndarray:
+    """Squared-exponential kernel matrix between (..., n, 2) and (..., m, 2): (..., n, m)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    d2 = np.sum((a[..., :, None, :] - b[..., None, :, :]) ** 2, axis=-1)
+    return hyp.signal_var * np.exp(-0.5 / hyp.lengthscale**2 * d2)
+
+
+def inducing_indices(n: int, ratio: float) -> np.ndarray:
+    """Indices of the inducing samples: ``max(1, round(ratio * n))`` samples uniformly in time.
+
+    The paper picks "the proportion of actual data points used as inducing points ... ensuring
+    a uniform distribution across time"; we take evenly spaced indices from the first to the
+    last sample (ratio 1.0 gives every sample).
+    """
+    if not (0.0 < float(ratio) <= 1.0):
+        raise ValueError(f"inducing ratio must be in (0, 1], got {ratio!r}")
+    if n < 1:
+        raise ValueError(f"need at least one sample, got {n}")
+    m = min(n, max(1, int(round(ratio * n))))
+    return np.unique(np.round(np.linspace(0, n - 1, m)).astype(np.int64))
+
+
+def _check_xy(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] != 2 or y.ndim != 2 or y.shape[0] != x.shape[0]:
+        raise ValueError(f"expected X (N, 2) and Y (N, D), got {x.shape} and {y.shape}")
+    if x.shape[0] < 1 or not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise ValueError("X and Y must be non-empty and finite")
+    return x, y
+
+
+@dataclass(frozen=True)
+class PredictiveForm:
+    """mu(x) = k(x, Z)^T alpha and sigma2(x) = s2 - |R k(x, Z)|^2 for one demo.
+
+    ``W = R^T R`` is the variance matrix ((K + sn2 I)^-1 exact, K_mm^-1 - Q^-1 FITC); keeping the
+    factor R and summing squares avoids the cancellation of ``k^T W k`` when W has large entries.
+    """
+
+    z: np.ndarray  # (M, 2) inducing (FITC) or training (exact) inputs
+    alpha: np.ndarray  # (M, D) mean weights
+    r: np.ndarray  # (r, M) variance factor, r <= M
+
+    def predict(self, x: np.ndarray, hyp: GPHyperparameters) -> tuple[np.ndarray, np.ndarray]:
+        """Mean (Q, D) and latent variance (Q,) at query points x (Q, 2)."""
+        k = se_kernel(np.atleast_2d(x), self.z, hyp)
+        return k @ self.alpha, hyp.signal_var - np.sum((k @ self.r.T) ** 2, axis=1)
+
+
+def exact_gp(x: np.ndarray, y: np.ndarray, hyp: GPHyperparameters) -> PredictiveForm:
+    """Exact GP regression (IAAL's flow model): Z = X, alpha = (K + sn2 I)^-1 Y, R = L^-1.
+
+    ``L = chol(K + sn2 I)`` is well conditioned (eigenvalues >= sn2), so ``R = L^-1`` is exact.
+    """
+    x, y = _check_xy(x, y)
+    k = se_kernel(x, x, hyp)
+    k[np.diag_indices_from(k)] += hyp.noise_var
+    c = cholesky(k, lower=True)
+    r = solve_triangular(c, np.eye(x.shape[0]), lower=True)
+    return PredictiveForm(z=x, alpha=cho_solve((c, True), y), r=r)
+
+
+def exact_gp_reference(
+    x: np.ndarray, y: np.ndarray, xq: np.ndarray, hyp: GPHyperparameters
+) -> tuple[np.ndarray, np.ndarray]:
+    """Textbook exact GP prediction by triangular solves (Rasmussen & Williams Alg. 2.1), for tests."""
+    x, y = _check_xy(x, y)
+    k = se_kernel(x, x, hyp) + hyp.noise_var * np.eye(x.shape[0])
+    c = cholesky(k, lower=True)
+    ks = se_kernel(np.atleast_2d(xq), x, hyp)
+    v = solve_triangular(c, ks.T, lower=True)
+    return ks @ cho_solve((c, True), y), hyp.signal_var - np.sum(v**2, axis=0)
+
+
+def _fitc_parts(
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, hyp: GPHyperparameters, rcond: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Feature-space FITC: P (M, r), Lambda (N,), eigen-decomposition (a, E) of A, and A^-1 Phi^T Lambda^-1 Y."""
+    x, y = _check_xy(x, y)
+    z = np.asarray(z, dtype=np.float64)
+    if z.ndim != 2 or z.shape[1] != 2 or z.shape[0] < 1 or not np.all(np.isfinite(z)):
+        raise ValueError(f"inducing inputs must be finite with shape (M, 2), got {z.shape}")
+    lam, u = eigh(se_kernel(z, z, hyp))
+    keep = lam > rcond * lam[-1]
+    p = u[:, keep] / np.sqrt(lam[keep])  # K_mm^+ = P P^T on the kept eigen-space
+    phi = se_kernel(x, z, hyp) @ p  # (N, r): Q_nn = Phi Phi^T
+    # Lambda = diag(K_nn - Q_nn) + sn2; the clip only removes round-off below zero.
+    lam_n = np.maximum(hyp.signal_var - np.sum(phi**2, axis=1), 0.0) + hyp.noise_var
+    a_val, a_vec = eigh(np.eye(p.shape[1]) + (phi / lam_n[:, None]).T @ phi)  # A, eigenvalues >= 1
+    beta = a_vec @ ((a_vec.T @ (phi.T @ (y / lam_n[:, None]))) / a_val[:, None])
+    return p, a_val, a_vec, beta
+
+
+def fitc_gp(
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, hyp: GPHyperparameters, rcond: float = DEFAULT_RCOND
+) -> PredictiveForm:
+    """FITC / SPGP (Snelson & Ghahramani 2006) in predictive form, inducing inputs ``z``.
+
+    K_mm is inverted on its numerically non-singular eigen-space (eigenvalues above
+    ``rcond * max``), ``K_mm^+ = P P^T`` with ``P = U_r diag(lambda_r)^-1/2``. With the features
+    ``Phi = K_nm P`` (so Q_nn = Phi Phi^T) and ``A = I + Phi^T Lambda^-1 Phi``::
+
+        alpha = P A^-1 Phi^T Lambda^-1 Y
+        R     = diag(sqrt(1 - 1/a)) E^T P^T          (A = E diag(a) E^T)
+
+    so that ``k^T R^T R k = k^T (K_mm^-1 - Q^-1) k``. Truncating the spectrum (instead of adding
+    jitter to K_mm, which perturbs every direction and costs ~sqrt(jitter) in accuracy) keeps
+    FITC at Z = X equal to the exact GP as far as float64 can represent K_mm^-1.
+    """
+    p, a_val, a_vec, beta = _fitc_parts(x, y, z, hyp, rcond)
+    r = (np.sqrt(np.maximum(1.0 - 1.0 / a_val, 0.0))[:, None] * a_vec.T) @ p.T
+    return PredictiveForm(z=np.asarray(z, dtype=np.float64), alpha=p @ beta, r=r)
+
+
+def fitc_gp_reference(
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    xq: np.ndarray,
+    hyp: GPHyperparameters,
+    rcond: float = DEFAULT_RCOND,
+) -> tuple[np.ndarray, np.ndarray]:
+    """FITC prediction by the textbook feature-space formulas evaluated at query time, for tests.
+
+    ``mu = phi_*^T A^-1 Phi^T Lambda^-1 Y`` and ``sigma2 = s2 - phi_*^T phi_* + phi_*^T A^-1 phi_*``
+    with ``phi_* = P^T k_*`` (Snelson & Ghahramani 2006, Eqs. 8-9, written with Q = K_mm + ...
+    factored through K_mm^+ = P P^T).
+    """
+    p, a_val, a_vec, beta = _fitc_parts(x, y, z, hyp, rcond)
+    phis = se_kernel(np.atleast_2d(xq), np.asarray(z, dtype=np.float64), hyp) @ p  # (Q, r)
+    proj = phis @ a_vec
+    var = hyp.signal_var - np.sum(phis**2, axis=1) + np.sum(proj**2 / a_val, axis=1)
+    return phis @ beta, var
+
+
+@dataclass
+class _Bucket:
+    """Demos of similar size padded to a common M (padding has k = 0 through ``mask``)."""
+
+    index: np.ndarray  # (B,) positions of these demos in the bank
+    z: np.ndarray  # (B, M, 2)
+    mask: np.ndarray  # (B, M) 1.0 for real points, 0.0 for padding
+    alpha: np.ndarray  # (B, D, M) transposed mean weights
+    r: np.ndarray  # (B, R, M) variance factors, zero rows/columns for padding
+
+    def __post_init__(self) -> None:
+        self.zz = np.sum(self.z**2, axis=2)  # (B, M)
+        self.mask_s2 = self.mask  # scaled by s2 in FlowBank
+
+
+class FlowBank:
+    """The predictive forms of many demos stacked for batched evaluation (float64).
+
+    Args:
+        forms: one :class:`PredictiveForm` per demo (all with the same output width D).
+        hyp: the shared hyperparameters they were built with.
+        n_buckets: demos are sorted by M and split into this many groups of equal count, each
+            padded to its own largest M (more buckets, less padding, more Python calls).
+        dtype: precision of the per-query mat-vecs. Kernel values are computed in float64 and
+            then cast. float32 halves the memory streamed per query (the cost is memory-bound)
+            at an absolute error of ~1e-4 in sigma2 (K_mm is ill-conditioned, so R has large
+            entries); float64 reproduces :meth:`PredictiveForm.predict` to round-off.
+    """
+
+    def __init__(
+        self,
+        forms: Sequence[PredictiveForm],
+        hyp: GPHyperparameters,
+        n_buckets: int = 8,
+        dtype: type | str = np.float64,
+    ) -> None:
+        if len(forms) == 0:
+            raise ValueError("FlowBank needs at least one demo")
+        if not isinstance(n_buckets, (int, np.integer)) or n_buckets < 1:
+            raise ValueError(f"n_buckets must be an integer >= 1, got {n_buckets!r}")
+        self.dtype = np.dtype(dtype)
+        if self.dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
+            raise ValueError(f"dtype must be float32 or float64, got {dtype!r}")
+        self.hyp = hyp
+        self.n_demos = len(forms)
+        self.sizes = np.array([f.z.shape[0] for f in forms], dtype=np.int64)
+        ranks = np.array([f.r.shape[0] for f in forms], dtype=np.int64)
+        out_dim = {f.alpha.shape[1] for f in forms}
+        if len(out_dim) != 1:
+            raise ValueError(f"all demos need the same output width, got {sorted(out_dim)}")
+        self.out_dim = out_dim.pop()
+        order = np.argsort(self.sizes, kind="stable")
+        self.buckets: list[_Bucket] = []
+        for idx in np.array_split(order, min(int(n_buckets), self.n_demos)):
+            m, nr, b = int(self.sizes[idx].max()), int(ranks[idx].max()), idx.size
+            z = np.zeros((b, m, 2))
+            mask = np.zeros((b, m))
+            alpha = np.zeros((b, m, self.out_dim))
+            r = np.zeros((b, nr, m))
+            for j, k in enumerate(idx):  # fit time only
+                mk, rk = self.sizes[k], ranks[k]
+                z[j, :mk] = forms[k].z
+                mask[j, :mk] = 1.0
+                alpha[j, :mk] = forms[k].alpha
+                r[j, :rk, :mk] = forms[k].r
+            # Stored for the (B, M, Q) layout of predict(): alpha^T (B, D, M), R (B, R, M).
+            self.buckets.append(
+                _Bucket(idx, z, mask, np.ascontiguousarray(alpha.transpose(0, 2, 1)).astype(self.dtype),
+                        r.astype(self.dtype))
+            )
+        for b in self.buckets:
+            b.mask_s2 = b.mask * hyp.signal_var
+        self._neg_half_inv_l2 = -0.5 / hyp.lengthscale**2
+
+    @property
+    def n_stored(self) -> int:
+        """Stored variance-factor entries including padding: the per-query mat-vec work."""
+        return int(sum(b.r.size for b in self.buckets))
+
+    def predict(self, xq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every demo's flow at query points: mean (Q, K, D) and latent variance (Q, K).
+
+        Per bucket: one batched kernel evaluation of the Q queries against all inducing points of
+        all its demos, ``k (B, M, Q)``, then two batched products, ``alpha^T k`` and ``R k``;
+        no loop over demos. Padding has k = 0 so it contributes nothing.
+        """
+        xq = np.asarray(xq, dtype=np.float64).reshape(-1, 2)
+        q = xq.shape[0]
+        mean = np.empty((q, self.n_demos, self.out_dim))
+        var = np.empty((q, self.n_demos))
+        s2 = self.hyp.signal_var
+        xx = np.sum(xq**2, axis=1)
+        for b in self.buckets:
+            d2 = b.zz[:, :, None] + xx[None, None, :] - 2.0 * (b.z @ xq.T)  # (B, M, Q)
+            k = np.exp(self._neg_half_inv_l2 * np.maximum(d2, 0.0))
+            k *= b.mask_s2[:, :, None]
+            k = k.astype(self.dtype, copy=False)
+            mean[:, b.index] = np.matmul(b.alpha, k).transpose(2, 0, 1)
+            rk = np.matmul(b.r, k)  # (B, R, Q)
+            var[:, b.index] = (s2 - np.einsum("brq,brq->qb", rk, rk)).astype(np.float64)
+        return mean, var
+
+
+def build_bank(
+    inputs: Sequence[np.ndarray],
+    outputs: Sequence[np.ndarray],
+    hyp: GPHyperparameters,
+    ratio: float | None,
+    n_buckets: int = 8,
+    rcond: float = DEFAULT_RCOND,
+    dtype: type | str = np.float64,
+) -> FlowBank:
+    """Fit one flow per demo and stack them: FITC with ``ratio`` in (0, 1], or exact when ``None``.
+
+    The loop over demos here runs once, at fit time.
+    """
+    if len(inputs) != len(outputs):
+        raise ValueError(f"{len(inputs)} input and {len(outputs)} output sequences")
+    forms = []
+    for x, y in zip(inputs, outputs):
+        if ratio is None:
+            forms.append(exact_gp(x, y, hyp))
+        else:
+            x = np.asarray(x, dtype=np.float64)
+            forms.append(fitc_gp(x, y, x[inducing_indices(len(x), ratio)], hyp, rcond))
+    return FlowBank(forms, hyp, n_buckets=n_buckets, dtype=dtype)
