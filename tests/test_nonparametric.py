@@ -1,0 +1,177 @@
+"""The SPGP planner and IAAL (agents/nonparametric.py, baselines/iaal.py) on toy data with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.base import Agent
+from agents.nonparametric import NonparametricAgent, NonparametricConfig, backward_velocity, cosine_distance
+from baselines.iaal import IAALAgent
+from handover_env.data.dataset import Episode, HandoverDataset
+from handover_env.envs.observation import ObsLayout
+
+
+def _episode(i: int, receiver: np.ndarray, giver: np.ndarray, ood: bool = False) -> Episode:
+    n = len(receiver)
+    return Episode(receiver_xy=receiver, receiver_hand_xyz=np.zeros((n, 3)), giver_xyz=giver,
+                   object_quat=np.tile([1.0, 0, 0, 0], (n, 1)), is_ood=ood, source_id=f"toy_{i}")
+
+
+def toy_dataset(n_demos: int = 6, length: int = 70) -> HandoverDataset:
+    """Receivers on well separated straight lanes (different y and headings); each giver
+    trajectory is a distinct known function of time, so the right answer is known."""
+    eps = []
+    t = np.arange(length) / 30.0
+    for j in range(n_demos):
+        heading = np.pi + 0.25 * (j - n_demos / 2)  # walking toward -x, fanned out
+        y0 = -1.5 + 0.5 * j
+        rec = np.column_stack([2.5 + 0.8 * t * np.cos(heading), y0 + 0.8 * t * np.sin(heading)])
+        giv = np.column_stack([0.1 * j + 0.2 * t, -0.3 - 0.05 * j + 0.0 * t, 1.0 + 0.03 * j + 0.1 * np.sin(t + j)])
+        eps.append(_episode(j, rec, giv, ood=(j == n_demos - 1)))
+    return HandoverDataset(eps, name="toy")
+
+
+CONFIG = NonparametricConfig(lengthscale=0.15, top_k=1, horizon=30)
+
+
+@pytest.fixture(scope="module")
+def toy() -> HandoverDataset:
+    return toy_dataset()
+
+
+@pytest.fixture(scope="module", params=["spgp", "iaal"])
+def agent(request, toy) -> NonparametricAgent:
+    cls = NonparametricAgent if request.param == "spgp" else IAALAgent
+    return cls(CONFIG).fit(toy)
+
+
+def test_replaying_demo_j_predicts_demo_j(agent, toy):
+    for j, ep in enumerate(toy):
+        for t_c in (5, 20, 39):
+            pred = agent.predict(ep.receiver_xy[: t_c + 1])
+            np.testing.assert_allclose(pred, ep.giver_xyz[t_c : t_c + 30], atol=1e-12)
+            d = agent.distances(ep.receiver_xy[: t_c + 1])
+            assert int(np.argmin(d)) == j
+        # Near the end the demo runs out: its last row is held.
+        pred = agent.predict(ep.receiver_xy[:60])
+        np.testing.assert_allclose(pred[:11], ep.giver_xyz[59:70], atol=1e-12)
+        np.testing.assert_allclose(pred[11:], np.repeat(ep.giver_xyz[-1:], 19, axis=0), atol=1e-12)
+
+
+def test_streaming_equals_batch_recomputation(agent, toy):
+    ep = toy[2]
+    noisy = ep.receiver_xy + np.random.default_rng(1).normal(0, 0.01, ep.receiver_xy.shape)
+    agent.stream_reset()
+    for t in range(len(noisy)):
+        agent.stream_update(noisy[t])
+        if t in (0, 1, 7, 33, len(noisy) - 1):
+            np.testing.assert_allclose(agent.stream_distances(), agent.distances(noisy[: t + 1]), atol=1e-12)
+            np.testing.assert_allclose(agent.stream_predict(), agent.predict(noisy[: t + 1]), atol=1e-12)
+
+
+def test_predict_sequence_equals_loop_over_predict(agent, toy):
+    ep = toy[4]
+    times = np.array([0, 3, 10, 11, 40, 68])
+    fast = agent.predict_sequence(ep.receiver_xy, times)
+    slow = Agent.predict_sequence(agent, ep.receiver_xy, times)  # the base-class loop over predict
+    np.testing.assert_allclose(fast, slow, atol=1e-12)
+    assert agent.predict_sequence(ep.receiver_xy, np.array([], dtype=int)).shape == (0, 30, 3)
+
+
+def test_blend_weights_are_normalised_similarities(toy):
+    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=3)).fit(toy)
+    hist = toy[1].receiver_xy[:25] + np.array([0.0, 0.25])  # between lanes 1 and 2
+    d = agent.distances(hist)
+    sel = np.argsort(d)[:3]
+    w = np.exp(-d[sel]) / np.exp(-d[sel]).sum()
+    expected = np.zeros((30, 3))
+    for wk, k in zip(w, sel):
+        t_k = int(np.argmin(np.sum((agent.receivers[k] - hist[-1]) ** 2, axis=1)))
+        rows = np.minimum(t_k + np.arange(30), agent.lengths[k] - 1)
+        expected += wk * agent.givers[k, rows]
+    np.testing.assert_allclose(agent.predict(hist), expected, atol=1e-12)
+    np.testing.assert_allclose(agent.similarities(hist), np.exp(-d))
+
+
+def test_zero_velocity_is_neutral_and_finite(toy):
+    agent = NonparametricAgent(CONFIG).fit(toy)
+    pause = np.repeat(toy[3].receiver_xy[10:11], 15, axis=0)  # a receiver standing still
+    d = agent.distances(pause)
+    assert np.all(np.isfinite(d)) and np.all(np.isfinite(agent.predict(pause)))
+    # Standing still gives no directional evidence: d_cos = 1 for every frame and demo.
+    np.testing.assert_allclose(cosine_distance(np.zeros((4, 2)), np.ones((4, 2)), 0.05), 1.0)
+    np.testing.assert_allclose(cosine_distance(np.array([1.0, 0]), np.array([-2.0, 0]), 0.05), 2.0)
+    np.testing.assert_allclose(cosine_distance(np.array([1.0, 0]), np.array([0.0, 0]), 0.05), 1.0)
+    np.testing.assert_allclose(backward_velocity(np.array([[0.0, 0], [1, 0], [3, 0]]), 30.0)[:, 0], [30, 30, 60])
+
+
+def test_far_query_is_finite_and_sensible(toy):
+    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=3)).fit(toy)
+    far = toy[0].receiver_xy[:20] + np.array([50.0, 50.0])
+    d = agent.distances(far)
+    # Every flow reverts to its prior: sigma2 = 1, d_cos = 1, so d = kappa + 1 for every demo.
+    np.testing.assert_allclose(d, CONFIG.kappa + 1.0, atol=1e-9)
+    pred = agent.predict(far)
+    assert pred.shape == (30, 3) and np.all(np.isfinite(pred))
+    lo, hi = np.min([ep.giver_xyz.min(0) for ep in toy], 0), np.max([ep.giver_xyz.max(0) for ep in toy], 0)
+    assert np.all(pred >= lo - 1e-9) and np.all(pred <= hi + 1e-9)  # a convex blend of recorded givers
+
+
+def test_bad_input_raises(agent):
+    for bad in (np.zeros((0, 2)), np.zeros((5, 3)), np.array([[0.0, np.nan]]), np.zeros(4)):
+        with pytest.raises(ValueError):
+            agent.predict(bad)
+    with pytest.raises(ValueError):
+        agent.predict_sequence(np.zeros((5, 2)), np.array([7]))
+    agent.stream_reset()
+    with pytest.raises(ValueError):
+        agent.stream_predict()
+    with pytest.raises(ValueError):
+        agent.stream_update(np.array([np.inf, 0.0]))
+    with pytest.raises(RuntimeError):
+        NonparametricAgent().predict(np.zeros((3, 2)))
+    with pytest.raises(ValueError):
+        NonparametricAgent().fit(HandoverDataset([]))
+    for kwargs in ({"inducing_ratio": 0.0}, {"inducing_ratio": 1.2}, {"kappa": -1.0}, {"top_k": 0},
+                   {"lengthscale": 0.0}, {"precision": "float16"}, {"horizon": 2.5}):
+        with pytest.raises(ValueError):
+            NonparametricConfig(**kwargs)
+
+
+def test_one_episode_and_short_episodes_work(toy):
+    one = HandoverDataset([toy[0]])
+    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=10)).fit(one)
+    np.testing.assert_allclose(agent.predict(toy[0].receiver_xy[:10]), toy[0].giver_xyz[9:39], atol=1e-12)
+    short = HandoverDataset([_episode(0, toy[0].receiver_xy[:8], toy[0].giver_xyz[:8]), toy[1]])
+    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=1)).fit(short)
+    pred = agent.predict(toy[0].receiver_xy[:4])
+    np.testing.assert_allclose(pred[:5], toy[0].giver_xyz[3:8], atol=1e-12)
+    np.testing.assert_allclose(pred[5:], np.repeat(toy[0].giver_xyz[7:8], 25, axis=0), atol=1e-12)
+
+
+def test_act_follows_the_forecast_with_ready_pose_first(toy):
+    layout = ObsLayout()
+    agent = NonparametricAgent(CONFIG).fit(toy)
+    agent.reset()
+    ep = toy[2]
+    sl = layout.slices()
+    targets = []
+    for n in range(1, 40):
+        obs = np.zeros(layout.size, dtype=np.float32)
+        hist = ep.receiver_xy[max(0, n - layout.history) : n]
+        full = np.vstack([np.repeat(hist[:1], layout.history - len(hist), axis=0), hist])
+        obs[sl["receiver_xy_history"][0]] = full.reshape(-1)
+        obs[sl["receiver_frames_seen"][0]] = n
+        targets.append(agent.act(obs))
+    targets = np.array(targets)
+    ready = np.array([*agent.closed_loop.ready_pos, agent.closed_loop.ready_yaw], dtype=np.float32)
+    np.testing.assert_allclose(targets[0], ready)  # fewer than min_frames = 3 frames seen
+    np.testing.assert_allclose(targets[1], ready)
+    # Later the target is demo 2's giver at frame (n - 1) + t_f * 30 = n - 1 + 4.2 (interpolated).
+    for n in (10, 25, 39):
+        f = n - 1 + agent.params.forecast_time * 30.0
+        lo = int(np.floor(f))
+        exp = (1 - (f - lo)) * ep.giver_xyz[lo] + (f - lo) * ep.giver_xyz[lo + 1]
+        np.testing.assert_allclose(targets[n - 1][:3], exp, atol=1e-5)
+        assert abs(targets[n - 1][3] - ready[3]) <= agent.closed_loop.max_yaw_turn + 1e-6
