@@ -1,0 +1,21 @@
+"""Evaluation: the open-loop RMS protocol every method shares (:mod:`.openloop`) and result tables."""
+
+from handover_env.evaluation.openloop import (
+    EpisodeRecord,
+    OpenLoopProtocol,
+    episode_rms,
+    evaluate_openloop,
+    kfold_rms,
+    query_times,
+    summarise,
+)
+
+__all__ = [
+    "EpisodeRecord",
+    "OpenLoopProtocol",
+    "episode_rms",
+    "evaluate_openloop",
+    "kfold_rms",
+    "query_times",
+    "summarise",
+]
