@@ -45,6 +45,12 @@ START_RANK_CORRELATION = 0.5
 #: Bounding box of the data's start points (x range, y range), m.
 START_BOX = ((0.73, 3.13), (-1.86, 0.17))
 _START_CANDIDATES = 16
+#: Initial walking direction relative to the straight line to the passing line (deg, + = toward
+#: +y). Data: from the first 8 frames of the smoothed pelvis track; 5%/50%/95% = -31/11/81 deg.
+START_TURN_DEG_Q = (
+    (0.0, 0.05, 0.25, 0.5, 0.75, 0.95, 1.0),
+    (-45.0, -31.2, -3.8, 10.9, 37.7, 81.1, 95.0),
+)
 #: Per-recording median pelvis speed (m/s). Data: 0.57 .. 1.13, median 0.83.
 SPEED_Q = (_P, (0.58, 0.633, 0.691, 0.769, 0.831, 0.90, 0.996, 1.078, 1.12))
 #: Pelvis y at the moment of transfer (m). Data: 1%/50%/99% = -1.20/-0.92/-0.58.
@@ -102,6 +108,10 @@ class WalkerParams:
         height: body height, m; shoulder and hand heights scale with it.
         ood_mode: None for ID; ``"wander"`` or ``"pause"`` for OOD.
         approach_x: x by which the path has converged from ``start_y`` onto ``pass_y``.
+        start_turn: initial walking direction relative to the straight line toward
+            ``(approach_x, pass_y)``, rad; positive turns toward +y (the giver's side).
+        start_bulge: how long the walker keeps its initial direction (Hermite tangent length
+            at the start over the straight-line distance; larger = wider curve).
         step_length_ratio: step length / height; cadence = speed / step length (~1.7 steps/s).
         sway_amplitude: lateral pelvis sway, m, one period per stride.
         speed_ripple: relative speed oscillation at the step frequency.
@@ -115,6 +125,8 @@ class WalkerParams:
         wander_amplitude: OOD "wander": lateral meander amplitude, m.
         wander_wavelength: OOD "wander": meander wavelength along x, m.
         wander_phase: OOD "wander": meander phase, rad.
+        wander_loop: OOD "wander": how much the meander also runs along x (0: purely lateral;
+            near 1 with a large amplitude the path makes loops, as some recordings do).
         wander_fade_x: OOD "wander": the meander fades out between ``approach_x + 0.6`` and this x
             so the receiver is back on the passing line for the handover.
     """
@@ -127,6 +139,8 @@ class WalkerParams:
     height: float = DEFAULT_HEIGHT
     ood_mode: str | None = None
     approach_x: float = 0.3
+    start_turn: float = 0.0
+    start_bulge: float = 1.0
     step_length_ratio: float = 0.28
     sway_amplitude: float = 0.012
     speed_ripple: float = 0.05
@@ -140,6 +154,7 @@ class WalkerParams:
     wander_amplitude: float = 0.3
     wander_wavelength: float = 1.5
     wander_phase: float = 0.0
+    wander_loop: float = 0.5
     wander_fade_x: float = 0.2
 
     def __post_init__(self) -> None:
@@ -179,7 +194,13 @@ class WalkerParams:
             raise ValueError(
                 f"start x ({start[0]:.3f}) must be ahead of end_x ({self.end_x:.3f}) by > 0.1 m"
             )
-        for name in ("step_length_ratio", "pause_ramp", "wander_wavelength", "drift_frequency"):
+        for name in (
+            "step_length_ratio",
+            "start_bulge",
+            "pause_ramp",
+            "wander_wavelength",
+            "drift_frequency",
+        ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         for name in (
@@ -243,7 +264,7 @@ def sample_walker(rng: np.random.Generator, kind: str = "id", **overrides: objec
     pick = int(np.argmax(inside)) if inside.any() else 0
     start = np.clip(cand[pick], (xlo, ylo), (xhi, yhi))
     u = rng.random(8)
-    g = rng.random(10)
+    g = rng.random(13)
     mode_draw = rng.random()
     params: dict[str, object] = {
         "kind": kind,
@@ -267,6 +288,9 @@ def sample_walker(rng: np.random.Generator, kind: str = "id", **overrides: objec
         "wander_amplitude": 0.15 + 0.3 * float(g[7]),
         "wander_wavelength": 1.0 + 1.2 * float(g[8]),
         "wander_phase": 2.0 * math.pi * float(g[9]),
+        "wander_loop": float(g[10]),
+        "start_bulge": 1.0 + float(g[12]),
+        "start_turn": math.radians(float(_quantile_sample(g[11], START_TURN_DEG_Q))),
     }
     params.update(overrides)
     if "kind" in overrides and "ood_mode" not in overrides:
@@ -301,34 +325,51 @@ class BaseTrajectory:
         return int(self.t.shape[0])
 
 
-def _path(params: WalkerParams, n: int = 4001) -> tuple[np.ndarray, np.ndarray]:
-    """Dense path (x decreasing from start to end) as (xy (n, 2), cumulative arc length (n,))."""
+def _path(params: WalkerParams, n: int = 1201) -> tuple[np.ndarray, np.ndarray]:
+    """Dense path from start to end as (xy (m, 2), cumulative arc length (m,)).
+
+    A cubic Hermite curve from the start to the convergence point ``(x_conv, pass_y)``, leaving
+    the start ``start_turn`` away from the straight line to that point and arriving along -x,
+    then the straight passing line to ``end_x``. OOD "wander" adds a trochoid-like offset (lateral
+    meander, with loops when ``wander_loop`` is large) that starts at zero and fades out before
+    the handover.
+    """
     x0, y0 = params.start_xy
-    x = np.linspace(x0, params.end_x, n)
-    # Converge from start_y onto pass_y over at least 1 m of x, done by approach_x (or later):
-    # a quadratic blend, so the walker starts out heading toward the passing line and joins it
-    # tangentially.
-    x_conv = min(params.approach_x, x0 - 1.0)
-    remaining = np.clip((x - x_conv) / (x0 - x_conv), 0.0, 1.0)
-    y = params.pass_y + (y0 - params.pass_y) * remaining**2
+    x_conv = max(min(params.approach_x, x0 - 1.0), params.end_x + 0.05)
+    p0, p1 = np.array([x0, y0]), np.array([x_conv, params.pass_y])
+    chord = p1 - p0
+    length = float(np.linalg.norm(chord))
+    c, s = math.cos(-params.start_turn), math.sin(-params.start_turn)
+    d0 = np.array([c * chord[0] - s * chord[1], s * chord[0] + c * chord[1]])  # clockwise = +y side
+    m0, m1 = params.start_bulge * d0, np.array([-length, 0.0])
+    n_curve = max(int(n * (x0 - x_conv) / (x0 - params.end_x)), 50)
+    u = np.linspace(0.0, 1.0, n_curve)[:, None]
+    h00, h10, h01, h11 = (
+        2 * u**3 - 3 * u**2 + 1,
+        u**3 - 2 * u**2 + u,
+        -2 * u**3 + 3 * u**2,
+        u**3 - u**2,
+    )
+    curve = h00 * p0 + h10 * m0 + h01 * p1 + h11 * m1
+    line_x = np.linspace(x_conv, params.end_x, max(n - n_curve, 10))[1:]
+    line = np.stack([line_x, np.full_like(line_x, params.pass_y)], axis=-1)
+    xy = np.concatenate([curve, line])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
     if params.ood_mode == "wander":
-        # Lateral meander along the way, zero at the start and faded out before the handover.
-        d = x0 - x
         fade_start = max(params.wander_fade_x + 0.6, x0 - 0.5)
         taper = _smoothstep(
-            (x - params.wander_fade_x) / max(fade_start - params.wander_fade_x, 1e-6)
+            (xy[:, 0] - params.wander_fade_x) / max(fade_start - params.wander_fade_x, 1e-6)
         )
-        onset = _smoothstep(d / 0.4)
-        y = (
-            y
-            + params.wander_amplitude
-            * np.sin(2 * math.pi * d / params.wander_wavelength)
-            * taper
-            * onset
+        envelope = params.wander_amplitude * taper * _smoothstep(arc / 0.4)
+        theta = 2 * math.pi * arc / params.wander_wavelength + params.wander_phase
+        phi = params.wander_phase
+        offset = np.stack(
+            [params.wander_loop * (np.cos(theta) - math.cos(phi)), np.sin(theta) - math.sin(phi)],
+            axis=-1,
         )
-    xy = np.stack([x, y], axis=-1)
-    seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
-    return xy, np.concatenate([[0.0], np.cumsum(seg)])
+        xy = xy + envelope[:, None] * offset
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    return xy, arc
 
 
 def _pause_factor(params: WalkerParams, t: np.ndarray) -> np.ndarray:

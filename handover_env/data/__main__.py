@@ -1,0 +1,279 @@
+"""Command line for handover datasets: ``python -m handover_env.data <command> ...``.
+
+Commands (each has ``--help``)::
+
+    info PATH                          counts, frames and distributions of a dataset
+    convert PUBLIC_DIR OUT.npz         public-dataset pickles -> canonical .npz (safe loader)
+    synth [--n --ood-fraction --seed] OUT.npz
+                                       synthetic demonstrations (the embedded default generator)
+    compare A B                        two datasets side by side: medians, relative difference, KS
+    export-lerobot DATASET ROOT        canonical dataset -> local LeRobotDataset (no network)
+    plot DATASET OUT.png               top-down receiver and giver paths, ID and OOD
+
+Wherever a dataset is read, PATH may be a ``.npz``, a public-dataset folder, or ``synthetic``
+for the embedded default (900 ID + 100 OOD, seed 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from handover_env.data.dataset import DatasetError, HandoverDataset
+
+DEFAULT_KEYWORD = "synthetic"
+
+
+def _load(path: str, skip_bad: bool = False) -> HandoverDataset:
+    from handover_env.data import load_any
+    from handover_env.data.public import LoadReport, load_public_dataset
+
+    if path == DEFAULT_KEYWORD and not Path(path).exists():
+        return load_any(None)
+    if Path(path).is_dir():
+        report = LoadReport()
+        dataset = load_public_dataset(
+            path, skip_bad=skip_bad, progress=True, report=report, on_skip=lambda *_: None
+        )
+        if report.skipped:
+            print(report.summary(), file=sys.stderr)
+        return dataset
+    return load_any(path)
+
+
+def _header(dataset: HandoverDataset) -> str:
+    n_ood = int(dataset.ood_mask.sum())
+    lengths = dataset.lengths
+    return (
+        f"{dataset.name or 'dataset'}\n"
+        f"episodes: {len(dataset)} ({len(dataset) - n_ood} ID, {n_ood} OOD)\n"
+        f"frames: {dataset.n_frames:,} at {dataset.rate_hz:g} Hz "
+        f"(per episode {lengths.min()} .. {lengths.max()}, median {int(sorted(lengths)[len(lengths) // 2])})"
+    )
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from handover_env.data.stats import episode_statistics, format_distribution
+
+    dataset = _load(args.path, args.skip_bad)
+    print(_header(dataset))
+    print()
+    print(format_distribution(episode_statistics(dataset)))
+    return 0
+
+
+def cmd_convert(args: argparse.Namespace) -> int:
+    from handover_env.data.public import LoadReport, load_public_dataset
+
+    start = time.perf_counter()
+    report = LoadReport()
+    dataset = load_public_dataset(
+        args.public_dir,
+        skip_bad=args.skip_bad,
+        progress=True,
+        report=report,
+        on_skip=lambda *_: None,
+    )
+    out = dataset.save(args.out)
+    print(report.summary())
+    print(_header(dataset))
+    print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    from handover_env.data.synthetic import generate_synthetic
+
+    start = time.perf_counter()
+    dataset = generate_synthetic(args.n, args.ood_fraction, args.seed, progress=True)
+    out = dataset.save(args.out)
+    print(_header(dataset))
+    print(f"wrote {out} in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from handover_env.data.stats import compare_statistics, episode_statistics, format_comparison
+
+    a, b = _load(args.a), _load(args.b)
+    sa, sb = episode_statistics(a), episode_statistics(b)
+    print(f"A: {_header(a)}\n\nB: {_header(b)}\n")
+    for subset in args.subset:
+        print(f"[{subset} episodes]")
+        print(format_comparison(compare_statistics(sa, sb, subset), "A", "B"))
+        print()
+    return 0
+
+
+def cmd_export_lerobot(args: argparse.Namespace) -> int:
+    try:
+        from handover_env.data.lerobot_export import export_lerobot
+    except ImportError as exc:
+        raise DatasetError(
+            f"the LeRobot export is not available ({exc}); it lives in handover_env/data/lerobot_export.py"
+        ) from exc
+    dataset = _load(args.dataset)
+    start = time.perf_counter()
+    root = export_lerobot(
+        dataset,
+        args.root,
+        repo_id=args.repo_id,
+        history=args.history,
+        horizon=args.horizon,
+        overwrite=args.overwrite,
+        progress=True,
+    )
+    print(
+        f"exported {len(dataset)} episodes ({dataset.n_frames:,} frames) to {root} "
+        f"as {args.repo_id!r} in {time.perf_counter() - start:.1f} s"
+    )
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from handover_env.data.plot import plot_paths
+
+    dataset = _load(args.dataset)
+    out = plot_paths(dataset, args.out, max_episodes=args.max_episodes, seed=args.seed)
+    print(f"wrote {out}")
+    return 0
+
+
+def _fraction(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1], got {text}")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse parser with one subcommand per operation."""
+    parser = argparse.ArgumentParser(
+        prog="python -m handover_env.data",
+        description="Handover datasets: inspect, convert the public dataset safely, synthesise, "
+        "compare, export to LeRobot, plot.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    dataset_help = (
+        f"a .npz, a public-dataset folder, or '{DEFAULT_KEYWORD}' for the embedded default"
+    )
+
+    p = sub.add_parser(
+        "info",
+        help="counts, frames and distributions of a dataset",
+        description="Print episode counts (ID/OOD), frames, and the distributions of "
+        "walking speed, duration, transfer height/position/time and start point.",
+    )
+    p.add_argument("path", help=dataset_help)
+    p.add_argument(
+        "--skip-bad", action="store_true", help="for a folder: skip bad files and report them"
+    )
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser(
+        "convert",
+        help="public-dataset pickles -> canonical .npz",
+        description="Load a folder of motion_normal_*.pkl / motion_variation_*.pkl "
+        "with the safe unpickler (numpy arrays only), validate, save one .npz.",
+    )
+    p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
+    p.add_argument("out", help="output .npz")
+    p.add_argument(
+        "--skip-bad", action="store_true", help="skip bad files and report them instead of failing"
+    )
+    p.set_defaults(func=cmd_convert)
+
+    p = sub.add_parser(
+        "synth",
+        help="generate synthetic demonstrations",
+        description="Generate synthetic handovers calibrated to the public data's statistics.",
+    )
+    p.add_argument("out", help="output .npz")
+    p.add_argument(
+        "--n", type=_positive_int, default=1000, help="number of episodes (default 1000)"
+    )
+    p.add_argument(
+        "--ood-fraction", type=_fraction, default=0.1, help="fraction of OOD episodes (default 0.1)"
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.set_defaults(func=cmd_synth)
+
+    p = sub.add_parser(
+        "compare",
+        help="two datasets side by side",
+        description="Medians of A and B, relative difference (B - A)/|A| and the "
+        "two-sample Kolmogorov-Smirnov statistic for each statistic.",
+    )
+    p.add_argument("a", help=f"reference dataset ({dataset_help})")
+    p.add_argument("b", help=f"candidate dataset ({dataset_help})")
+    p.add_argument(
+        "--subset",
+        nargs="+",
+        choices=("all", "id", "ood"),
+        default=["all", "id", "ood"],
+        help="which episodes to compare (default: all, id and ood)",
+    )
+    p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser(
+        "export-lerobot",
+        help="export to a local LeRobotDataset",
+        description="Write a LeRobotDataset (use_videos=False, no network) that the "
+        "ACT baseline trains on.",
+    )
+    p.add_argument("dataset", help=dataset_help)
+    p.add_argument("root", help="output folder of the LeRobotDataset")
+    p.add_argument("--repo-id", default="local/handover", help="repo id recorded in the metadata")
+    p.add_argument(
+        "--history", type=_positive_int, default=10, help="frames of receiver history (default 10)"
+    )
+    p.add_argument(
+        "--horizon",
+        type=_positive_int,
+        default=30,
+        help="frames of future giver positions (default 30)",
+    )
+    p.add_argument("--overwrite", action="store_true", help="replace an existing ROOT")
+    p.set_defaults(func=cmd_export_lerobot)
+
+    p = sub.add_parser(
+        "plot",
+        help="top-down paths of receiver and giver",
+        description="Save a PNG of receiver (solid) and giver/object (dashed) paths "
+        "seen from above, ID blue and OOD red, and the object height over time.",
+    )
+    p.add_argument("dataset", help=dataset_help)
+    p.add_argument("out", help="output .png")
+    p.add_argument(
+        "--max-episodes",
+        type=_positive_int,
+        default=200,
+        help="episodes drawn per kind (default 200)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the choice of episodes")
+    p.set_defaults(func=cmd_plot)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the exit status (2 for a dataset or file error)."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (DatasetError, FileNotFoundError, FileExistsError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

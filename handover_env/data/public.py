@@ -1,0 +1,305 @@
+"""Safe loader of the public Dynamic Handover Dataset (a folder of pickles) into the canonical format.
+
+The public dataset of the paper (Sec. IV-A, "Data Collection": 1,000 human-to-human handovers,
+900 in-distribution + 100 out-of-distribution) is published as one Python pickle per recording:
+``motion_normal_<i>.pkl`` (ID) and ``motion_variation_<i>.pkl`` (OOD, the receiver wanders or
+pauses). Each holds a ``dict`` of float64 arrays:
+
+=================  ==========  ==========================================================
+key                shape       meaning
+=================  ==========  ==========================================================
+``pose_receiver``  (T, 34, 3)  receiver body joints, ZED SDK BODY_34 layout, metres
+``pose_giver``     (T, 34, 3)  giver body joints, same layout
+``pose_object``    (T, 3)      object position (OptiTrack), metres; the paper's giver wrist
+``quat_object``    (T, 4)      object orientation, scalar first (w, x, y, z), unit norm
+=================  ==========  ==========================================================
+
+A pickle can run arbitrary code when it is loaded, so :class:`SafeUnpickler` resolves only the
+globals numpy needs to rebuild arrays (``_reconstruct``, ``ndarray``, ``dtype``, ``scalar``) and
+refuses every other one *before* anything is called, with an error naming the file and the global.
+
+Mapping to :class:`~handover_env.data.dataset.Episode`:
+
+* ``receiver_xy`` = ``pose_receiver[:, 0, :2]`` (pelvis, the paper's receiver input x^r);
+* ``receiver_hand_xyz`` = ``pose_receiver[:, 15]`` (BODY_34 right hand: in most recordings the
+  joint closest to the object at the moment of transfer);
+* ``giver_xyz`` = ``pose_object`` (the paper uses the object position as the giver wrist x^g);
+* ``object_quat`` = ``quat_object``. The files store the scalar part first: at the start of every
+  recording the object rests in its calibrated pose and the first component is +-1, and the
+  rotation that follows is mostly about z (the giver turns the object). The loader renormalises
+  each quaternion and fixes the sign so that w >= 0 in the first frame and consecutive frames
+  lie in the same hemisphere (q and -q are the same rotation).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import pickle
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from handover_env.data.dataset import DEFAULT_RATE_HZ, DatasetError, Episode, HandoverDataset
+
+try:  # numpy >= 2
+    from numpy._core import multiarray as _multiarray
+except ImportError:  # pragma: no cover - numpy 1.x
+    from numpy.core import multiarray as _multiarray  # type: ignore[no-redef]
+
+#: The only globals a public-dataset pickle may reference: numpy's array-rebuilding machinery.
+#: Both module spellings map to the same objects, so files written with numpy 1.x (``numpy.core``)
+#: and 2.x (``numpy._core``) load, without importing the deprecated ``numpy.core`` alias.
+ALLOWED_GLOBALS: dict[tuple[str, str], Any] = {
+    ("numpy.core.multiarray", "_reconstruct"): _multiarray._reconstruct,
+    ("numpy._core.multiarray", "_reconstruct"): _multiarray._reconstruct,
+    ("numpy.core.multiarray", "scalar"): _multiarray.scalar,
+    ("numpy._core.multiarray", "scalar"): _multiarray.scalar,
+    ("numpy", "ndarray"): np.ndarray,
+    ("numpy", "dtype"): np.dtype,
+}
+
+#: Expected arrays: key -> shape after the time axis.
+REQUIRED_ARRAYS: dict[str, tuple[int, ...]] = {
+    "pose_receiver": (34, 3),
+    "pose_giver": (34, 3),
+    "pose_object": (3,),
+    "quat_object": (4,),
+}
+PELVIS_JOINT = 0
+RIGHT_HAND_JOINT = 15
+ID_PREFIX = "motion_normal_"
+OOD_PREFIX = "motion_variation_"
+_NAME_RE = re.compile(r"^(motion_normal|motion_variation)_(\d+)\.pkl$")
+
+
+class UnsafePickleError(DatasetError):
+    """A pickle referenced a global outside :data:`ALLOWED_GLOBALS`; nothing in it was run."""
+
+
+class SafeUnpickler(pickle.Unpickler):
+    """An unpickler that resolves only numpy's array-rebuilding globals.
+
+    ``find_class`` is the single place a pickle can name a callable; every name outside
+    :data:`ALLOWED_GLOBALS` is refused before it is imported, let alone called. Persistent ids
+    are refused too.
+
+    Args:
+        file: a binary file object.
+        source: the file's name, used in error messages.
+    """
+
+    def __init__(self, file: io.BufferedIOBase | io.BytesIO, source: str) -> None:
+        super().__init__(file)
+        self.source = source
+
+    def find_class(self, module: str, name: str) -> Any:
+        try:
+            return ALLOWED_GLOBALS[(module, name)]
+        except KeyError:
+            raise UnsafePickleError(
+                f"{self.source}: refused to load: the pickle references the global "
+                f"{module}.{name}, which is not one of numpy's array-rebuilding functions; "
+                f"nothing in the file was run"
+            ) from None
+
+    def persistent_load(self, pid: Any) -> Any:
+        raise UnsafePickleError(f"{self.source}: refused to load: the pickle uses persistent ids")
+
+
+def safe_load_pickle(path: str | os.PathLike) -> Any:
+    """Unpickle ``path`` with :class:`SafeUnpickler`.
+
+    Raises:
+        UnsafePickleError: the file references a forbidden global.
+        DatasetError: the file is empty, truncated or not a pickle.
+    """
+    path = Path(path)
+    data = path.read_bytes()
+    if not data:
+        raise DatasetError(f"{path}: empty file (0 bytes)")
+    try:
+        return SafeUnpickler(io.BytesIO(data), str(path)).load()
+    except UnsafePickleError:
+        raise
+    except EOFError as exc:
+        raise DatasetError(f"{path}: truncated pickle ({len(data)} bytes; ended early)") from exc
+    except Exception as exc:  # UnpicklingError, ValueError, TypeError from a corrupt stream
+        raise DatasetError(f"{path}: not a readable pickle ({type(exc).__name__}: {exc})") from exc
+
+
+def _validate_record(record: Any, source: str) -> dict[str, np.ndarray]:
+    """Check one recording's dict: keys, dtypes, shapes, finite values and equal lengths."""
+    if not isinstance(record, dict):
+        raise DatasetError(f"{source}: expected a dict of arrays, got {type(record).__name__}")
+    missing = [key for key in REQUIRED_ARRAYS if key not in record]
+    if missing:
+        raise DatasetError(f"{source}: missing key(s) {missing}; found {sorted(map(str, record))}")
+    arrays: dict[str, np.ndarray] = {}
+    lengths: dict[str, int] = {}
+    for key, tail in REQUIRED_ARRAYS.items():
+        value = record[key]
+        if not isinstance(value, np.ndarray):
+            raise DatasetError(
+                f"{source}: {key} is a {type(value).__name__}, expected a numpy array"
+            )
+        if not (np.issubdtype(value.dtype, np.floating) or np.issubdtype(value.dtype, np.integer)):
+            raise DatasetError(f"{source}: {key} has dtype {value.dtype}, expected real numbers")
+        if value.ndim != 1 + len(tail) or value.shape[1:] != tail:
+            expected = "(T, " + ", ".join(map(str, tail)) + ")"
+            raise DatasetError(f"{source}: {key} has shape {value.shape}, expected {expected}")
+        bad = ~np.isfinite(value)
+        if bad.any():
+            frames = np.flatnonzero(bad.reshape(bad.shape[0], -1).any(axis=1))
+            raise DatasetError(
+                f"{source}: {key} has {int(bad.sum())} NaN/inf value(s) in {frames.size} frame(s), "
+                f"first at frame {int(frames[0])}"
+            )
+        arrays[key] = value.astype(np.float64, copy=False)
+        lengths[key] = value.shape[0]
+    if len(set(lengths.values())) != 1:
+        raise DatasetError(f"{source}: arrays disagree in length (frames): {lengths}")
+    if next(iter(lengths.values())) < 2:
+        raise DatasetError(f"{source}: needs at least 2 frames, got {lengths['pose_object']}")
+    norms = np.linalg.norm(arrays["quat_object"], axis=1)
+    if np.any(norms < 1e-6):
+        raise DatasetError(f"{source}: quat_object has a zero-norm quaternion")
+    return arrays
+
+
+def canonical_quaternions(quat: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z), sign-continuous over time, w >= 0 in the first frame."""
+    q = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    dots = np.einsum("ij,ij->i", q[1:], q[:-1])
+    flips = np.concatenate([[q[0, 0] < 0], dots < 0])
+    sign = np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)
+    return q * sign[:, None]
+
+
+def episode_from_record(record: dict[str, np.ndarray], source_id: str, is_ood: bool) -> Episode:
+    """Map one validated public recording to a canonical :class:`Episode`."""
+    receiver = record["pose_receiver"]
+    return Episode(
+        receiver_xy=receiver[:, PELVIS_JOINT, :2].copy(),
+        receiver_hand_xyz=receiver[:, RIGHT_HAND_JOINT, :].copy(),
+        giver_xyz=record["pose_object"].copy(),
+        object_quat=canonical_quaternions(record["quat_object"]),
+        is_ood=is_ood,
+        source_id=source_id,
+    )
+
+
+def load_public_file(path: str | os.PathLike) -> Episode:
+    """Load and validate one ``motion_normal_<i>.pkl`` / ``motion_variation_<i>.pkl``.
+
+    Raises:
+        UnsafePickleError: the file references a global outside numpy's array rebuilding.
+        DatasetError: the file is empty, truncated, not a pickle, or has bad keys, dtypes,
+            shapes, NaN/inf or lengths; the message names the file and the problem.
+    """
+    path = Path(path)
+    match = _NAME_RE.match(path.name)
+    if match is None:
+        raise DatasetError(
+            f"{path}: not a public-dataset file name (expected {ID_PREFIX}<i>.pkl or {OOD_PREFIX}<i>.pkl)"
+        )
+    record = _validate_record(safe_load_pickle(path), str(path))
+    return episode_from_record(record, path.stem, is_ood=match.group(1) == "motion_variation")
+
+
+def list_public_files(folder: str | os.PathLike) -> list[Path]:
+    """The dataset files in ``folder``: ID first, then OOD, each in natural index order.
+
+    Raises:
+        FileNotFoundError: ``folder`` does not exist or is not a directory.
+        DatasetError: it holds no ``motion_normal_*.pkl`` / ``motion_variation_*.pkl`` files.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"no public-dataset folder at {folder}")
+    files = [p for p in folder.iterdir() if p.is_file() and _NAME_RE.match(p.name)]
+    if not files:
+        raise DatasetError(
+            f"{folder}: no {ID_PREFIX}<i>.pkl or {OOD_PREFIX}<i>.pkl files; point at the "
+            f"dataset's data/whole_motions folder"
+        )
+
+    def key(p: Path) -> tuple[int, int]:
+        m = _NAME_RE.match(p.name)
+        assert m is not None
+        return (0 if m.group(1) == "motion_normal" else 1, int(m.group(2)))
+
+    return sorted(files, key=key)
+
+
+@dataclass
+class LoadReport:
+    """What :func:`load_public_dataset` did with each file.
+
+    Attributes:
+        loaded: number of files converted.
+        skipped: ``(file name, reason)`` for every file refused with ``skip_bad=True``.
+    """
+
+    loaded: int = 0
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+
+    def summary(self) -> str:
+        """One line, plus one line per skipped file."""
+        lines = [f"loaded {self.loaded} file(s), skipped {len(self.skipped)}"]
+        lines += [f"  skipped {name}: {reason}" for name, reason in self.skipped]
+        return "\n".join(lines)
+
+
+def load_public_dataset(
+    folder: str | os.PathLike,
+    *,
+    skip_bad: bool = False,
+    progress: bool = True,
+    report: LoadReport | None = None,
+    on_skip: Callable[[str, str], None] | None = None,
+) -> HandoverDataset:
+    """Load a folder of public-dataset pickles safely into a :class:`HandoverDataset`.
+
+    Args:
+        folder: the dataset's ``data/whole_motions`` folder (or any folder of its files).
+        skip_bad: skip files that fail to load or validate instead of raising; each skip is
+            recorded in ``report`` and passed to ``on_skip`` (default: a warning).
+        progress: show a tqdm progress bar.
+        report: filled with the counts and the skipped files.
+        on_skip: called as ``on_skip(file_name, reason)`` for each skipped file.
+
+    Raises:
+        FileNotFoundError: the folder does not exist.
+        DatasetError: no dataset files, every file was bad, or (without ``skip_bad``) the first
+            bad file; the message names the file and the problem. Forbidden globals raise
+            :class:`UnsafePickleError`, a subclass.
+    """
+    files = list_public_files(folder)
+    report = report if report is not None else LoadReport()
+    episodes: list[Episode] = []
+    for path in tqdm(files, desc=f"loading {Path(folder).name}", unit="file", disable=not progress):
+        try:
+            episodes.append(load_public_file(path))
+        except (DatasetError, OSError) as exc:
+            if not skip_bad:
+                raise
+            reason = str(exc).removeprefix(f"{path}: ")
+            report.skipped.append((path.name, reason))
+            if on_skip is not None:
+                on_skip(path.name, reason)
+            else:
+                import warnings
+
+                warnings.warn(f"skipping {path}: {reason}", stacklevel=2)
+    report.loaded = len(episodes)
+    if not episodes:
+        raise DatasetError(f"{folder}: none of the {len(files)} dataset file(s) could be loaded")
+    return HandoverDataset(
+        episodes, rate_hz=DEFAULT_RATE_HZ, name=f"public:{Path(folder).resolve()}"
+    )
