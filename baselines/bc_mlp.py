@@ -81,8 +81,8 @@ class BCMLPConfig:
     lr: float = 1e-3
     weight_decay: float = 0.0
     batch_size: int = 256
-    max_epochs: int = 100
-    patience: int = 8
+    max_epochs: int = 50
+    patience: int = 5
     val_fraction: float = 0.1
     seed: int = 0
     device: str = "cpu"
@@ -228,7 +228,6 @@ class BCMLPAgent(Agent):
             log: called with one line per epoch.
         """
         cfg = self.config
-        torch.set_num_threads(max(1, min(torch.get_num_threads(), 2)))
         train_idx, val_idx = split_train_val(dataset, cfg.val_fraction, cfg.seed)
         train = dataset_frames(dataset.subset(train_idx), cfg.spec)
         val = dataset_frames(dataset.subset(val_idx), cfg.spec)
@@ -281,7 +280,7 @@ class BCMLPAgent(Agent):
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 opt.step()
-                running += float(loss)
+                running += loss.item()
                 if bar is not None and j % 20 == 0:
                     bar.set_postfix(loss=f"{running / (j + 1):.4f}")
             if bar is not None:

@@ -112,6 +112,10 @@ def export_lerobot(
         from tqdm import tqdm
 
         episodes = tqdm(episodes, desc="export-lerobot", unit="ep")
+    import datasets
+
+    bars_were_on = datasets.is_progress_bar_enabled()
+    datasets.disable_progress_bars()  # one "Map" bar per saved episode otherwise
     try:
         for ep in episodes:
             f = episode_frames(ep, spec)
@@ -128,6 +132,8 @@ def export_lerobot(
             out.save_episode()
     finally:
         out.finalize()
+        if bars_were_on:
+            datasets.enable_progress_bars()
     sidecar = {
         "export_format": EXPORT_FORMAT,
         "history": int(history),

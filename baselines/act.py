@@ -1,0 +1,619 @@
+"""ACT (Action Chunking with Transformers) through LeRobot 0.4.x's own ``ACTPolicy``.
+
+State-only ACT: no camera, no vision backbone, no pretrained weights, no network.
+
+| ACT input / output                | feature type | shape  | content (:mod:`baselines.features`)            |
+|-----------------------------------|--------------|--------|------------------------------------------------|
+| ``observation.environment_state`` | ENV          | (2 W,) | receiver base xy history (current xy + offsets) |
+| ``observation.state``             | STATE        | (3,)   | current giver xyz (robot TCP in the env)        |
+| ``action``                        | ACTION       | (3,)   | giver xyz; the policy predicts a chunk of H=30  |
+
+Training goes through LeRobot's machinery: the dataset is exported with
+:func:`handover_env.data.lerobot_export.export_lerobot`, read back as a ``LeRobotDataset`` with
+``delta_timestamps`` for the action chunk, normalised by ``make_act_pre_post_processors`` with
+statistics (``get_feature_stats``) of the training episodes for all three features (ENV, STATE and
+ACTION all MEAN_STD), and optimised with ``ACTPolicy.forward`` (L1 + KL loss) under AdamW with the
+gradient clipping of LeRobot's ACT preset. At run time ``select_action`` applies LeRobot's
+``ACTTemporalEnsembler`` (``temporal_ensemble_coeff=0.01``, ``n_action_steps=1``), as the paper does.
+
+Model sizes:
+
+* default (trains on one CPU core in ~25 min on the 875-episode set): ``dim_model=128``,
+  ``n_heads=4``, ``dim_feedforward=512``, 2 encoder layers, 1 decoder layer, VAE with
+  1 encoder layer and ``latent_dim=16``, dropout 0.1, ``kl_weight=10``.
+* ``paper_scale=True`` (``--paper-scale``): LeRobot's/ACT's defaults, ``dim_model=512``,
+  ``n_heads=8``, ``dim_feedforward=3200``, 4 encoder layers, 1 decoder layer, VAE with 4 encoder
+  layers and ``latent_dim=32``.
+
+Checkpoint folder: ``config.json`` + ``model.safetensors`` (``ACTPolicy.save_pretrained``),
+``policy_preprocessor*.json/.safetensors`` and ``policy_postprocessor*`` (the normalisation
+statistics), ``handover_act.json`` (our config, features and training summary) and
+``training_state/`` (last weights, optimizer, RNG and step) for ``--resume``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from safetensors.torch import load_file, save_file  # noqa: E402
+
+from agents.base import Agent, validate_history  # noqa: E402
+from baselines.bc_mlp import _layout_for, ensembled_ahead  # noqa: E402
+from baselines.features import (  # noqa: E402
+    ACTION,
+    ACTION_DIM,
+    OBS_ENV_STATE,
+    OBS_STATE,
+    STATE_DIM,
+    CheckpointError,
+    FeatureSpec,
+    encode_history,
+    episode_frames,
+    facing_yaw,
+    split_train_val,
+    validate_giver,
+)
+from handover_env.data.dataset import Episode, HandoverDataset  # noqa: E402
+
+CHECKPOINT_TYPE = "act"
+CHECKPOINT_FORMAT = 1
+HANDOVER_JSON = "handover_act.json"
+PAPER_SCALE = dict(
+    dim_model=512, n_heads=8, dim_feedforward=3200, n_encoder_layers=4, n_decoder_layers=1,
+    n_vae_encoder_layers=4, latent_dim=32,
+)
+
+
+@dataclass
+class ACTAgentConfig:
+    """Configuration of the ACT baseline (the model part maps onto LeRobot's ``ACTConfig``).
+
+    Args:
+        history: W, frames of receiver history in ``observation.environment_state``.
+        horizon: H, ACT's ``chunk_size`` (30 = 1 s, the paper's chunk).
+        dim_model: transformer width.
+        n_heads: attention heads.
+        dim_feedforward: feed-forward width.
+        n_encoder_layers: transformer encoder layers.
+        n_decoder_layers: transformer decoder layers.
+        use_vae: train with ACT's conditional-VAE objective (zero latent at inference).
+        latent_dim: VAE latent size.
+        n_vae_encoder_layers: VAE encoder layers.
+        kl_weight: weight of the KL term.
+        dropout: transformer dropout.
+        paper_scale: use ACT's default (paper) size instead; overrides the size fields above.
+        lr: AdamW learning rate.
+        weight_decay: AdamW weight decay.
+        grad_clip_norm: gradient norm clip (LeRobot's ACT preset uses 10).
+        batch_size: samples per step.
+        steps: optimisation steps.
+        eval_every: steps between validation passes (and checkpoints).
+        val_fraction: fraction of episodes held out for validation (best checkpoint kept).
+        seed: seeds initialisation, sampling and the split.
+        device: torch device.
+        temporal_ensemble_coeff: LeRobot ``ACTTemporalEnsembler`` coefficient used by ``act``.
+        forecast_time: t_f in seconds, how far ahead ``act`` targets.
+    """
+
+    history: int = 10
+    horizon: int = 30
+    dim_model: int = 128
+    n_heads: int = 4
+    dim_feedforward: int = 512
+    n_encoder_layers: int = 2
+    n_decoder_layers: int = 1
+    use_vae: bool = True
+    latent_dim: int = 16
+    n_vae_encoder_layers: int = 1
+    kl_weight: float = 10.0
+    dropout: float = 0.1
+    paper_scale: bool = False
+    lr: float = 1e-4
+    weight_decay: float = 1e-4
+    grad_clip_norm: float = 10.0
+    batch_size: int = 64
+    steps: int = 8_000
+    eval_every: int = 1_000
+    val_fraction: float = 0.1
+    seed: int = 0
+    device: str = "cpu"
+    temporal_ensemble_coeff: float = 0.01
+    forecast_time: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.paper_scale:
+            for key, value in PAPER_SCALE.items():
+                setattr(self, key, value)
+        FeatureSpec(history=self.history, horizon=self.horizon)
+        for name in ("dim_model", "n_heads", "dim_feedforward", "n_encoder_layers", "n_decoder_layers",
+                     "latent_dim", "n_vae_encoder_layers", "batch_size", "steps", "eval_every"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if self.dim_model % self.n_heads:
+            raise ValueError(f"dim_model ({self.dim_model}) must be divisible by n_heads ({self.n_heads})")
+        if self.lr <= 0 or self.weight_decay < 0 or self.grad_clip_norm <= 0 or self.kl_weight < 0:
+            raise ValueError("lr and grad_clip_norm must be positive, weight_decay and kl_weight >= 0")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+        if not 0.0 <= self.forecast_time * 30.0 < self.horizon:
+            raise ValueError(f"forecast_time must be in [0, horizon/30) s, got {self.forecast_time}")
+
+    @property
+    def spec(self) -> FeatureSpec:
+        return FeatureSpec(history=self.history, horizon=self.horizon)
+
+    def policy_config(self):
+        """LeRobot's ``ACTConfig`` for this agent (state-only, no backbone weights)."""
+        from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
+        from lerobot.policies.act.configuration_act import ACTConfig
+
+        return ACTConfig(
+            input_features={
+                OBS_ENV_STATE: PolicyFeature(type=FeatureType.ENV, shape=(self.spec.env_dim,)),
+                OBS_STATE: PolicyFeature(type=FeatureType.STATE, shape=(STATE_DIM,)),
+            },
+            output_features={ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(ACTION_DIM,))},
+            normalization_mapping={
+                "VISUAL": NormalizationMode.MEAN_STD,
+                "ENV": NormalizationMode.MEAN_STD,
+                "STATE": NormalizationMode.MEAN_STD,
+                "ACTION": NormalizationMode.MEAN_STD,
+            },
+            chunk_size=self.horizon,
+            n_action_steps=1,
+            temporal_ensemble_coeff=self.temporal_ensemble_coeff,
+            pretrained_backbone_weights=None,
+            dim_model=self.dim_model,
+            n_heads=self.n_heads,
+            dim_feedforward=self.dim_feedforward,
+            n_encoder_layers=self.n_encoder_layers,
+            n_decoder_layers=self.n_decoder_layers,
+            use_vae=self.use_vae,
+            latent_dim=self.latent_dim,
+            n_vae_encoder_layers=self.n_vae_encoder_layers,
+            kl_weight=self.kl_weight,
+            dropout=self.dropout,
+            optimizer_lr=self.lr,
+            optimizer_weight_decay=self.weight_decay,
+            device=self.device,
+            push_to_hub=False,
+        )
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ACTAgentConfig:
+        unknown = sorted(set(d) - {f.name for f in fields(cls)})
+        if unknown:
+            raise CheckpointError(f"unknown ACTAgentConfig fields {unknown}")
+        return cls(**d)
+
+
+# ---------------------------------------------------------------------- LeRobot data
+def open_export(root: str | os.PathLike, repo_id: str, spec: FeatureSpec):
+    """``LeRobotDataset(repo_id, root, delta_timestamps=...)`` after checking its features fit ``spec``."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from handover_env.data.lerobot_export import action_delta_timestamps, read_sidecar
+
+    sidecar = read_sidecar(root)
+    ds = LeRobotDataset(repo_id, root=root, delta_timestamps=action_delta_timestamps(spec.horizon, spec.rate_hz))
+    want = {OBS_ENV_STATE: (spec.env_dim,), OBS_STATE: (STATE_DIM,), ACTION: (ACTION_DIM,)}
+    for key, shape in want.items():
+        if key not in ds.features:
+            raise ValueError(f"LeRobot dataset at {root} has no feature {key!r} (features: {sorted(ds.features)})")
+        got = tuple(ds.features[key]["shape"])
+        if got != shape:
+            raise ValueError(
+                f"LeRobot dataset at {root}: feature {key!r} has shape {got}, this ACT config needs {shape} "
+                f"(history W={spec.history}; the export used W={sidecar.get('history')})"
+            )
+    if int(ds.fps) != int(round(spec.rate_hz)):
+        raise ValueError(f"LeRobot dataset at {root} is at {ds.fps} fps, expected {spec.rate_hz}")
+    return ds, sidecar
+
+
+def lerobot_samples(ds, episode_indices: np.ndarray) -> dict[str, torch.Tensor]:
+    """Every frame of ``episode_indices`` as LeRobot training samples, vectorised.
+
+    Reads the parquet columns once and applies ``ds.delta_indices`` exactly as
+    ``LeRobotDataset.__getitem__`` does (indices clamped to the episode, ``action_is_pad`` outside
+    it); ``tests/test_act.py`` checks the result equals ``ds[i]`` item by item. One pass through
+    ``__getitem__`` costs ~2 ms per frame, too slow to repeat every step on 2 cores.
+    """
+    cols = ds.hf_dataset.with_format("numpy")
+    env = np.asarray(cols[OBS_ENV_STATE], dtype=np.float32)
+    state = np.asarray(cols[OBS_STATE], dtype=np.float32)
+    action = np.asarray(cols[ACTION], dtype=np.float32)
+    index = np.asarray(cols["index"], dtype=np.int64)
+    if not np.array_equal(index, np.arange(index.size)):
+        raise ValueError("LeRobot dataset rows are not in index order; re-export it")
+    deltas = np.asarray(ds.delta_indices[ACTION], dtype=np.int64)
+    out: dict[str, list[np.ndarray]] = {k: [] for k in (OBS_ENV_STATE, OBS_STATE, ACTION, "action_is_pad")}
+    for e in np.asarray(episode_indices, dtype=np.int64):
+        ep = ds.meta.episodes[int(e)]
+        start, end = int(ep["dataset_from_index"]), int(ep["dataset_to_index"])
+        rows = np.arange(start, end)
+        q = rows[:, None] + deltas[None, :]
+        out[OBS_ENV_STATE].append(env[rows])
+        out[OBS_STATE].append(state[rows])
+        out[ACTION].append(action[np.clip(q, start, end - 1)])
+        out["action_is_pad"].append((q < start) | (q >= end))
+    return {k: torch.as_tensor(np.concatenate(v)) for k, v in out.items()}
+
+
+def feature_stats(samples: dict[str, torch.Tensor]) -> dict[str, dict[str, np.ndarray]]:
+    """LeRobot ``get_feature_stats`` of the training samples (action over its per-frame values)."""
+    from lerobot.datasets.compute_stats import get_feature_stats
+
+    per_frame_action = samples[ACTION][:, 0].numpy()  # the action column itself, as LeRobot's stats.json
+    return {
+        OBS_ENV_STATE: get_feature_stats(samples[OBS_ENV_STATE].numpy(), axis=0, keepdims=False),
+        OBS_STATE: get_feature_stats(samples[OBS_STATE].numpy(), axis=0, keepdims=False),
+        ACTION: get_feature_stats(per_frame_action, axis=0, keepdims=False),
+    }
+
+
+def _split_from_export(sidecar: dict, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The same stratified episode split as BC-MLP's, from the export's ID/OOD flags."""
+    stub = HandoverDataset(
+        [Episode(np.zeros((2, 2)), np.zeros((2, 3)), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)), ood, sid)
+         for sid, ood in zip(sidecar["source_id"], sidecar["is_ood"], strict=True)]
+    )
+    return split_train_val(stub, val_fraction, seed)
+
+
+# ---------------------------------------------------------------------- the agent
+class ACTAgent(Agent):
+    """LeRobot's ``ACTPolicy`` behind the common :class:`Agent` interface."""
+
+    def __init__(self, config: ACTAgentConfig | None = None):
+        from lerobot.policies.act.modeling_act import ACTPolicy
+        from lerobot.policies.act.processor_act import make_act_pre_post_processors
+
+        self.config = config or ACTAgentConfig()
+        self.horizon = self.config.horizon
+        torch.manual_seed(self.config.seed)
+        self.policy = ACTPolicy(self.config.policy_config())
+        self.policy.eval()
+        self.preprocessor, self.postprocessor = make_act_pre_post_processors(self.policy.config, None)
+        self.fitted = False
+        self.train_log: dict = {}
+        self._layout = None
+
+    # ------------------------------------------------------------------ training
+    def fit(
+        self,
+        dataset: HandoverDataset,
+        out_dir: str | os.PathLike | None = None,
+        export_root: str | os.PathLike | None = None,
+        resume: bool = False,
+        progress: bool = False,
+        steps: int | None = None,
+        log: Callable[[str], None] | None = None,
+    ) -> ACTAgent:
+        """Export ``dataset`` to a LeRobotDataset (``export_root`` or a temp folder) and train on it."""
+        from handover_env.data.lerobot_export import export_lerobot
+
+        spec = self.config.spec
+        with contextlib.ExitStack() as stack:
+            if export_root is None:
+                export_root = Path(stack.enter_context(tempfile.TemporaryDirectory())) / "lerobot"
+            export_root = Path(export_root)
+            if not (export_root / "meta" / "handover.json").is_file():
+                export_lerobot(dataset, export_root, history=spec.history, horizon=spec.horizon, progress=progress)
+            return self.fit_lerobot(export_root, out_dir=out_dir, resume=resume, progress=progress,
+                                    steps=steps, log=log)
+
+    def fit_lerobot(
+        self,
+        root: str | os.PathLike,
+        repo_id: str = "local/handover",
+        out_dir: str | os.PathLike | None = None,
+        resume: bool = False,
+        progress: bool = False,
+        steps: int | None = None,
+        log: Callable[[str], None] | None = None,
+    ) -> ACTAgent:
+        """Train on a LeRobot export at ``root`` (see :mod:`handover_env.data.lerobot_export`).
+
+        Args:
+            root: the export folder.
+            repo_id: its LeRobot repo id (local only).
+            out_dir: checkpoint folder, rewritten every ``eval_every`` steps.
+            resume: continue from ``out_dir/training_state``.
+            progress: tqdm bar with the loss.
+            steps: overrides ``config.steps``.
+            log: called with one line per validation pass.
+        """
+        from lerobot.policies.act.modeling_act import ACTPolicy
+        from lerobot.policies.act.processor_act import make_act_pre_post_processors
+
+        cfg = self.config
+        total_steps = cfg.steps if steps is None else int(steps)
+        ds, sidecar = open_export(root, repo_id, cfg.spec)
+        train_ep, val_ep = _split_from_export(sidecar, cfg.val_fraction, cfg.seed)
+        train = lerobot_samples(ds, train_ep)
+        val = lerobot_samples(ds, val_ep)
+        stats = feature_stats(train)
+
+        torch.manual_seed(cfg.seed)
+        self.policy = ACTPolicy(cfg.policy_config())
+        self.preprocessor, self.postprocessor = make_act_pre_post_processors(self.policy.config, stats)
+        opt = torch.optim.AdamW(self.policy.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        state = {
+            "step": 0, "best_val": math.inf, "best_step": -1, "train_loss": [], "val_loss": [],
+            "wall_time_s": 0.0,
+            "split": {"train": [sidecar["source_id"][i] for i in train_ep],
+                      "val": [sidecar["source_id"][i] for i in val_ep]},
+        }
+        best = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
+        if resume:
+            if out_dir is None:
+                raise CheckpointError("resume needs the checkpoint folder (out_dir)")
+            state, best = self._load_training_state(Path(out_dir), opt, state["split"])
+
+        n = train[OBS_STATE].shape[0]
+        per_epoch = max(1, n // cfg.batch_size)
+        t_start = time.perf_counter() - state["wall_time_s"]
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total_steps, initial=state["step"], desc="act", unit="step")
+        running, count = 0.0, 0
+        perm = None
+        while state["step"] < total_steps:
+            step = state["step"]
+            epoch, pos = divmod(step, per_epoch)
+            if perm is None or pos == 0:  # the permutation depends only on (seed, epoch): resumable
+                perm = torch.randperm(n, generator=torch.Generator().manual_seed(cfg.seed * 100_003 + epoch))
+            idx = perm[pos * cfg.batch_size : (pos + 1) * cfg.batch_size]
+            self.policy.train()
+            batch = self.preprocessor({k: v[idx] for k, v in train.items()})
+            loss, _ = self.policy.forward(batch)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(self.policy.parameters(), cfg.grad_clip_norm)
+            opt.step()
+            running += loss.item()
+            count += 1
+            state["step"] = step + 1
+            if bar is not None:
+                bar.update(1)
+                if count % 25 == 0:
+                    bar.set_postfix(loss=f"{running / count:.4f}")
+            if state["step"] % cfg.eval_every == 0 or state["step"] == total_steps:
+                val_l1 = self._val_l1(val)
+                state["train_loss"].append(running / max(count, 1))
+                state["val_loss"].append(val_l1)
+                running, count = 0.0, 0
+                if val_l1 < state["best_val"]:
+                    state["best_val"], state["best_step"] = val_l1, state["step"]
+                    best = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
+                state["wall_time_s"] = time.perf_counter() - t_start
+                if log is not None:
+                    log(f"step {state['step']:6d}  train {state['train_loss'][-1]:.4f}  val L1 {val_l1:.4f}  "
+                        f"best {state['best_val']:.4f} @ {state['best_step']}")
+                if out_dir is not None:
+                    self._save_checkpoint(Path(out_dir), best, opt, state)
+        if bar is not None:
+            bar.close()
+        self.policy.load_state_dict(best)
+        self.policy.eval()
+        self.fitted = True
+        self.train_log = state
+        return self
+
+    @torch.no_grad()
+    def _val_l1(self, val: dict[str, torch.Tensor], batch_size: int = 1024) -> float:
+        """Masked L1 of the normalised chunk (the reconstruction term of ACT's loss), zero latent."""
+        self.policy.eval()
+        total, weight = 0.0, 0.0
+        n = val[OBS_STATE].shape[0]
+        for i in range(0, n, batch_size):
+            batch = self.preprocessor({k: v[i : i + batch_size] for k, v in val.items()})
+            pred = self.policy.predict_action_chunk(batch)
+            valid = (~batch["action_is_pad"]).unsqueeze(-1).to(pred.dtype)
+            total += float(((pred - batch[ACTION]).abs() * valid).sum())
+            weight += float(valid.sum()) * ACTION_DIM
+        return total / max(weight, 1.0)
+
+    # ------------------------------------------------------------------ inference
+    def _require_fitted(self) -> None:
+        if not self.fitted:
+            raise RuntimeError("ACTAgent is not trained: call fit(dataset) or ACTAgent.load(dir)")
+
+    @torch.no_grad()
+    def predict_batch(self, env_state: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """(B, H, 3) giver chunks for B feature rows (env_state (B, 2W), state (B, 3))."""
+        self._require_fitted()
+        env = torch.as_tensor(np.asarray(env_state, dtype=np.float32))
+        st = torch.as_tensor(np.asarray(state, dtype=np.float32))
+        if env.ndim != 2 or env.shape[1] != self.config.spec.env_dim or tuple(st.shape) != (env.shape[0], 3):
+            raise ValueError(
+                f"expected env_state (B, {self.config.spec.env_dim}) and state (B, 3), "
+                f"got {tuple(env.shape)} and {tuple(st.shape)}"
+            )
+        batch = self.preprocessor({OBS_ENV_STATE: env, OBS_STATE: st})
+        chunk = self.policy.predict_action_chunk(batch)
+        return self.postprocessor(chunk).cpu().numpy().astype(np.float64)
+
+    def predict(self, receiver_history: np.ndarray, giver_xyz: np.ndarray | None = None) -> np.ndarray:
+        """(H, 3) future giver xyz from the receiver history and the current giver xyz."""
+        hist = validate_history(receiver_history)
+        giver = validate_giver(giver_xyz)
+        return self.predict_batch(encode_history(hist, self.config.history)[None], giver[None])[0]
+
+    def predict_sequence(
+        self, receiver_xy: np.ndarray, query_times: np.ndarray, giver_xyz: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Batched open-loop predictions (Q, H, 3); ``giver_xyz`` is the episode's (T, 3) giver."""
+        receiver_xy = validate_history(receiver_xy)
+        if giver_xyz is None:
+            validate_giver(None)
+        giver = np.asarray(giver_xyz, dtype=np.float64)
+        if giver.shape != (receiver_xy.shape[0], 3):
+            raise ValueError(f"giver_xyz must have shape ({receiver_xy.shape[0]}, 3), got {giver.shape}")
+        ep = Episode(receiver_xy, np.zeros((len(giver), 3)), giver, np.tile([1.0, 0, 0, 0], (len(giver), 1)),
+                     False, "query")
+        return self.predict_episode(ep, query_times)
+
+    def predict_episode(self, episode: Episode, query_times: np.ndarray, batch_size: int = 1024) -> np.ndarray:
+        """Open-loop predictions at frames ``query_times`` of ``episode`` (its giver gives the state)."""
+        f = episode_frames(episode, self.config.spec, query_times)
+        if len(f) == 0:
+            return np.zeros((0, self.horizon, 3))
+        return np.concatenate([self.predict_batch(f.env_state[i : i + batch_size], f.state[i : i + batch_size])
+                               for i in range(0, len(f), batch_size)])
+
+    # ------------------------------------------------------------------ closed loop
+    def reset(self) -> None:
+        self.policy.reset()
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """(x, y, z, yaw) via ``ACTPolicy.select_action`` (temporal ensembling); yaw faces the receiver."""
+        self._require_fitted()
+        obs = np.asarray(obs, dtype=np.float64).reshape(-1)
+        if self._layout is None or self._layout.size != obs.size:
+            self._layout = _layout_for(obs.size)
+        track = self._layout.receiver_track(obs)
+        ee = self._layout.unflatten(obs)["ee_pos"]
+        env = torch.as_tensor(encode_history(track, self.config.history), dtype=torch.float32)
+        batch = self.preprocessor({OBS_ENV_STATE: env, OBS_STATE: torch.as_tensor(ee, dtype=torch.float32)})
+        now = self.policy.select_action(batch)  # (1, 3), normalised; the ensembler keeps the future rows
+        ahead = ensembled_ahead(self.policy.temporal_ensembler, now, self.config.forecast_time)
+        target = self.postprocessor(torch.as_tensor(ahead, dtype=torch.float32)[None]).numpy()[0]
+        return np.array([*target, facing_yaw(target, track[-1])], dtype=np.float32)
+
+    # ------------------------------------------------------------------ checkpoints
+    def _handover_json(self, state: dict | None) -> dict:
+        d = {"type": CHECKPOINT_TYPE, "format": CHECKPOINT_FORMAT, "config": asdict(self.config),
+             "features": self.config.spec.to_dict()}
+        if state:
+            d["training"] = {k: state[k] for k in ("step", "best_step", "best_val", "wall_time_s") if k in state}
+        return d
+
+    def _write_model(self, out: Path, weights: dict | None, state: dict | None) -> None:
+        out.mkdir(parents=True, exist_ok=True)
+        current = None
+        if weights is not None:
+            current = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
+            self.policy.load_state_dict(weights)
+        self.policy.save_pretrained(out)
+        if current is not None:
+            self.policy.load_state_dict(current)
+        self.preprocessor.save_pretrained(out)
+        self.postprocessor.save_pretrained(out)
+        (out / HANDOVER_JSON).write_text(json.dumps(self._handover_json(state), indent=1))
+
+    def _save_checkpoint(self, out: Path, best: dict, opt: torch.optim.Optimizer, state: dict) -> None:
+        from lerobot.optim.optimizers import save_optimizer_state
+
+        self._write_model(out, best, state)
+        ts = out / "training_state"
+        ts.mkdir(exist_ok=True)
+        save_file({k: v.contiguous() for k, v in self.policy.state_dict().items()}, ts / "last.safetensors")
+        save_file({"torch_rng": torch.get_rng_state()}, ts / "rng.safetensors")
+        save_optimizer_state(opt, ts)
+        (ts / "state.json").write_text(json.dumps(state, indent=1))
+
+    def _load_training_state(self, out: Path, opt: torch.optim.Optimizer, split: dict) -> tuple[dict, dict]:
+        from lerobot.optim.optimizers import load_optimizer_state
+
+        ts = out / "training_state"
+        if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
+            raise CheckpointError(f"cannot resume: no training state in {ts}")
+        saved = _read_handover_json(out)["config"]
+        mine = asdict(self.config)
+        diff = sorted(k for k in mine if k not in ("steps", "eval_every", "device") and saved.get(k) != mine[k])
+        if diff:
+            raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
+        state = json.loads((ts / "state.json").read_text())
+        if state["split"] != split:
+            raise CheckpointError(f"cannot resume from {out}: it was trained on a different dataset/split")
+        self.policy.load_state_dict(load_file(ts / "last.safetensors"))
+        load_optimizer_state(opt, ts)
+        torch.set_rng_state(load_file(ts / "rng.safetensors")["torch_rng"])
+        best = load_file(out / "model.safetensors")
+        return state, {k: best.get(k, v) for k, v in self.policy.state_dict().items()}
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the policy (``config.json``, ``model.safetensors``), processors and ``handover_act.json``."""
+        self._require_fitted()
+        self._write_model(Path(path), None, self.train_log)
+        return Path(path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, device: str = "cpu") -> ACTAgent:
+        """Load a checkpoint written by :meth:`save` or ``train.py act`` (local files only)."""
+        from lerobot.policies.act.modeling_act import ACTPolicy
+        from lerobot.processor import PolicyProcessorPipeline
+        from lerobot.processor.converters import (
+            batch_to_transition,
+            policy_action_to_transition,
+            transition_to_batch,
+            transition_to_policy_action,
+        )
+
+        path = Path(path)
+        saved = _read_handover_json(path)
+        cfg = ACTAgentConfig.from_dict({**saved["config"], "device": device})
+        for name in ("config.json", "model.safetensors", "policy_preprocessor.json", "policy_postprocessor.json"):
+            if not (path / name).is_file():
+                raise CheckpointError(f"{path}: missing {name} (incomplete ACT checkpoint)")
+        agent = cls.__new__(cls)
+        agent.config, agent.horizon, agent._layout = cfg, cfg.horizon, None
+        try:
+            with contextlib.redirect_stdout(io.StringIO()):
+                agent.policy = ACTPolicy.from_pretrained(path, local_files_only=True, strict=True)
+            agent.preprocessor = PolicyProcessorPipeline.from_pretrained(
+                path, config_filename="policy_preprocessor.json",
+                to_transition=batch_to_transition, to_output=transition_to_batch,
+            )
+            agent.postprocessor = PolicyProcessorPipeline.from_pretrained(
+                path, config_filename="policy_postprocessor.json",
+                to_transition=policy_action_to_transition, to_output=transition_to_policy_action,
+            )
+        except Exception as exc:  # draccus / safetensors / shape mismatch
+            raise CheckpointError(f"{path}: cannot load the ACT policy ({type(exc).__name__}: {exc})") from exc
+        pc = agent.policy.config
+        if pc.chunk_size != cfg.horizon or pc.env_state_feature.shape != (cfg.spec.env_dim,):
+            raise CheckpointError(f"{path}: config.json (chunk {pc.chunk_size}) disagrees with {HANDOVER_JSON}")
+        agent.policy.eval()
+        agent.fitted = True
+        agent.train_log = saved.get("training", {})
+        return agent
+
+
+def _read_handover_json(path: Path) -> dict:
+    if not path.is_dir():
+        raise CheckpointError(f"no ACT checkpoint folder at {path}")
+    f = path / HANDOVER_JSON
+    if not f.is_file():
+        raise CheckpointError(f"{path}: missing {HANDOVER_JSON} (not an ACT checkpoint of this project)")
+    try:
+        saved = json.loads(f.read_text())
+    except json.JSONDecodeError as exc:
+        raise CheckpointError(f"{f}: not valid JSON ({exc})") from exc
+    if saved.get("type") != CHECKPOINT_TYPE:
+        raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {CHECKPOINT_TYPE!r}")
+    if saved.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointError(f"{path}: checkpoint format {saved.get('format')}, this code reads {CHECKPOINT_FORMAT}")
+    return saved

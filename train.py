@@ -1,0 +1,221 @@
+#!/usr/bin/env python
+"""Train the learned baselines: BC-MLP (torch) and ACT (LeRobot's ACTPolicy).
+
+    python train.py bc-mlp --data PATH --out runs/bc_mlp
+    python train.py act    --data PATH --out runs/act
+    python train.py act    --smoke --out /tmp/act_smoke          # seconds, for tests
+
+PATH is a canonical ``.npz`` (``python -m handover_env.data convert``/``synth``), a folder of the
+public dataset's pickles, or omitted for the embedded synthetic default. The checkpoint folder
+(``--out``) holds safetensors weights plus JSON config and is loaded by ``BCMLPAgent.load(dir)`` /
+``ACTAgent.load(dir)``; ``--resume`` continues an interrupted run from it. ``--test-fold K``
+holds out fold K of a stratified ``--folds``-fold split (by ID/OOD) from training and reports the
+open-loop RMS on it at the end. Features: see ``baselines/features.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from handover_env.data.dataset import HandoverDataset  # noqa: E402
+
+SMOKE_EPISODES = 24
+
+
+# ---------------------------------------------------------------------------- data
+def load_data(path: str | None, smoke: bool, seed: int) -> HandoverDataset:
+    """The training demonstrations: .npz, public folder, or the synthetic default."""
+    try:
+        from handover_env.data import load_any
+    except ImportError:
+        load_any = None
+    if path is None and smoke:
+        from handover_env.data.synthetic import generate_synthetic
+
+        return generate_synthetic(n=SMOKE_EPISODES, ood_fraction=0.125, seed=seed)
+    if load_any is not None:
+        data = load_any(path)
+    elif path is None:
+        from handover_env.data.synthetic import generate_synthetic
+
+        data = generate_synthetic(n=1000, ood_fraction=0.1, seed=0)
+    elif Path(path).is_dir():
+        from handover_env.data.public import load_public_dataset
+
+        data = load_public_dataset(path)
+    else:
+        data = HandoverDataset.load(path)
+    if smoke and len(data) > SMOKE_EPISODES:
+        data = data.subset(np.linspace(0, len(data) - 1, SMOKE_EPISODES).round().astype(int))
+    return data
+
+
+def split_test(data: HandoverDataset, folds: int, test_fold: int | None, seed: int):
+    """(train_data, test_data or None): hold out one stratified fold for the final RMS."""
+    if test_fold is None:
+        return data, None
+    if not 0 <= test_fold < folds:
+        raise SystemExit(f"--test-fold must be in [0, {folds - 1}], got {test_fold}")
+    train_idx, test_idx = data.stratified_kfold(folds, seed=seed)[test_fold]
+    return data.subset(train_idx), data.subset(test_idx)
+
+
+# ---------------------------------------------------------------------------- evaluation
+def openloop_rms(agent, test: HandoverDataset, horizon: int) -> dict:
+    """Open-loop RMS (mm) on ``test`` by the shared protocol, ID and OOD separately.
+
+    Uses ``handover_env.evaluation.openloop`` when present; otherwise the same protocol inline:
+    a query at every frame from frame 5 on, the prediction's row h compared with the giver at
+    t + h for the rows inside the episode; per episode the RMS of the 3D Euclidean error, and the
+    per-axis RMS (= 3D / sqrt(3)); mean and std over episodes.
+    """
+    per_ep = []
+    for ep in test:
+        times = np.arange(5, ep.length)
+        pred = agent.predict_episode(ep, times)
+        fut = times[:, None] + np.arange(horizon)[None, :]
+        valid = fut < ep.length
+        truth = ep.giver_xyz[np.minimum(fut, ep.length - 1)]
+        err2 = ((pred - truth) ** 2).sum(-1)[valid]
+        per_ep.append((ep.is_ood, 1000.0 * float(np.sqrt(err2.mean()))))
+    out = {}
+    for name, ood in (("ID", False), ("OOD", True)):
+        vals = np.array([r for o, r in per_ep if o == ood])
+        if vals.size:
+            out[name] = {
+                "n": int(vals.size),
+                "rms3d_mean": float(vals.mean()), "rms3d_std": float(vals.std()),
+                "rms_axis_mean": float(vals.mean() / np.sqrt(3)), "rms_axis_std": float(vals.std() / np.sqrt(3)),
+            }
+    return out
+
+
+def report(name: str, agent, test: HandoverDataset | None, out: Path, t0: float, val_loss: float) -> None:
+    summary = {"method": name, "wall_time_s": time.perf_counter() - t0, "final_val_loss": val_loss,
+               "threads": torch.get_num_threads(), "loadavg": os.getloadavg()}
+    print(f"[{name}] wall time {summary['wall_time_s']:.1f} s, best validation loss {val_loss:.5f}")
+    if test is not None:
+        summary["test_rms_mm"] = openloop_rms(agent, test, agent.horizon)
+        for split, r in summary["test_rms_mm"].items():
+            print(f"[{name}] held-out {split} (n={r['n']}): RMS 3D {r['rms3d_mean']:.2f} +- {r['rms3d_std']:.2f} mm,"
+                  f" per axis {r['rms_axis_mean']:.2f} +- {r['rms_axis_std']:.2f} mm")
+    (out / "train_summary.json").write_text(json.dumps(summary, indent=1))
+
+
+# ---------------------------------------------------------------------------- commands
+def train_bc_mlp(args: argparse.Namespace) -> None:
+    from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
+
+    cfg = BCMLPConfig(
+        history=args.history, horizon=args.horizon, hidden=tuple(args.hidden), lr=args.lr or 1e-3,
+        batch_size=args.batch_size or 256, max_epochs=(3 if args.smoke else args.epochs), patience=args.patience,
+        val_fraction=args.val_fraction, seed=args.seed, device=args.device,
+    )
+    if args.smoke:
+        cfg.hidden = (64, 64)
+    data = load_data(args.data, args.smoke, args.seed)
+    train, test = split_test(data, args.folds, args.test_fold, args.seed)
+    print(f"[bc-mlp] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
+    t0 = time.perf_counter()
+    agent = BCMLPAgent(cfg).fit(train, out_dir=args.out, resume=args.resume, progress=not args.no_progress,
+                                log=print)
+    report("bc-mlp", agent, test, Path(args.out), t0, agent.train_log["best_val"])
+
+
+def train_act(args: argparse.Namespace) -> None:
+    from baselines.act import ACTAgent, ACTAgentConfig
+
+    size = dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4) if args.smoke else {}
+    for key in ("dim_model", "n_heads", "dim_feedforward", "n_encoder_layers", "n_decoder_layers"):
+        if getattr(args, key) is not None:
+            size[key] = getattr(args, key)
+    cfg = ACTAgentConfig(
+        history=args.history, horizon=args.horizon, paper_scale=args.paper_scale, use_vae=not args.no_vae,
+        lr=args.lr or 1e-4, batch_size=args.batch_size or (16 if args.smoke else 64),
+        steps=(20 if args.smoke else args.steps), eval_every=(10 if args.smoke else args.eval_every),
+        val_fraction=args.val_fraction, seed=args.seed, device=args.device, **size,
+    )
+    data = load_data(args.data, args.smoke, args.seed)
+    train, test = split_test(data, args.folds, args.test_fold, args.seed)
+    print(f"[act] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
+    t0 = time.perf_counter()
+    export_root = Path(args.export_root) if args.export_root else Path(args.out) / "lerobot_dataset"
+    agent = ACTAgent(cfg).fit(train, out_dir=args.out, export_root=export_root, resume=args.resume,
+                              progress=not args.no_progress, log=print)
+    report("act", agent, test, Path(args.out), t0, agent.train_log["best_val"])
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="method", required=True, metavar="{bc-mlp,act}")
+
+    def common(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--data", default=None, help="a canonical .npz, a public-dataset folder, or omit for "
+                        "the embedded synthetic default (1000 episodes, 10%% OOD)")
+        sp.add_argument("--out", required=True, help="checkpoint folder (created; safetensors + JSON config)")
+        sp.add_argument("--resume", action="store_true", help="continue training from the state saved in --out")
+        sp.add_argument("--smoke", action="store_true", help=f"tiny fast configuration for tests: "
+                        f"{SMOKE_EPISODES} episodes, a few epochs/steps, a small network")
+        sp.add_argument("--seed", type=int, default=0, help="seed of initialisation, sampling and splits")
+        sp.add_argument("--device", default="cpu", help="torch device (default cpu)")
+        sp.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1: on a shared "
+                        "2-core machine 2 threads oversubscribe and run ~10x slower)")
+        sp.add_argument("--batch-size", type=int, default=None, help="samples per step "
+                        "(default 256 for bc-mlp, 64 for act)")
+        sp.add_argument("--lr", type=float, default=None, help="learning rate (default 1e-3 bc-mlp, 1e-4 act)")
+        sp.add_argument("--history", type=int, default=10, help="W, frames of receiver xy history (default 10)")
+        sp.add_argument("--horizon", type=int, default=30, help="H, frames of predicted giver xyz (default 30)")
+        sp.add_argument("--val-fraction", type=float, default=0.1,
+                        help="fraction of training episodes held out for validation (default 0.1)")
+        sp.add_argument("--folds", type=int, default=10, help="number of stratified folds for --test-fold")
+        sp.add_argument("--test-fold", type=int, default=None, help="hold out this fold entirely and report "
+                        "the open-loop RMS (mm) on it after training (default: train on all episodes)")
+        sp.add_argument("--no-progress", action="store_true", help="no tqdm bars")
+
+    bc = sub.add_parser("bc-mlp", help="BC-MLP: torch MLP, receiver history -> 30-frame giver chunk",
+                        description="Train BC-MLP with early stopping on a validation split.")
+    common(bc)
+    bc.add_argument("--epochs", type=int, default=50, help="maximum epochs (default 50)")
+    bc.add_argument("--patience", type=int, default=5, help="early-stopping patience in epochs (default 5)")
+    bc.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 256], help="hidden widths")
+    bc.set_defaults(func=train_bc_mlp)
+
+    act = sub.add_parser("act", help="ACT: LeRobot's ACTPolicy, state-only, trained on a LeRobot export",
+                         description="Train LeRobot's ACTPolicy on a LeRobotDataset export of the data.")
+    common(act)
+    act.add_argument("--steps", type=int, default=8_000, help="optimisation steps (default 8000)")
+    act.add_argument("--eval-every", type=int, default=1_000, help="steps between validation/checkpoints")
+    act.add_argument("--paper-scale", action="store_true", help="ACT's default size (dim 512, 8 heads, "
+                     "ffn 3200, 4 enc layers, VAE 4 layers, latent 32) instead of the CPU default "
+                     "(dim 128, 4 heads, ffn 512, 2 enc / 1 dec layers, VAE 1 layer, latent 16)")
+    act.add_argument("--no-vae", action="store_true", help="train without ACT's CVAE objective")
+    act.add_argument("--dim-model", type=int, default=None, help="override the transformer width")
+    act.add_argument("--n-heads", type=int, default=None, help="override the attention heads")
+    act.add_argument("--dim-feedforward", type=int, default=None, help="override the feed-forward width")
+    act.add_argument("--n-encoder-layers", type=int, default=None, help="override the encoder depth")
+    act.add_argument("--n-decoder-layers", type=int, default=None, help="override the decoder depth")
+    act.add_argument("--export-root", default=None, help="LeRobot export folder (default OUT/lerobot_dataset; "
+                     "reused if it already holds an export)")
+    act.set_defaults(func=train_act)
+    return p
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = build_parser().parse_args(argv)
+    torch.set_num_threads(max(1, args.threads))
+    args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
