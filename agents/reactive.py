@@ -8,8 +8,9 @@ i.e. the receiver's current (smoothed) pelvis position, moved toward the robot (
 receiver's right hand faces) and slightly ahead along the walk, extrapolated by the forecast time
 t_f of Θ at the receiver's current velocity (paper Sec. IV-B: the robot tracks x_d(t + t_f)). It
 is clipped to the robot's workspace. Before the receiver is near (its handover point farther
-than ``engage_distance`` from the robot base in x), and after the release, it holds the ready
-pose. The gripper yaw points at the receiver's path (-y), turned toward where the receiver comes
+than ``engage_distance`` from the robot base in x) it holds the ready pose; after the release it
+holds its last target until the fingers have let go of the object (``object_held`` = 0), then
+returns to the ready pose. The gripper yaw points at the receiver's path (-y), turned toward where the receiver comes
 from by at most ``max_yaw_turn``.
 """
 
@@ -84,9 +85,11 @@ class ReactiveAgent(Agent):
         self.layout = layout or ObsLayout()
         self.horizon = self.config.horizon
         self._slices = self.layout.slices()
+        self._last: np.ndarray | None = None
 
     def reset(self) -> None:
-        """Stateless between steps: nothing to forget."""
+        """Forget the last target (kept only to hold still while the fingers open)."""
+        self._last = None
 
     def _velocity(self, hist: np.ndarray) -> np.ndarray:
         n = min(self.config.velocity_window, hist.shape[0])
@@ -123,8 +126,12 @@ class ReactiveAgent(Agent):
         obs = np.asarray(obs)
         track = self.layout.receiver_track(obs)
         released = obs[self._slices["gripper_open"][0]][0] > 0.5
+        held = obs[self._slices["object_held"][0]][0] > 0.5
         frames = obs[self._slices["receiver_frames_seen"][0]][0]
         ready = np.array([*c.ready_pos, c.ready_yaw], dtype=np.float32)
+        if released and held and self._last is not None:
+            # The fingers are still opening: stay put instead of yanking the object back.
+            return self._last.copy()
         if released or frames < 1:
             return ready
         vel = self._velocity(track)
@@ -136,4 +143,5 @@ class ReactiveAgent(Agent):
         lateral = max(0.1, p[1] - (track[-1][1]))
         turn = math.atan2(max(0.0, track[-1][0] - p[0]), lateral)
         yaw = c.ready_yaw + min(turn, math.radians(20.0))
-        return np.array([p[0], p[1], p[2], yaw], dtype=np.float32)
+        self._last = np.array([p[0], p[1], p[2], yaw], dtype=np.float32)
+        return self._last.copy()

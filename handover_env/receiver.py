@@ -17,10 +17,14 @@ with the synthetic dataset); this module only drives the scene's two mocap bodie
   keeps walking, so it pulls. The weld is soft (solref 0.06 s) and the robot arm is compliant,
   so the pull is a physical, bounded force that the wrist F/T sensor measures.
 
-  For the static handover (``present_after_walk``) the receiver stops at the end of its walk and
-  first raises the right hand (``presenting``: forward and to the right of the shoulder); the
-  time the hand is fully raised is ``t_hand_raised`` (what a hand detector would see). It reaches
-  for the object once the robot brings it within reach.
+  For the static handover (``present_after_walk``) the receiver does not reach while walking; it
+  stops at the end of its walk and raises the right hand (``presenting``: forward and to the
+  right of the shoulder); the time the hand is fully raised is ``t_hand_raised`` (what a hand
+  detector would see). The hand then waits and takes the object only once the robot has brought
+  it within ``present_reach`` of the hand.
+
+  ``t_depart`` is when the receiver leaves its start point (first camera frame faster than
+  ``depart_speed``): the start of the paper's handover time (Sec. V-C).
 
 Why welds, not finger friction: the grasp on both sides is a weld equality (gripper<->object
 while the 2F-85 is closed, hand<->object once the receiver holds it). A friction grasp with the
@@ -63,6 +67,11 @@ class ReceiverConfig:
         grasp_radius: the hand grasps when it is this close to the object centre, m.
         pull_speed: speed at which the holding hand withdraws toward the carry pose, m/s.
         carry_forward: the carry pose, m in front of the pelvis (hand beside the hip).
+        present_reach: static receiver (``present_after_walk``): it keeps the raised hand still
+            and reaches for the object only once the robot has brought it this close to the
+            hand, m (the robot delivers to the detected hand, Meng et al. 2022).
+        depart_speed: the receiver "leaves the start point" at the first camera frame at which
+            its pelvis moves faster than this, m/s (start of the paper's handover time).
     """
 
     reach_margin: float = 0.0
@@ -70,13 +79,17 @@ class ReceiverConfig:
     grasp_radius: float = 0.05
     pull_speed: float = 0.4
     carry_forward: float = 0.15
+    present_reach: float = 0.15
+    depart_speed: float = 0.25
 
     def __post_init__(self) -> None:
-        vals = (self.reach_margin, self.reach_time, self.grasp_radius, self.pull_speed, self.carry_forward)
+        vals = (self.reach_margin, self.reach_time, self.grasp_radius, self.pull_speed, self.carry_forward,
+                self.present_reach, self.depart_speed)
         if not all(math.isfinite(v) for v in vals):
             raise ValueError("ReceiverConfig values must be finite")
-        if self.reach_time <= 0 or self.grasp_radius <= 0 or self.pull_speed <= 0:
-            raise ValueError("reach_time, grasp_radius and pull_speed must be > 0")
+        if (self.reach_time <= 0 or self.grasp_radius <= 0 or self.pull_speed <= 0 or self.present_reach <= 0
+                or self.depart_speed <= 0):
+            raise ValueError("reach_time, grasp_radius, pull_speed, present_reach and depart_speed must be > 0")
 
 
 def _heading_from_track(xy: np.ndarray) -> np.ndarray:
@@ -131,6 +144,7 @@ class Receiver:
         self.source_id = ""
         self.present_after_walk = False
         self.t_hand_raised = math.nan
+        self.t_depart = 0.0
         self._reach_from = None
 
     # ------------------------------------------------------------------ setup
@@ -193,6 +207,7 @@ class Receiver:
             self.height = float(self.walker.height)
             self.source_id = f"scripted_{kind}"
         self._scale_body(self.height)
+        self.t_depart = self._departure_time(self._frames_xy)
         self.state = "walking"
         self.reach = 0.0
         self.t_grasp = math.nan
@@ -200,6 +215,17 @@ class Receiver:
         self._reach_from = None
         self._hand_carry = np.zeros(3)
         self._hand_prev = None
+
+    def _departure_time(self, xy: np.ndarray) -> float:
+        """When the receiver leaves the start point: first frame whose pelvis speed (central
+        difference, 5-frame mean) exceeds ``depart_speed``; 0 for scripted walkers, which walk
+        from the first frame; the last frame if the track never moves."""
+        speed = np.linalg.norm(np.gradient(xy, axis=0), axis=1) * CAMERA_RATE
+        if speed.size >= 5:
+            speed = np.convolve(np.pad(speed, 2, mode="edge"), np.ones(5) / 5.0, "valid")
+        moving = np.nonzero(speed > self.config.depart_speed)[0]
+        k = int(moving[0]) if moving.size else xy.shape[0] - 1
+        return k / CAMERA_RATE
 
     @property
     def duration(self) -> float:
@@ -256,13 +282,18 @@ class Receiver:
             self.reach = min(1.0, self.reach + dt / cfg.reach_time)
             if self.reach >= 1.0 and math.isnan(self.t_hand_raised):
                 self.t_hand_raised = t1
-        if self.state in ("walking", "presenting") and object_free and self.hand_mode == "reach":
-            sh = self.shoulder(xy1, h1)
-            if np.linalg.norm(object_pos - sh) < rm.arm_reach(self.height) + cfg.reach_margin:
-                if self.state == "presenting":
+        if object_free and self.hand_mode == "reach":
+            if self.state == "walking" and not self.present_after_walk:
+                # Walking past: reach as soon as the object is within arm's reach of the shoulder.
+                sh = self.shoulder(xy1, h1)
+                if np.linalg.norm(object_pos - sh) < rm.arm_reach(self.height) + cfg.reach_margin:
+                    self.state = "reaching"
+            elif self.state == "presenting" and self.reach >= 1.0:
+                # Static: the raised hand waits until the robot brings the object to it.
+                if np.linalg.norm(object_pos - self._hand_prev) < cfg.present_reach:
                     self._reach_from = self._hand_prev.copy()
                     self.reach = 0.0
-                self.state = "reaching"
+                    self.state = "reaching"
         if self.state == "reaching":
             self.reach = min(1.0, self.reach + dt / cfg.reach_time)
         hand1 = self._hand_target(xy1, h1, object_pos, dt)
@@ -347,7 +378,7 @@ class Receiver:
         obj = data.xpos[self.ids.object_body]
         if np.linalg.norm(hand - obj) > self.config.grasp_radius:
             return False
-        activate_weld(model, data, self.ids.eq_receiver, torquescale=0.2)
+        activate_weld(model, data, self.ids.eq_receiver, torquescale=0.2, zero_force=True)
         self.state = "holding"
         self.t_grasp = float(data.time)
         base = data.mocap_pos[self.ids.base_mocap]

@@ -240,11 +240,20 @@ def scene_ids(model: mujoco.MjModel) -> SceneIds:
     return ids
 
 
-def activate_weld(model: mujoco.MjModel, data: mujoco.MjData, eq_id: int, torquescale: float = 1.0) -> None:
+def activate_weld(model: mujoco.MjModel, data: mujoco.MjData, eq_id: int, torquescale: float = 1.0,
+                  zero_force: bool = False) -> None:
     """Switch weld ``eq_id`` on, holding body2 at its current pose relative to body1.
 
     Sets the weld's ``relpose`` (``model.eq_data``) from ``data.xpos``/``xquat`` so that the
     constraint starts with zero violation, then sets ``data.eq_active``. Call after kinematics.
+
+    With ``zero_force`` the translational anchor is instead offset so that the weld starts with
+    zero reference acceleration: MuJoCo's soft constraint pulls with ``-b v - k r``, and for a
+    weld switched on while body2 moves at ``v`` relative to body1 (a mocap body has zero velocity
+    for the solver) the damping term alone would be an impulse. Placing the anchor at
+    ``r = -(b / k) v`` (``b / k = 2 timeconst dampratio²`` for positive ``solref`` beyond the
+    impedance width) cancels it, so the grasp force then builds up from zero as the bodies move
+    apart, like a hand closing on a moving object.
     """
     b1, b2 = model.eq_obj1id[eq_id], model.eq_obj2id[eq_id]
     rot1 = data.xmat[b1].reshape(3, 3)
@@ -254,7 +263,16 @@ def activate_weld(model: mujoco.MjModel, data: mujoco.MjData, eq_id: int, torque
     mujoco.mju_mulQuat(rel_q, inv_q1, data.xquat[b2])
     eq = model.eq_data[eq_id]
     eq[:3] = 0.0  # anchor at body2's origin
-    eq[3:6] = rot1.T @ (data.xpos[b2] - data.xpos[b1])
+    offset = data.xpos[b2] - data.xpos[b1]
+    if zero_force:
+        timeconst, dampratio = model.eq_solref[eq_id]
+        if timeconst <= 0:
+            raise ValueError("zero_force needs a positive (timeconst, dampratio) solref on the weld")
+        v1, v2 = np.empty(6), np.empty(6)
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, b1, v1, 0)
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, b2, v2, 0)
+        offset = offset + 2.0 * timeconst * dampratio**2 * (v2[3:] - v1[3:])
+    eq[3:6] = rot1.T @ offset
     eq[6:10] = rel_q
     eq[10] = torquescale
     data.eq_active[eq_id] = 1

@@ -421,11 +421,14 @@ class HandoverEnvBase(gym.Env, EzPickle):
         """Episode facts; values not yet defined (no release, no grasp) are ``None``."""
         ok = self.outcome == "success"
         delay = self.stabilisation_delay if self.static else 0.0
+        # Paper Sec. V-C: from when the receiver leaves the start point to the gripper release;
+        # the static baseline's stabilisation delay is subtracted ("handover_time") or not.
+        t_ho = self.t_release - self.receiver.t_depart
         return {
             "is_success": ok,
             "outcome": self.outcome,
-            "handover_time": (self.t_release - delay) if ok else None,
-            "handover_time_with_delay": self.t_release if ok else None,
+            "handover_time": (t_ho - delay) if ok else None,
+            "handover_time_with_delay": t_ho if ok else None,
             "release_force": None if math.isnan(self.release_force) else self.release_force,
             "released": self.released,
             "peak_contact_force": self.peak_contact_force,
