@@ -12,7 +12,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
-from handover_env.data.dataset import HandoverDataset
+from handover_env.data.dataset import Episode, HandoverDataset
 
 
 def validate_history(receiver_history: np.ndarray, min_frames: int = 1) -> np.ndarray:
@@ -61,6 +61,16 @@ class Agent(ABC):
         return np.stack([self.predict(receiver_xy[: t + 1]) for t in times]) if times.size else (
             np.zeros((0, self.horizon, 3))
         )
+
+    def predict_episode(self, episode: Episode, query_times: np.ndarray) -> np.ndarray:
+        """Open-loop predictions at ``query_times`` of a recorded ``episode``: (Q, horizon, 3).
+
+        This is what the open-loop protocol calls. The default uses the receiver track alone
+        (:meth:`predict_sequence`), as the paper's planner does. Agents that also read the
+        giver's current position (the learned baselines' ``observation.state``) override it and
+        take the giver row at each query time from the episode, never a later one.
+        """
+        return self.predict_sequence(episode.receiver_xy, query_times)
 
     @abstractmethod
     def reset(self) -> None:

@@ -6,7 +6,9 @@ Every method (SPGP planner, IAAL, BC-MLP, ACT, ...) is scored by this one protoc
   ``t_c in range(first_query, L - 1, stride)`` (defaults: ``first_query = 5`` frames of history
   before the first query, ``stride = 1``, i.e. every frame but the last). At t_c it sees the
   receiver base track ``receiver_xy[: t_c + 1]`` (30 Hz, oldest first) and nothing else of the
-  test episode.
+  test episode (through :meth:`Agent.predict_episode`). The one exception is documented per
+  agent: the learned baselines (BC-MLP, ACT) also read the giver position at frame t_c as their
+  ``observation.state`` (a robot knows where its own hand is), never a later row.
 * **Prediction.** It returns (H, 3) giver wrist positions, ``H = horizon = 30`` frames (1 s, the
   paper's chunk); row 0 is the giver position at frame t_c itself, row i at t_c + i.
 * **Ground truth** is ``giver_xyz[t_c : t_c + H]``; near the end of the episode fewer than H rows
@@ -88,7 +90,7 @@ def episode_rms(
     times = query_times(episode.length, protocol)
     if times.size == 0:
         return float("nan"), 0
-    pred = np.asarray(agent.predict_sequence(episode.receiver_xy, times), dtype=np.float64)
+    pred = np.asarray(agent.predict_episode(episode, times), dtype=np.float64)
     if pred.shape[0] != times.size or pred.ndim != 3 or pred.shape[2] != 3 or pred.shape[1] < protocol.horizon:
         raise ValueError(
             f"agent returned predictions of shape {pred.shape}, need ({times.size}, >= {protocol.horizon}, 3)"
