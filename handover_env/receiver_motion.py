@@ -46,10 +46,11 @@ START_RANK_CORRELATION = 0.5
 START_BOX = ((0.73, 3.13), (-1.86, 0.17))
 _START_CANDIDATES = 16
 #: Initial walking direction relative to the straight line to the passing line (deg, + = toward
-#: +y). Data: from the first 8 frames of the smoothed pelvis track; 5%/50%/95% = -31/11/81 deg.
+#: +y). Data: from the first 8 frames of the smoothed pelvis track; 5%/50%/75%/95% = -31/11/38/81
+#: deg; the upper tail is trimmed to 62 (95%) .. 70 deg so that turns stay below ~3 rad/s.
 START_TURN_DEG_Q = (
     (0.0, 0.05, 0.25, 0.5, 0.75, 0.95, 1.0),
-    (-45.0, -31.2, -3.8, 10.9, 37.7, 81.1, 95.0),
+    (-40.0, -31.2, -3.8, 10.9, 37.7, 62.0, 70.0),
 )
 #: Per-recording median pelvis speed (m/s). Data: 0.57 .. 1.13, median 0.83.
 SPEED_Q = (_P, (0.58, 0.633, 0.691, 0.769, 0.831, 0.90, 0.996, 1.078, 1.12))
@@ -73,6 +74,9 @@ ARM_REACH_RATIO = (
     0.386  # shoulder -> grip centre (upper arm 0.186 + forearm 0.146 + half hand 0.054)
 )
 DEFAULT_HEIGHT = 1.725
+WANDER_SMOOTHING = 0.15  # m, Gaussian smoothing of a wandering path (rounds off cusps)
+MAX_TURN_RATE = 3.0  # rad/s: walkers slow down in tight curves and turn no faster than this
+FREE_CURVATURE = 1.5  # 1/m: curves gentler than this (radius > 0.67 m) are walked at full speed
 
 KINDS = ("id", "ood")
 OOD_MODES = ("wander", "pause")
@@ -289,7 +293,7 @@ def sample_walker(rng: np.random.Generator, kind: str = "id", **overrides: objec
         "wander_wavelength": 1.0 + 1.2 * float(g[8]),
         "wander_phase": 2.0 * math.pi * float(g[9]),
         "wander_loop": float(g[10]),
-        "start_bulge": 1.0 + float(g[12]),
+        "start_bulge": 1.0 + 0.6 * float(g[12]),
         "start_turn": math.radians(float(_quantile_sample(g[11], START_TURN_DEG_Q))),
     }
     params.update(overrides)
@@ -367,9 +371,29 @@ def _path(params: WalkerParams, n: int = 1201) -> tuple[np.ndarray, np.ndarray]:
             [params.wander_loop * (np.cos(theta) - math.cos(phi)), np.sin(theta) - math.sin(phi)],
             axis=-1,
         )
-        xy = xy + envelope[:, None] * offset
+        xy = _smooth_polyline(xy + envelope[:, None] * offset, WANDER_SMOOTHING)
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
     return xy, arc
+
+
+def _smooth_polyline(xy: np.ndarray, sigma: float) -> np.ndarray:
+    """Resample a polyline evenly along its length and Gaussian-smooth it (sigma in metres).
+
+    Rounds off the cusps a looping meander can have, so the walking direction turns at human
+    rates; the end points stay where they were.
+    """
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    step = sigma / 8.0
+    grid = np.linspace(0.0, arc[-1], max(int(arc[-1] / step), 2) + 1)
+    even = np.stack([np.interp(grid, arc, xy[:, 0]), np.interp(grid, arc, xy[:, 1])], axis=-1)
+    half = int(4 * sigma / step)
+    kernel = np.exp(-0.5 * (np.arange(-half, half + 1) * step / sigma) ** 2)
+    kernel /= kernel.sum()
+    # Reflect through the end points (odd extension) so that they and the end directions stay put.
+    head = 2 * even[0] - even[half:0:-1]
+    tail = 2 * even[-1] - even[-2 : -half - 2 : -1]
+    padded = np.concatenate([head, even, tail])
+    return np.stack([np.convolve(padded[:, j], kernel, mode="valid") for j in range(2)], axis=-1)
 
 
 def _pause_factor(params: WalkerParams, t: np.ndarray) -> np.ndarray:
@@ -377,9 +401,35 @@ def _pause_factor(params: WalkerParams, t: np.ndarray) -> np.ndarray:
     if params.ood_mode != "pause":
         return np.ones_like(t)
     t0, ramp, hold = params.pause_time, params.pause_ramp, params.pause_duration
-    down = _smoothstep((t - t0) / ramp)
-    up = _smoothstep((t - (t0 + ramp + hold)) / ramp)
-    return 1.0 - down + up
+    return 1.0 - _smoothstep((t - t0) / ramp) + _smoothstep((t - (t0 + ramp + hold)) / ramp)
+
+
+def _turn_budget(
+    path_xy: np.ndarray, arc: np.ndarray, turn_length: float
+) -> tuple[np.ndarray, ...]:
+    """Knots mapping walking progress u to distance s and heading along a polyline.
+
+    Sharp turning costs progress: at each vertex the walker spends ``turn_length`` x (turn angle
+    beyond what :data:`FREE_CURVATURE` allows) of progress turning before going on. With progress
+    advancing at the walking speed v and ``turn_length = v / MAX_TURN_RATE``, the speed along a
+    curve of curvature k > k_free becomes v / (1 + v (k - k_free) / MAX_TURN_RATE), so the yaw
+    rate stays below max(MAX_TURN_RATE, v k_free), gentle curves are not slowed at all, and a
+    sharp kink is turned through on the spot.
+
+    Returns:
+        ``(s_knots, u_knots, heading_knots)``; headings are relative to -x (add pi for the yaw).
+    """
+    seg = np.diff(arc)
+    theta = np.unwrap(np.arctan2(-np.diff(path_xy[:, 1]), -np.diff(path_xy[:, 0])))
+    free = FREE_CURVATURE * 0.5 * (seg[1:] + seg[:-1])  # turning that costs nothing
+    turn = turn_length * np.maximum(np.abs(np.diff(theta)) - free, 0.0)
+    m = seg.size
+    steps = np.empty(2 * m - 1)
+    steps[0::2], steps[1::2] = seg, turn
+    u_knots = np.concatenate([[0.0], np.cumsum(steps + 1e-12)])
+    s_knots = np.concatenate([[0.0], np.repeat(arc[1:-1], 2), [arc[-1]]])
+    heading_knots = np.repeat(theta, 2)
+    return s_knots, u_knots, heading_knots
 
 
 def base_trajectory(params: WalkerParams, rate_hz: float = 30.0) -> BaseTrajectory:
@@ -400,18 +450,19 @@ def base_trajectory(params: WalkerParams, rate_hz: float = 30.0) -> BaseTrajecto
     if not (math.isfinite(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be positive and finite, got {rate_hz}")
     path_xy, arc = _path(params)
-    total = float(arc[-1])
+    s_knots, u_knots, heading_knots = _turn_budget(path_xy, arc, params.speed / MAX_TURN_RATE)
+    total = float(u_knots[-1])
     dt = 1.0 / rate_hz
     pause_total = (
         (params.pause_duration + 2 * params.pause_ramp) if params.ood_mode == "pause" else 0.0
     )
-    t_max = (
-        params.pause_time
-        + pause_total
-        + total / (params.speed * (1.0 - params.speed_ripple - params.drift_amplitude))
-        + 1.0
+    slowest = params.speed * (1.0 - params.speed_ripple - params.drift_amplitude)
+    t = (
+        np.arange(
+            math.ceil((params.pause_time + pause_total + total / slowest + 1.0) * rate_hz) + 2
+        )
+        * dt
     )
-    t = np.arange(math.ceil(t_max * rate_hz) + 2) * dt
     slow = 1.0 + params.drift_amplitude * np.sin(
         2 * math.pi * params.drift_frequency * t + params.drift_phase
     )
@@ -420,18 +471,18 @@ def base_trajectory(params: WalkerParams, rate_hz: float = 30.0) -> BaseTrajecto
     def integrate(v: np.ndarray) -> np.ndarray:
         return np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
 
-    # Step-frequency ripple needs the distance walked; one fixed-point pass is accurate to << 1 mm.
-    s = integrate(base_v)
-    step_phase = 2 * math.pi * s / params.step_length + params.gait_phase
-    s = integrate(base_v * (1.0 + params.speed_ripple * np.sin(2 * step_phase)))
-    n = int(np.searchsorted(s, total)) + 1
-    n = min(max(n, 2), t.size)
-    t, s = t[:n], np.minimum(s[:n], total)
+    # Progress u along the path (distance plus turning budget). The step-frequency ripple needs
+    # the distance walked; one fixed-point pass is accurate to well under a millimetre.
+    u = integrate(base_v)
+    step_phase = (
+        2 * math.pi * np.interp(u, u_knots, s_knots) / params.step_length + params.gait_phase
+    )
+    u = integrate(base_v * (1.0 + params.speed_ripple * np.sin(2 * step_phase)))
+    n = min(max(int(np.searchsorted(u, total)) + 1, 2), t.size)
+    t, u = t[:n], np.minimum(u[:n], total)
+    s = np.interp(u, u_knots, s_knots)
     xy = np.stack([np.interp(s, arc, path_xy[:, 0]), np.interp(s, arc, path_xy[:, 1])], axis=-1)
-    tangent = np.gradient(path_xy, arc, axis=0)
-    tx, ty = np.interp(s, arc, tangent[:, 0]), np.interp(s, arc, tangent[:, 1])
-    # Yaw relative to -x stays near 0, so heading = pi + it is continuous without wrapping.
-    heading = math.pi + np.unwrap(np.arctan2(-ty, -tx))
+    heading = math.pi + np.interp(u, u_knots, heading_knots)
     gait = 2 * math.pi * s / (2 * params.step_length) + params.gait_phase
     # Lateral sway: one period per stride, vanishing while standing.
     moving = np.clip(np.gradient(s, dt) / params.speed, 0.0, 1.0)
