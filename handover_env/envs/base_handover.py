@@ -10,16 +10,22 @@ global step counter, so its rate holds across env steps; one env step = 1/30 s =
 
 Wrist force: the ``force``/``torque`` sensors on the gripper mounting plate measure what the
 gripper, plus anything it holds, exerts on the flange. The static load is subtracted with the
-payload's known mass and the ``accelerometer`` at the same site (which reads a - g):
-``F_ext = R (m_payload * acc - F_sensor)``, the force the world applies to gripper and object; the torque likewise with the payload's centre of mass.
+payload's known mass and the ``accelerometer`` at the same site (which reads a - g), plus the
+rigid payload's rotational inertia terms: ``F_ext = R (m acc - F_sensor) + m (α × c + ω × (ω × c))``
+with ω, α the gripper's angular velocity and acceleration and c the payload's centre of mass
+relative to the site (world frame): the force the world applies to gripper and object. Without
+the rotational terms the estimate is off by up to ~5 N while the arm swings the object toward the
+receiver, close to f_r; with them, by ~0.2 N. The torque (observation only) is the quasi-static
+estimate with the payload's centre of mass.
 The force estimate is low-pass filtered (first order, ``force_filter_tau``) at every tick, like
 a real F/T signal; the torque is estimated at the env rate for the observation.
 When its magnitude exceeds f_r the gripper opens (paper Sec. IV-C).
 
 Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 
-* ``success``: the robot released the object while the receiver held it, and 0.1 s later the
-  receiver still holds it.
+* ``success``: the robot released the object while the receiver held it, the fingers have let go
+  (gripper weld off) and the receiver has taken the object clear of the gripper (object centre
+  more than ``CLEAR_DISTANCE`` = 6 cm from the TCP) while still holding it.
 * ``dropped``: nobody holds the object (gripper weld off, receiver not holding) and it has fallen
   0.15 m below where it was last held, or touches the floor.
 * ``unsafe_force``: the peak contact force on the receiver exceeded ``safety_force`` (default
@@ -55,6 +61,7 @@ from handover_env.scene import (
     scene_ids,
 )
 
+CLEAR_DISTANCE = 0.06  # m, object centre to TCP: the 6.6 cm bottle is out from between the pads
 FRAME_SKIP = 20  # physics steps per env step (1/30 s at dt = 1/600 s)
 GRIPPER_CLOSED_CTRL = 90.0  # 2F-85 command at which the pads meet the 66 mm bottle
 GRIPPER_OPEN_CTRL = 0.0
@@ -117,6 +124,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.default_receiver = default_receiver
         self.stabilisation_delay = float(stabilisation_delay)
         self.miss_distance = float(miss_distance)
+        self.clear_distance = CLEAR_DISTANCE
         self.width, self.height, self.camera = int(width), int(height), camera
 
         self.model = build_model(SceneConfig(object_mass=object_mass))
@@ -303,8 +311,17 @@ class HandoverEnvBase(gym.Env, EzPickle):
         """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques."""
         m, d, ids = self.model, self.data, self.ids
         sd = d.sensordata
-        f_site = self._payload_mass * sd[self._acc_sl] - sd[self._force_sl]
-        f_world = d.site_xmat[self._ft_site].reshape(3, 3) @ f_site
+        m_p = self._payload_mass
+        rot = d.site_xmat[self._ft_site].reshape(3, 3)
+        f_world = rot @ (m_p * sd[self._acc_sl] - sd[self._force_sl])
+        # Rigid-payload inertia beyond the site's linear acceleration: m (α × c + ω × (ω × c)),
+        # with ω, α of the gripper (world frame, from cvel/cacc) and c its centre of mass.
+        cx, cy, cz = rot @ self._payload_com
+        wx, wy, wz, ax, ay, az = self._gripper_w_alpha(d)
+        vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx  # ω × c
+        f_world[0] += m_p * (ay * cz - az * cy + wy * vz - wz * vy)
+        f_world[1] += m_p * (az * cx - ax * cz + wz * vx - wx * vz)
+        f_world[2] += m_p * (ax * cy - ay * cx + wx * vy - wy * vx)
         f_world -= self.f_ext
         f_world *= self._filter_alpha
         self.f_ext += f_world
@@ -328,6 +345,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         if self._gripper_holds or self._receiver_holds:
             self._last_held_z = float(d.xpos[ids.object_body, 2])
         d.ctrl[ids.arm_act] = self.controller.compute(d)
+
+    def _gripper_w_alpha(self, d: mujoco.MjData) -> tuple[float, float, float, float, float, float]:
+        """Angular velocity and acceleration of the gripper mount (world frame)."""
+        b = self.ids.gripper_root_body
+        w = d.cvel[b]
+        a = d.cacc[b]
+        return float(w[0]), float(w[1]), float(w[2]), float(a[0]), float(a[1]), float(a[2])
 
     def _wrist_torque(self) -> np.ndarray:
         """External torque at the wrist sensor (world frame), static load removed (per env step)."""
@@ -358,7 +382,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         holds = self._receiver_holds
         if self.peak_contact_force > self.safety_force:
             self.outcome = "unsafe_force"
-        elif self.released and holds and t - self.t_release >= 0.1 - 1e-9:
+        elif (self.released and holds and not self._gripper_holds
+              and float(np.linalg.norm(obj - d.site_xpos[ids.tcp_site])) > self.clear_distance):
             self.outcome = "success"
         elif not self._gripper_holds and not holds and (obj[2] < self._last_held_z - 0.15 or obj[2] < 0.1):
             self.outcome = "dropped"
