@@ -21,14 +21,18 @@ class StaticHandoverEnv(HandoverEnvBase):
 
     ## Receiver
     A scripted walker whose walk ends at ``STOP_XY`` = (0.45, -0.95) (replayed tracks stop at their
-    last frame). There it raises the right hand; the hand counts as detected when fully raised.
-    Until ``detect + stabilisation_delay`` the robot holds its ready pose whatever the action
-    (``robot_enabled`` = 0 in the observation). The receiver waits; only the TimeLimit (600 steps,
-    20 s) ends an episode without a handover.
+    last frame). It does not reach while walking. There it raises the right hand; the hand counts
+    as detected when fully raised. Until ``detect + stabilisation_delay`` the robot holds its
+    ready pose whatever the action (``robot_enabled`` = 0 in the observation). The raised hand
+    waits until the robot brings the object within ``ReceiverConfig.present_reach`` (0.15 m),
+    then grasps and pulls it toward the hip. Only the TimeLimit (600 steps, 20 s) ends an episode
+    without a handover. The matching agent is :class:`agents.static.StaticAgent` (deliver to the
+    hand seen at ``robot_enabled``).
 
     ## Timing
-    ``info["handover_time"]`` excludes the stabilisation delay, as the paper does;
-    ``info["handover_time_with_delay"]`` includes it.
+    Handover time is measured as in the paper's user study (Sec. V-C): from when the receiver
+    leaves the start point to the gripper release. ``info["handover_time"]`` excludes the
+    stabilisation delay, as the paper does; ``info["handover_time_with_delay"]`` includes it.
 
     ## Arguments
     As the dynamic env, plus ``stabilisation_delay`` (s, default 2.0).
