@@ -213,7 +213,10 @@ def synthesize_episode(
     tilt = rng.standard_normal(2) * 0.02
 
     # ---- timeline: the take (transfer) frame and the giver's onset frame
-    k_take = int(np.argmax(xy[:, 0] <= take_x)) if np.any(xy[:, 0] <= take_x) else n - 1
+    crossed = xy[:, 0] <= take_x
+    k_take = int(np.argmax(crossed)) if crossed.any() else n - 1
+    if 0 < k_take and abs(xy[k_take - 1, 0] - take_x) < abs(xy[k_take, 0] - take_x):
+        k_take -= 1  # the frame nearest the take point
     near = np.linalg.norm(xy - home[:2], axis=1) <= trigger
     k_trigger = int(np.argmax(near)) if near.any() else n - 1
     # The trigger statistic is the receiver's distance when the object has moved 3 cm, so the
