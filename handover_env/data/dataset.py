@@ -178,7 +178,7 @@ class HandoverDataset:
         keep: list[np.ndarray] = []
         for stratum in (np.flatnonzero(~mask), np.flatnonzero(mask)):
             if stratum.size:
-                n = max(1, int(round(ratio * stratum.size)))
+                n = max(1, round(ratio * stratum.size))
                 keep.append(np.sort(rng.choice(stratum, size=n, replace=False)))
         return self.subset(np.sort(np.concatenate(keep)) if keep else np.array([], dtype=np.int64))
 
