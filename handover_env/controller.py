@@ -157,6 +157,7 @@ class ImpedanceController:
         self._tmp6b = np.zeros(6)
         self._rest = np.zeros(6) if rest_qpos is None else np.asarray(rest_qpos, float).copy()
         self._eye6 = np.eye(6)
+        self._lam = np.zeros((6, 6))
         self._limits = TORQUE_LIMITS.copy()
         self._neg_limits = -self._limits
         # Reference filter state and target.
@@ -169,7 +170,11 @@ class ImpedanceController:
         self.yaw_d = 0.0
         self.yaw_rate_d = 0.0
         self._rot_d = target_rotation(0.0)
-        self.payload_mass = 0.0  # mass of a held object to compensate, kg
+        self._payload_mass = 0.0  # mass of a held object to compensate, kg
+        self._gain = np.zeros((6, 18))  # wrench = G s + c (see _refresh_dynamics)
+        self._gain_c = np.zeros(6)
+        self._s = np.zeros(18)
+        self._twist_prev = np.zeros(6)
         self.last_torque = np.zeros(6)
         self.last_unclipped = np.zeros(6)
         self.dt = model.opt.timestep * self.config.ticks
@@ -189,9 +194,20 @@ class ImpedanceController:
         self._powers = np.array(rows)  # (plan_ticks, 3, 2): tick k -> (e, v after the tick, a during it)
         self._x_plan = np.zeros((0, 3))
 
+    @property
+    def payload_mass(self) -> float:
+        """Mass of the held object whose inertia and weight are compensated at the TCP, kg."""
+        return self._payload_mass
+
+    @payload_mass.setter
+    def payload_mass(self, mass: float) -> None:
+        self._payload_mass = float(mass)
+        self._stale = True  # the gain matrix includes it
+
     def set_params(self, params: HandoverParams) -> None:
         """Use the translational stiffness and damping of Θ."""
         self.params = params
+        self._stale = True
         c = self.config
         self._kvec = np.array([params.stiffness] * 3 + [0.0] * 3, dtype=float)
         self._bvec = np.array([params.damping] * 3 + [0.0] * 3, dtype=float)
@@ -276,6 +292,21 @@ class ImpedanceController:
         lam_inv += self._damp6
         mujoco.mju_cholFactor(lam_inv, 0.0)  # Λ^-1 = L Lᵀ; Λ v = cholSolve(v)
         self._lam_chol = lam_inv
+        # The control law is linear in s = [Δx (6), Δẋ (6), ẍ_d - J̇q̇ (6)] with Λ frozen until the
+        # next replan: wrench = G s + c, with
+        #   G = [diag(K) + Λ diag(K_r),  diag(B) + Λ diag(B_r),  Λ + m_obj I_trans],  c = -m_obj g.
+        lam = self._lam
+        for k in range(6):
+            mujoco.mju_cholSolve(lam[k], lam_inv, self._eye6[k])  # Λ is symmetric: rows = columns
+        g = self._gain
+        np.multiply(lam, self._kr6, out=g[:, 0:6])
+        np.multiply(lam, self._br6, out=g[:, 6:12])
+        g[:, 12:18] = lam
+        for k in range(3):
+            g[k, k] += self._kvec[k]
+            g[k, 6 + k] += self._bvec[k]
+            g[k, 12 + k] += self._payload_mass
+        self._gain_c[:3] = -self._payload_mass * GRAVITY
         # Null-space posture term, N = I - Jᵀ J̄ᵀ with J̄ᵀ = Λ J M^-1.
         if self._posture:
             tau0 = self._kn * (self._rest - data.qpos[self._qpos_adr]) - self._dn * data.qvel[dof]
@@ -303,35 +334,33 @@ class ImpedanceController:
         j = self._jac[:, dof]
         qvel = data.qvel[dof]
         twist = j @ qvel
-        # J̇ q̇ by a backward difference of J over one tick (cheaper than mj_jacDot).
+        s = self._s
+        # J̇ q̇ by a backward difference of J over one tick (cheaper than mj_jacDot):
+        # (J_k - J_{k-1}) q̇_k / dt; s[12:18] = ẍ_d - J̇ q̇.
         if self._have_prev:
-            jdot_qdot = (twist - self._prev_j @ qvel) * self._inv_dt
+            np.subtract(twist, self._prev_j @ qvel, out=self._tmp6)
+            self._tmp6 *= self._inv_dt
+            np.subtract(self._a6_plan[i], self._tmp6, out=s[12:18])
         else:
-            jdot_qdot = self._zero6
+            s[12:18] = self._a6_plan[i]
             self._have_prev = True
         self._prev_j[:] = j
         # Pose error: translation, and rotation from R_d Rᵀ (exact axis, sin-scaled magnitude).
-        err = self._err
-        np.subtract(self.x_d, data.site_xpos[self._tcp], out=err[:3])
-        r_err = self._rot_plan[i] @ data.site_xmat[self._tcp].reshape(3, 3).T
-        err[3] = 0.5 * (r_err[2, 1] - r_err[1, 2])
-        err[4] = 0.5 * (r_err[0, 2] - r_err[2, 0])
-        err[5] = 0.5 * (r_err[1, 0] - r_err[0, 1])
-        if r_err[0, 0] + r_err[1, 1] + r_err[2, 2] < -0.5:  # beyond ~120 deg: push at full strength
-            err[3:] *= 2.0 / max(float(np.linalg.norm(err[3:])), 1e-9)
-        verr = self._vd6_plan[i] - twist
-        # Translation: F = K Δx + B Δẋ with K, B from Θ, plus M Δẍ of Eq. 1 as feed-forward with
-        # M = Λ(q) (including -Λ J̇ q̇); rotation: Λ (ω² e_r + 2ζω Δω), fixed gains on the
-        # decoupled rotational dynamics.
-        wrench = self._kvec * err
-        wrench += self._bvec * verr
-        rhs = self._a6_plan[i] - jdot_qdot
-        rhs += self._kr6 * err
-        rhs += self._br6 * verr
-        mujoco.mju_cholSolve(self._tmp6, self._lam_chol, rhs)
-        wrench += self._tmp6
-        if self.payload_mass > 0.0:  # the held object's inertia and weight at the TCP
-            wrench[:3] += self.payload_mass * (rhs[:3] - GRAVITY)
+        np.subtract(self.x_d, data.site_xpos[self._tcp], out=s[0:3])
+        r = (self._rot_plan[i] @ data.site_xmat[self._tcp].reshape(3, 3).T).tolist()
+        ex = 0.5 * (r[2][1] - r[1][2])
+        ey = 0.5 * (r[0][2] - r[2][0])
+        ez = 0.5 * (r[1][0] - r[0][1])
+        if r[0][0] + r[1][1] + r[2][2] < -0.5:  # beyond ~120 deg: push at full strength
+            scale = 2.0 / max(math.sqrt(ex * ex + ey * ey + ez * ez), 1e-9)
+            ex, ey, ez = ex * scale, ey * scale, ez * scale
+        s[3], s[4], s[5] = ex, ey, ez
+        np.subtract(self._vd6_plan[i], twist, out=s[6:12])
+        # Eq. 1 with M = Λ(q): F = K Δx + B Δẋ + Λ (ẍ_d - J̇q̇) for translation (K, B from Θ), plus
+        # Λ (ω² e_r + 2ζω Δω) for rotation (fixed gains on the decoupled rotational dynamics), plus
+        # the held object's inertia and weight at the TCP: all in one product, wrench = G s + c.
+        wrench = self._gain @ s
+        wrench += self._gain_c
         tau = j.T @ wrench
         tau += data.qfrc_bias[dof]
         tau += self._tau_posture

@@ -146,6 +146,7 @@ class Receiver:
         self.t_hand_raised = math.nan
         self.t_depart = 0.0
         self._reach_from = None
+        self._raised_hand: np.ndarray | None = None
 
     # ------------------------------------------------------------------ setup
     def reset(self, rng: np.random.Generator, kind: str = "id", height: float | None = None,
@@ -208,6 +209,14 @@ class Receiver:
             self.source_id = f"scripted_{kind}"
         self._scale_body(self.height)
         self.t_depart = self._departure_time(self._frames_xy)
+        # The hand's rest pose (walking swing) and the shoulder at every camera frame, computed
+        # once with the shared motion model (vectorised): env steps end on frame times, so the
+        # per-step lookups below give the same values as calling the model at each step.
+        self._rest_hand = np.asarray(
+            rm.hand_position(self._frames_xy, self._frames_heading, self.height), dtype=np.float64)
+        self._shoulder_frames = np.asarray(
+            rm.shoulder_position(self._frames_xy, self._frames_heading, self.height), dtype=np.float64)
+        self._arm_reach = float(rm.arm_reach(self.height))
         self.state = "walking"
         self.reach = 0.0
         self.t_grasp = math.nan
@@ -215,6 +224,7 @@ class Receiver:
         self._reach_from = None
         self._hand_carry = np.zeros(3)
         self._hand_prev = None
+        self._raised_hand = None
 
     def _departure_time(self, xy: np.ndarray) -> float:
         """When the receiver leaves the start point: first frame whose pelvis speed (central
@@ -251,6 +261,15 @@ class Receiver:
         heading = self._frames_heading[i] * (1.0 - a) + self._frames_heading[i + 1] * a
         return xy, float(heading)
 
+    def _at(self, frames: np.ndarray, t: float) -> np.ndarray:
+        """Per-frame array ``frames`` (T, k) at time t (linear; holds the last frame)."""
+        f = min(max(t * CAMERA_RATE, 0.0), frames.shape[0] - 1.0)
+        i = min(int(f), frames.shape[0] - 2)
+        a = f - i
+        if a < 1e-9:
+            return frames[i].copy()
+        return frames[i] * (1.0 - a) + frames[i + 1] * a
+
     def frames_until(self, t: float) -> np.ndarray:
         """All 30 Hz base frames up to time t (what a camera has seen), (n, 2)."""
         n = min(int(math.floor(t * CAMERA_RATE + 1e-9)) + 1, self._frames_xy.shape[0])
@@ -273,7 +292,7 @@ class Receiver:
         xy1, h1 = self.base_at(t1)
         if self._hand_prev is None:
             xy0, h0 = self.base_at(t0)
-            self._hand_prev = self._hand_target(xy0, h0, object_pos, 0.0)
+            self._hand_prev = self._hand_target(t0, xy0, h0, object_pos, 0.0)
             self._base_prev = np.array([xy0[0], xy0[1], h0])
         if self.present_after_walk and self.state == "walking" and t1 >= self.duration:
             self.state = "presenting"  # static handover: stop and raise the right hand
@@ -285,8 +304,8 @@ class Receiver:
         if object_free and self.hand_mode == "reach":
             if self.state == "walking" and not self.present_after_walk:
                 # Walking past: reach as soon as the object is within arm's reach of the shoulder.
-                sh = self.shoulder(xy1, h1)
-                if np.linalg.norm(object_pos - sh) < rm.arm_reach(self.height) + cfg.reach_margin:
+                sh = self._at(self._shoulder_frames, t1)
+                if np.linalg.norm(object_pos - sh) < self._arm_reach + cfg.reach_margin:
                     self.state = "reaching"
             elif self.state == "presenting" and self.reach >= 1.0:
                 # Static: the raised hand waits until the robot brings the object to it.
@@ -296,15 +315,16 @@ class Receiver:
                     self.state = "reaching"
         if self.state == "reaching":
             self.reach = min(1.0, self.reach + dt / cfg.reach_time)
-        hand1 = self._hand_target(xy1, h1, object_pos, dt)
+        hand1 = self._hand_target(t1, xy1, h1, object_pos, dt)
         self._hand_next = hand1
         self._base_next = np.array([xy1[0], xy1[1], h1])
 
-    def _hand_target(self, xy: np.ndarray, heading: float, object_pos: np.ndarray, dt: float) -> np.ndarray:
+    def _hand_target(self, t: float, xy: np.ndarray, heading: float, object_pos: np.ndarray,
+                     dt: float) -> np.ndarray:
         if self.state == "holding":
             # Withdraw toward the carry pose at pull_speed, moving with the body.
             c, s = math.cos(heading), math.sin(heading)
-            carry = np.asarray(rm.hand_position(xy, heading, self.height), dtype=np.float64).copy()
+            carry = self._at(self._rest_hand, t)
             carry[:2] += self.config.carry_forward * np.array([c, s])
             rel = self._hand_carry  # hand position relative to the pelvis (world axes)
             goal = carry - np.array([xy[0], xy[1], 0.0])
@@ -317,15 +337,23 @@ class Receiver:
         if self._frames_hand is not None:
             return self._recorded_hand(xy)
         if self.state == "presenting":
+            if self.reach >= 1.0 and self._raised_hand is not None:
+                return self._raised_hand.copy()  # standing still with the hand up
             c, s = math.cos(heading), math.sin(heading)
             sh = self.shoulder(xy, heading)
             raised = sh + np.array([0.3 * c + 0.15 * s, 0.3 * s - 0.15 * c, -0.15])  # forward, to the right
-            return np.asarray(rm.hand_position(xy, heading, self.height, target_xyz=raised, reach=self.reach),
+            hand = np.asarray(rm.hand_position(xy, heading, self.height, target_xyz=raised, reach=self.reach),
                               dtype=np.float64)
+            if self.reach >= 1.0 and t >= self.duration:
+                self._raised_hand = hand.copy()
+            return hand
         if self.state == "reaching" and self._reach_from is not None:
             goal = np.asarray(rm.hand_position(xy, heading, self.height, target_xyz=object_pos, reach=1.0),
                               dtype=np.float64)
             return self._reach_from + self.reach * (goal - self._reach_from)
+        if self.reach <= 0.0:
+            # Walking: the rest swing (within arm's reach, so the model's reach clip is inactive).
+            return self._at(self._rest_hand, t)
         return np.asarray(rm.hand_position(xy, heading, self.height, target_xyz=object_pos, reach=self.reach),
                           dtype=np.float64)
 
@@ -344,24 +372,27 @@ class Receiver:
         data.mocap_pos[ids.hand_mocap] = self._hand_prev + alpha * (self._hand_next - self._hand_prev)
 
     def plan_ticks(self, alphas: np.ndarray) -> None:
-        """Precompute the mocap poses at the ticks of this env step (fractions ``alphas``)."""
-        a = alphas[:, None]
-        base = self._base_prev + a * (self._base_next - self._base_prev)
-        self._tick_base = np.zeros((len(alphas), 3))
-        self._tick_base[:, :2] = base[:, :2]
-        half = 0.5 * base[:, 2]
-        self._tick_quat = np.stack([np.cos(half), np.zeros_like(half), np.zeros_like(half), np.sin(half)], axis=1)
-        self._tick_hand = self._hand_prev + a * (self._hand_next - self._hand_prev)
+        """Set the fractions ``alphas`` of this env step at which the ticks fall."""
+        self._tick_alphas = np.asarray(alphas, dtype=np.float64).tolist()
         self._tick_i = 0
 
     def apply_tick(self, data: mujoco.MjData) -> None:
-        """Move the mocap bodies to the next precomputed tick pose."""
-        i = self._tick_i
+        """Move the mocap bodies to their pose at the next tick (linear between the keyframes)."""
+        a = self._tick_alphas[self._tick_i]
+        self._tick_i += 1
         ids = self.ids
-        data.mocap_pos[ids.base_mocap] = self._tick_base[i]
-        data.mocap_quat[ids.base_mocap] = self._tick_quat[i]
-        data.mocap_pos[ids.hand_mocap] = self._tick_hand[i]
-        self._tick_i = i + 1
+        b0, b1 = self._base_prev, self._base_next
+        yaw = float(b0[2] + a * (b1[2] - b0[2]))
+        bp = data.mocap_pos[ids.base_mocap]
+        bp[0] = b0[0] + a * (b1[0] - b0[0])
+        bp[1] = b0[1] + a * (b1[1] - b0[1])
+        bq = data.mocap_quat[ids.base_mocap]
+        bq[0], bq[3] = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+        h0, h1 = self._hand_prev, self._hand_next
+        hp = data.mocap_pos[ids.hand_mocap]
+        hp[0] = h0[0] + a * (h1[0] - h0[0])
+        hp[1] = h0[1] + a * (h1[1] - h0[1])
+        hp[2] = h0[2] + a * (h1[2] - h0[2])
 
     def end_step(self) -> None:
         """The env step is over: its end keyframes become the next step's start."""
@@ -383,10 +414,8 @@ class Receiver:
         self.t_grasp = float(data.time)
         base = data.mocap_pos[self.ids.base_mocap]
         self._hand_carry = hand - np.array([base[0], base[1], 0.0])
-        self._hand_next = hand.copy()
+        self._hand_next = hand.copy()  # hold still for the rest of this env step
         self._hand_prev = hand.copy()
-        if hasattr(self, "_tick_hand"):
-            self._tick_hand[:] = hand  # hold still for the rest of this env step
         return True
 
     def place(self, data: mujoco.MjData, t: float, object_pos: np.ndarray) -> None:

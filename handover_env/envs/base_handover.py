@@ -140,6 +140,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
             np.array([k / FRAME_SKIP for k in range(FRAME_SKIP) if (phase + k) % self._ticks == 0])
             for phase in range(self._ticks)
         ]
+        # Per phase: (tick at the segment start?, physics steps until the next tick or step end).
+        self._segments = []
+        for phase in range(self._ticks):
+            starts = [k for k in range(FRAME_SKIP) if (phase + k) % self._ticks == 0]
+            bounds = sorted(set([0, *starts, FRAME_SKIP]))
+            self._segments.append([(lo in starts, hi - lo) for lo, hi in zip(bounds[:-1], bounds[1:])])
         self._filter_alpha = (self._ticks * self.model.opt.timestep) / (force_filter_tau + self._ticks * self.model.opt.timestep)
 
         low, high = self.layout.bounds()
@@ -159,6 +165,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._force_sl = slice(self.ids.ft_force_adr, self.ids.ft_force_adr + 3)
         self._torque_sl = slice(self.ids.ft_torque_adr, self.ids.ft_torque_adr + 3)
         self._ft_site = self.ids.ft_site
+        self._grip_body = self.ids.gripper_root_body
+        self._eq_receiver = self.ids.eq_receiver
+        self._object_body = self.ids.object_body
+        arm_act = np.asarray(self.ids.arm_act)
+        contiguous = arm_act.size and np.all(np.diff(arm_act) == 1)
+        self._arm_act = slice(int(arm_act[0]), int(arm_act[-1]) + 1) if contiguous else arm_act
         self._init_state, self._ready_q = self._settled_start()
         self._renderer: Any = None
         self._viewer: Any = None
@@ -199,6 +211,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.release_force = math.nan
         self.peak_contact_force = 0.0
         self.f_ext = np.zeros(3)
+        self._f_ext_f = (0.0, 0.0, 0.0)
         self.tau_ext = np.zeros(3)
         self._gripper_holds = True
         self._last_held_z = float(READY_POS[2])
@@ -265,18 +278,15 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.receiver.plan_step(t0, t1, d.xpos[ids.object_body].copy(), object_free=not self._receiver_holds)
         self.receiver.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
 
-        k = 0
-        ticks = self._ticks
-        while k < FRAME_SKIP:
-            n = ticks - (self._global_step % ticks)  # steps until (and including) the next tick
-            if self._global_step % ticks == 0:
-                self.receiver.apply_tick(d)
-                self._tick()
-                n = ticks
-            n = min(n, FRAME_SKIP - k)
-            mujoco.mj_step(m, d, nstep=n)
-            k += n
-            self._global_step += n
+        # The controller ticks on the global step clock: the schedule of (tick?, physics steps)
+        # segments depends only on the clock's phase at the start of the env step.
+        apply_tick, tick, mj_step = self.receiver.apply_tick, self._tick, mujoco.mj_step
+        for is_tick, n in self._segments[self._global_step % self._ticks]:
+            if is_tick:
+                apply_tick(d)
+                tick()
+            mj_step(m, d, nstep=n)
+        self._global_step += FRAME_SKIP
         self.receiver.apply(d, 1.0)
         self.receiver.end_step()
         self._step_count += 1
@@ -306,26 +316,41 @@ class HandoverEnvBase(gym.Env, EzPickle):
         rot = d.site_xmat[ids.ft_site].reshape(3, 3)
         self._payload_mass = mass
         self._payload_com = rot.T @ (com - d.site_xpos[ids.ft_site])
+        self._payload_com_f = tuple(self._payload_com.tolist())
 
     def _tick(self) -> None:
-        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques."""
+        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques.
+
+        The wrist-force estimate is done in plain floats (3-vectors are cheaper that way than as
+        numpy arrays); see the module docstring for the formula.
+        """
         m, d, ids = self.model, self.data, self.ids
         sd = d.sensordata
         m_p = self._payload_mass
-        rot = d.site_xmat[self._ft_site].reshape(3, 3)
-        f_world = rot @ (m_p * sd[self._acc_sl] - sd[self._force_sl])
+        a0, a1, a2 = sd[self._acc_sl].tolist()
+        s0, s1, s2 = sd[self._force_sl].tolist()
+        l0, l1, l2 = m_p * a0 - s0, m_p * a1 - s1, m_p * a2 - s2  # site frame
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = d.site_xmat[self._ft_site].tolist()
+        c0, c1, c2 = self._payload_com_f
+        cx = r00 * c0 + r01 * c1 + r02 * c2
+        cy = r10 * c0 + r11 * c1 + r12 * c2
+        cz = r20 * c0 + r21 * c1 + r22 * c2
         # Rigid-payload inertia beyond the site's linear acceleration: m (α × c + ω × (ω × c)),
         # with ω, α of the gripper (world frame, from cvel/cacc) and c its centre of mass.
-        cx, cy, cz = rot @ self._payload_com
-        wx, wy, wz, ax, ay, az = self._gripper_w_alpha(d)
+        wx, wy, wz = d.cvel[self._grip_body, 0:3].tolist()
+        ax, ay, az = d.cacc[self._grip_body, 0:3].tolist()
         vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx  # ω × c
-        f_world[0] += m_p * (ay * cz - az * cy + wy * vz - wz * vy)
-        f_world[1] += m_p * (az * cx - ax * cz + wz * vx - wx * vz)
-        f_world[2] += m_p * (ax * cy - ay * cx + wx * vy - wy * vx)
-        f_world -= self.f_ext
-        f_world *= self._filter_alpha
-        self.f_ext += f_world
-        f_mag = math.sqrt(self.f_ext[0] ** 2 + self.f_ext[1] ** 2 + self.f_ext[2] ** 2)
+        gx = r00 * l0 + r01 * l1 + r02 * l2 + m_p * (ay * cz - az * cy + wy * vz - wz * vy)
+        gy = r10 * l0 + r11 * l1 + r12 * l2 + m_p * (az * cx - ax * cz + wz * vx - wx * vz)
+        gz = r20 * l0 + r21 * l1 + r22 * l2 + m_p * (ax * cy - ay * cx + wx * vy - wy * vx)
+        k = self._filter_alpha
+        fx, fy, fz = self._f_ext_f
+        fx += k * (gx - fx)
+        fy += k * (gy - fy)
+        fz += k * (gz - fz)
+        self._f_ext_f = (fx, fy, fz)
+        self.f_ext[0], self.f_ext[1], self.f_ext[2] = fx, fy, fz
+        f_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
         if f_mag > self.peak_contact_force:
             self.peak_contact_force = f_mag
         if not self.released and f_mag > self.params.release_force:
@@ -338,20 +363,14 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._gripper_holds = False
             self.controller.payload_mass = 0.0
             self._update_payload()
-        if self.receiver.state == "reaching" or (self.receiver.hand_mode == "recorded" and not self._receiver_holds):
-            self.receiver.try_grasp(m, d)
+        rec = self.receiver
+        if rec.state == "reaching" or (rec.hand_mode == "recorded" and not d.eq_active[self._eq_receiver]):
+            rec.try_grasp(m, d)
         if d.ncon:
             self._scan_contacts()
-        if self._gripper_holds or self._receiver_holds:
-            self._last_held_z = float(d.xpos[ids.object_body, 2])
-        d.ctrl[ids.arm_act] = self.controller.compute(d)
-
-    def _gripper_w_alpha(self, d: mujoco.MjData) -> tuple[float, float, float, float, float, float]:
-        """Angular velocity and acceleration of the gripper mount (world frame)."""
-        b = self.ids.gripper_root_body
-        w = d.cvel[b]
-        a = d.cacc[b]
-        return float(w[0]), float(w[1]), float(w[2]), float(a[0]), float(a[1]), float(a[2])
+        if self._gripper_holds or d.eq_active[self._eq_receiver]:
+            self._last_held_z = float(d.xpos[self._object_body, 2])
+        d.ctrl[self._arm_act] = self.controller.compute(d)
 
     def _wrist_torque(self) -> np.ndarray:
         """External torque at the wrist sensor (world frame), static load removed (per env step)."""

@@ -71,20 +71,22 @@ class ObsLayout:
                 ("robot_enabled", (1,), 1.0),
             ),
         )
-
-    @property
-    def size(self) -> int:
-        """Length of the flat vector."""
-        return int(sum(np.prod(shape) for _, shape, _ in self.fields))
-
-    def slices(self) -> dict[str, tuple[slice, tuple[int, ...]]]:
-        """Name -> (slice into the flat vector, shape)."""
         out, start = {}, 0
         for name, shape, _ in self.fields:
             n = int(np.prod(shape))
             out[name] = (slice(start, start + n), shape)
             start += n
-        return out
+        object.__setattr__(self, "_slices", out)
+        object.__setattr__(self, "_size", start)
+
+    @property
+    def size(self) -> int:
+        """Length of the flat vector."""
+        return self._size  # type: ignore[attr-defined]
+
+    def slices(self) -> dict[str, tuple[slice, tuple[int, ...]]]:
+        """Name -> (slice into the flat vector, shape) (a fresh dict; computed once per layout)."""
+        return dict(self._slices)  # type: ignore[attr-defined]
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Finite float32 (low, high) for the observation Box."""
