@@ -55,10 +55,20 @@ class DynamicHandoverEnv(HandoverEnvBase):
     body height and walking speed. Unknown option keys are ignored.
 
     ## Episode End
-    ``terminated`` on success, object dropped, unsafe contact force (> ``safety_force``) or a
+    ``terminated`` on success (released at a pull above f_r, fingers open, the receiver holding the
+    bottle clear of the gripper), object dropped, unsafe contact force (> ``safety_force``) or a
     missed handover (the receiver walked past); ``truncated`` only by the TimeLimit (450 steps,
-    15 s). ``info``: ``is_success``, ``outcome``, ``handover_time`` (s from the start of the walk to
-    the release), ``release_force``, ``peak_contact_force``, ``receiver_id``.
+    15 s).
+
+    | info key | Meaning |
+    |----------|---------|
+    | is_success, outcome | True on success; "running", "success", "dropped", "unsafe_force", "missed" |
+    | handover_time | s from when the receiver leaves the start point to the release (paper Sec. V-C) |
+    | release_force | N, filtered external wrist force at the release |
+    | peak_contact_force | N, max external wrist force or robot-receiver contact force so far |
+    | receiver_id, receiver_state, receiver_grasp_time | which receiver; its reach/hold state |
+
+    Values not yet defined (no release, no grasp) are ``None``.
 
     ## Arguments
     | Argument | Default | Meaning |
