@@ -236,27 +236,60 @@ def fitc_gp_reference(
 
 @dataclass
 class _Bucket:
-    """Demos of similar size padded to a common M (padding has k = 0 through ``mask``)."""
+    """Demos of similar size, padded to a common M, R; their rows of the bank's flat arrays.
 
-    index: np.ndarray  # (B,) positions of these demos in the bank
-    z: np.ndarray  # (B, M, 2)
-    mask: np.ndarray  # (B, M) 1.0 for real points, 0.0 for padding
-    alpha: np.ndarray  # (B, D, M) transposed mean weights
-    r: np.ndarray  # (B, R, M) variance factors, zero rows/columns for padding
+    The variance factor is stored upper-triangular (``T`` from ``R = Q T``; ``|T k| = |R k|``)
+    and split in two row blocks: rows ``[0, h)`` need every column, rows ``[h, R)`` only
+    columns ``[h, M)``, so 3/4 of the square is streamed per query. The D mean-weight rows are
+    stacked on top of the first block (one product gives the mean and the first half of T k).
+    """
 
-    def __post_init__(self) -> None:
-        self.zz = np.sum(self.z**2, axis=2)  # (B, M)
-        self.mask_s2 = self.mask  # scaled by s2 in FlowBank
+    start: int  # first row of this bucket in the bank's flat inducing-point arrays
+    n_demos: int  # B
+    m: int  # padded M
+    h: int  # split row
+    top: np.ndarray  # (B, D + h, M): [alpha^T; T[:h, :]]
+    bottom: np.ndarray  # (B, R - h, M - h): T[h:, h:]
+
+
+def _split_buckets(order: np.ndarray, sizes: np.ndarray, ranks: np.ndarray, max_buckets: int,
+                   overhead_entries: float = 4e4) -> list[np.ndarray]:
+    """Split demos (``order`` sorts them by size) into <= ``max_buckets`` contiguous groups.
+
+    Minimises ``sum over buckets (overhead_entries + B * R_max * M_max)``: the padded entries
+    streamed per query plus a fixed cost per bucket (one more set of numpy calls), by dynamic
+    programming over the sorted sizes (fit time only).
+    """
+    n = order.size
+    m_sorted = sizes[order].astype(np.float64)
+    r_sorted = np.maximum.accumulate(ranks[order].astype(np.float64))
+    max_buckets = max(1, min(max_buckets, n))
+    cost = np.full((max_buckets + 1, n + 1), np.inf)
+    back = np.zeros((max_buckets + 1, n + 1), dtype=np.int64)
+    cost[0, 0] = 0.0
+    j = np.arange(n)
+    for b in range(1, max_buckets + 1):
+        for i in range(1, n + 1):
+            # last bucket = sorted demos j..i-1, padded to the largest (the (i-1)-th) M and R
+            cand = cost[b - 1, :i] + overhead_entries + (i - j[:i]) * m_sorted[i - 1] * r_sorted[i - 1]
+            k = int(np.argmin(cand))
+            cost[b, i], back[b, i] = cand[k], k
+    b = int(np.argmin(cost[1:, n])) + 1
+    cuts, i = [], n
+    while b > 0:
+        cuts.append((back[b, i], i))
+        i, b = back[b, i], b - 1
+    return [order[lo:hi] for lo, hi in reversed(cuts) if hi > lo]
 
 
 class FlowBank:
-    """The predictive forms of many demos stacked for batched evaluation (float64).
+    """The predictive forms of many demos stacked for batched evaluation.
 
     Args:
         forms: one :class:`PredictiveForm` per demo (all with the same output width D).
         hyp: the shared hyperparameters they were built with.
-        n_buckets: demos are sorted by M and split into this many groups of equal count, each
-            padded to its own largest M (more buckets, less padding, more Python calls).
+        n_buckets: the most groups of similar size the demos are split into, each padded to its
+            own largest M; the split minimises padded entries plus a per-group overhead.
         dtype: precision of the per-query mat-vecs. Kernel values are computed in float64 and
             then cast. float32 halves the memory streamed per query (the cost is memory-bound)
             at an absolute error of ~1e-4 in sigma2 (K_mm is ill-conditioned, so R has large
@@ -267,7 +300,7 @@ class FlowBank:
         self,
         forms: Sequence[PredictiveForm],
         hyp: GPHyperparameters,
-        n_buckets: int = 8,
+        n_buckets: int = 12,
         dtype: type | str = np.float64,
     ) -> None:
         if len(forms) == 0:
@@ -280,61 +313,103 @@ class FlowBank:
         self.hyp = hyp
         self.n_demos = len(forms)
         self.sizes = np.array([f.z.shape[0] for f in forms], dtype=np.int64)
-        ranks = np.array([f.r.shape[0] for f in forms], dtype=np.int64)
+        ranks = np.array([min(f.r.shape) for f in forms], dtype=np.int64)
         out_dim = {f.alpha.shape[1] for f in forms}
         if len(out_dim) != 1:
             raise ValueError(f"all demos need the same output width, got {sorted(out_dim)}")
-        self.out_dim = out_dim.pop()
+        d = self.out_dim = out_dim.pop()
         order = np.argsort(self.sizes, kind="stable")
-        self.buckets: list[_Bucket] = []
-        for idx in np.array_split(order, min(int(n_buckets), self.n_demos)):
+        groups = _split_buckets(order, self.sizes, ranks, int(n_buckets))
+        self.order = np.concatenate(groups)  # bank row b*M.. holds demo order[...]
+        self._unsort = np.argsort(self.order)
+        z_all, mask_all, self.buckets = [], [], []
+        start = 0
+        for idx in groups:
             m, nr, b = int(self.sizes[idx].max()), int(ranks[idx].max()), idx.size
+            h = nr // 2
             z = np.zeros((b, m, 2))
             mask = np.zeros((b, m))
-            alpha = np.zeros((b, m, self.out_dim))
-            r = np.zeros((b, nr, m))
+            full = np.zeros((b, d + nr, m))
             for j, k in enumerate(idx):  # fit time only
-                mk, rk = self.sizes[k], ranks[k]
+                mk = self.sizes[k]
                 z[j, :mk] = forms[k].z
                 mask[j, :mk] = 1.0
-                alpha[j, :mk] = forms[k].alpha
-                r[j, :rk, :mk] = forms[k].r
-            # Stored for the (B, M, Q) layout of predict(): alpha^T (B, D, M), R (B, R, M).
+                full[j, :d, :mk] = forms[k].alpha.T
+                tri = np.linalg.qr(forms[k].r, mode="r")  # upper-trapezoidal, |T k| = |R k|
+                full[j, d : d + tri.shape[0], :mk] = tri
             self.buckets.append(
-                _Bucket(idx, z, mask, np.ascontiguousarray(alpha.transpose(0, 2, 1)).astype(self.dtype),
-                        r.astype(self.dtype))
+                _Bucket(start, b, m, h, full[:, : d + h].astype(self.dtype),
+                        np.ascontiguousarray(full[:, d + h :, h:]).astype(self.dtype))
             )
-        for b in self.buckets:
-            b.mask_s2 = b.mask * hyp.signal_var
-        self._neg_half_inv_l2 = -0.5 / hyp.lengthscale**2
+            z_all.append(z.reshape(-1, 2))
+            mask_all.append(mask.reshape(-1))
+            start += b * m
+        # Flat output buffers of the per-bucket products and the segment starts of every demo in
+        # them (bucket-sorted order): rows [D mean | h of T] in "top", [R - h of T] in "bottom".
+        top_sizes = [bk.n_demos * bk.top.shape[1] for bk in self.buckets]
+        bot_sizes = [bk.n_demos * bk.bottom.shape[1] for bk in self.buckets]
+        self._top_off = np.concatenate([[0], np.cumsum(top_sizes)])
+        self._bot_off = np.concatenate([[0], np.cumsum(bot_sizes)])
+        seg_top, seg_bot, mean_idx = [], [], []
+        for bk, t0, b0 in zip(self.buckets, self._top_off, self._bot_off):
+            rows_top, rows_bot = bk.top.shape[1], bk.bottom.shape[1]
+            starts = t0 + rows_top * np.arange(bk.n_demos)
+            seg_top.append(np.column_stack([starts, starts + d]).reshape(-1))
+            seg_bot.append(b0 + rows_bot * np.arange(bk.n_demos))
+            mean_idx.append(starts[:, None] + np.arange(d)[None, :])
+        self._seg_top = np.concatenate(seg_top)  # 2 per demo: mean rows start, T rows start
+        self._seg_bot = np.concatenate(seg_bot)
+        self._mean_idx = np.concatenate(mean_idx)[self._unsort]  # (N, D) in the caller's order
+        self._empty_bot = np.array([bk.bottom.shape[1] == 0 for bk in self.buckets for _ in range(bk.n_demos)])
+        self._empty_top = np.array([bk.h == 0 for bk in self.buckets for _ in range(bk.n_demos)])
+        self.z_all = np.concatenate(z_all)  # (P, 2) every (padded) inducing point of every demo
+        c = -0.5 / hyp.lengthscale**2
+        self._c = c
+        # k(x, z) = exp(c |z|^2 + log s2 - 2c z.x + c |x|^2); padding gets -inf, i.e. k = 0.
+        mask = np.concatenate(mask_all) > 0
+        self._log_base = np.where(mask, c * np.sum(self.z_all**2, axis=1) + np.log(hyp.signal_var), -np.inf)
+        self._z_t = np.ascontiguousarray(self.z_all.T)  # (2, P)
 
     @property
     def n_stored(self) -> int:
-        """Stored variance-factor entries including padding: the per-query mat-vec work."""
-        return int(sum(b.r.size for b in self.buckets))
+        """Stored mean and variance-factor entries including padding: the per-query mat-vec work."""
+        return int(sum(b.top.size + b.bottom.size for b in self.buckets))
 
     def predict(self, xq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Every demo's flow at query points: mean (Q, K, D) and latent variance (Q, K).
 
-        Per bucket: one batched kernel evaluation of the Q queries against all inducing points of
-        all its demos, ``k (B, M, Q)``, then two batched products, ``alpha^T k`` and ``R k``;
-        no loop over demos. Padding has k = 0 so it contributes nothing.
+        One kernel evaluation of the Q queries against all (padded) inducing points of all
+        demos, ``k (P, Q)``, then per bucket of similar-size demos two batched products with
+        the stored ``[alpha^T; T]`` blocks; no loop over demos. Padding has k = 0.
         """
         xq = np.asarray(xq, dtype=np.float64).reshape(-1, 2)
-        q = xq.shape[0]
-        mean = np.empty((q, self.n_demos, self.out_dim))
-        var = np.empty((q, self.n_demos))
-        s2 = self.hyp.signal_var
-        xx = np.sum(xq**2, axis=1)
-        for b in self.buckets:
-            d2 = b.zz[:, :, None] + xx[None, None, :] - 2.0 * (b.z @ xq.T)  # (B, M, Q)
-            k = np.exp(self._neg_half_inv_l2 * np.maximum(d2, 0.0))
-            k *= b.mask_s2[:, :, None]
-            k = k.astype(self.dtype, copy=False)
-            mean[:, b.index] = np.matmul(b.alpha, k).transpose(2, 0, 1)
-            rk = np.matmul(b.r, k)  # (B, R, Q)
-            var[:, b.index] = (s2 - np.einsum("brq,brq->qb", rk, rk)).astype(np.float64)
-        return mean, var
+        q, d = xq.shape[0], self.out_dim
+        e = (-2.0 * self._c * xq) @ self._z_t  # (Q, P); the expansion is exact to ~1e-15 in float64
+        e += self._log_base
+        e += (self._c * np.sum(xq**2, axis=1))[:, None]
+        np.minimum(e, np.log(self.hyp.signal_var), out=e)  # round-off can not push k above s2
+        if self.dtype == np.float32:  # float32 exp is ~3x faster; exponent error ~1e-7 relative
+            k = np.exp(e.astype(np.float32)).T
+        else:
+            k = np.exp(e, out=e).T  # (P, Q)
+        top = np.empty((self._top_off[-1], q), dtype=self.dtype)
+        bot = np.empty((max(self._bot_off[-1], 1), q), dtype=self.dtype)
+        for b, t0, t1, b0, b1 in zip(self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]):
+            kb = k[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, q)
+            np.matmul(b.top, kb, out=top[t0:t1].reshape(b.n_demos, -1, q))
+            if b1 > b0:
+                np.matmul(b.bottom, kb[:, b.h :], out=bot[b0:b1].reshape(b.n_demos, -1, q))
+        mean = top[self._mean_idx].astype(np.float64)  # (N, D, Q)
+        top *= top
+        bot *= bot
+        sq = np.add.reduceat(top, self._seg_top, axis=0)[1::2].astype(np.float64)  # (N_sorted, Q)
+        sq[self._empty_top] = 0.0  # reduceat returns one element for an empty segment
+        if self._bot_off[-1] > 0:
+            sq_bot = np.add.reduceat(bot, np.minimum(self._seg_bot, bot.shape[0] - 1), axis=0)
+            sq_bot[self._empty_bot] = 0.0
+            sq += sq_bot
+        var = self.hyp.signal_var - sq[self._unsort]
+        return mean.transpose(2, 0, 1), var.T
 
 
 def build_bank(
@@ -342,7 +417,7 @@ def build_bank(
     outputs: Sequence[np.ndarray],
     hyp: GPHyperparameters,
     ratio: float | None,
-    n_buckets: int = 8,
+    n_buckets: int = 12,
     rcond: float = DEFAULT_RCOND,
     dtype: type | str = np.float64,
 ) -> FlowBank:

@@ -79,12 +79,12 @@ class NonparametricConfig:
     exact: bool = False
     lengthscale: float = 0.15
     kappa: float = 1.0
-    top_k: int = 10
+    top_k: int = 20
     horizon: int = 30
     min_speed: float = 0.05
     rate_hz: float = 30.0
-    n_buckets: int = 8
-    precision: str = "float64"
+    n_buckets: int = 12
+    precision: str = "float32"
     rcond: float = DEFAULT_RCOND
     frame_batch: int = 32
 
@@ -114,10 +114,11 @@ def backward_velocity(xy: np.ndarray, rate_hz: float) -> np.ndarray:
 
 
 def cosine_distance(a: np.ndarray, b: np.ndarray, min_speed: float) -> np.ndarray:
-    """``1 - a.b / (max(|a|, v0) max(|b|, v0))`` over the last axis (the zero-velocity rule)."""
-    na = np.maximum(np.linalg.norm(a, axis=-1), min_speed)
-    nb = np.maximum(np.linalg.norm(b, axis=-1), min_speed)
-    return 1.0 - np.sum(a * b, axis=-1) / (na * nb)
+    """``1 - a.b / (max(|a|, v0) max(|b|, v0))`` over the last axis (2D; the zero-velocity rule)."""
+    a0, a1, b0, b1 = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
+    na = np.maximum(np.sqrt(a0 * a0 + a1 * a1), min_speed)
+    nb = np.maximum(np.sqrt(b0 * b0 + b1 * b1), min_speed)
+    return 1.0 - (a0 * b0 + a1 * b1) / (na * nb)
 
 
 @dataclass
@@ -189,6 +190,7 @@ class NonparametricAgent(PredictiveAgent):
             self.receivers[k, : ep.length] = ep.receiver_xy
             self.givers[k, : ep.length] = ep.giver_xyz
             self.givers[k, ep.length :] = ep.giver_xyz[-1]  # hold the last row (see module doc)
+        self._rr = np.sum(self.receivers**2, axis=2)  # (N, Lmax): |r|^2 for the closest-frame search
         self.n_demos = n
         self._top_k = min(c.top_k, n)
         self._steps = np.arange(c.horizon)
@@ -229,10 +231,10 @@ class NonparametricAgent(PredictiveAgent):
         sel = np.argpartition(d, k - 1)[:k] if k < d.size else np.arange(d.size)
         w = np.exp(-(d[sel] - d[sel].min()))
         w /= w.sum()
-        d2 = np.sum((self.receivers[sel] - xy) ** 2, axis=2)  # (K, Lmax)
-        t_k = np.argmin(d2, axis=1)
+        # t_k = argmin_t |r_{k,t} - x|^2 = argmin_t (|r_{k,t}|^2 - 2 r_{k,t}.x)
+        t_k = np.argmin(self._rr[sel] - self.receivers[sel] @ (2.0 * xy), axis=1)
         rows = np.minimum(t_k[:, None] + self._steps[None, :], self.lengths[sel, None] - 1)
-        return np.einsum("k,khd->hd", w, self.givers[sel[:, None], rows])
+        return (w @ self.givers[sel[:, None], rows].reshape(k, -1)).reshape(-1, 3)
 
     def predict(self, receiver_history: np.ndarray) -> np.ndarray:
         """(H, 3) predicted giver trajectory; row 0 is the current frame (open-loop use)."""

@@ -76,7 +76,7 @@ def test_sparse_is_an_approximation_that_improves_with_ratio(demos):
     assert errs[0] > errs[1] > errs[2] and errs[2] < 1e-8
 
 
-@pytest.mark.parametrize("ratio", [0.4, None])
+@pytest.mark.parametrize("ratio", [0.02, 0.4, None])
 @pytest.mark.parametrize("n_buckets", [1, 3])
 def test_bank_batches_every_demo_exactly(demos, ratio, n_buckets):
     hyp = GPHyperparameters(lengthscale=0.15, noise_var=0.03)

@@ -32,7 +32,7 @@ def toy_dataset(n_demos: int = 6, length: int = 70) -> HandoverDataset:
     return HandoverDataset(eps, name="toy")
 
 
-CONFIG = NonparametricConfig(lengthscale=0.15, top_k=1, horizon=30)
+CONFIG = NonparametricConfig(lengthscale=0.15, top_k=1, horizon=30, precision="float64")
 
 
 @pytest.fixture(scope="module")
@@ -70,6 +70,22 @@ def test_streaming_equals_batch_recomputation(agent, toy):
             np.testing.assert_allclose(agent.stream_predict(), agent.predict(noisy[: t + 1]), atol=1e-12)
 
 
+def test_float32_default_agrees_with_float64(toy):
+    from dataclasses import replace
+
+    ep = toy[2]
+    noisy = ep.receiver_xy + np.random.default_rng(2).normal(0, 0.02, ep.receiver_xy.shape)
+    f64 = NonparametricAgent(replace(CONFIG, top_k=3)).fit(toy)
+    f32 = NonparametricAgent(replace(CONFIG, top_k=3, precision="float32")).fit(toy)
+    assert NonparametricConfig().precision == "float32"
+    np.testing.assert_allclose(f32.distances(noisy), f64.distances(noisy), atol=1e-4)
+    f32.stream_reset()
+    for xy in noisy[:30]:
+        f32.stream_update(xy)
+    np.testing.assert_allclose(f32.stream_distances(), f64.distances(noisy[:30]), atol=1e-4)
+    np.testing.assert_allclose(f32.stream_predict(), f64.predict(noisy[:30]), atol=1e-4)
+
+
 def test_predict_sequence_equals_loop_over_predict(agent, toy):
     ep = toy[4]
     times = np.array([0, 3, 10, 11, 40, 68])
@@ -80,7 +96,7 @@ def test_predict_sequence_equals_loop_over_predict(agent, toy):
 
 
 def test_blend_weights_are_normalised_similarities(toy):
-    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=3)).fit(toy)
+    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=3, precision="float64")).fit(toy)
     hist = toy[1].receiver_xy[:25] + np.array([0.0, 0.25])  # between lanes 1 and 2
     d = agent.distances(hist)
     sel = np.argsort(d)[:3]
@@ -107,7 +123,7 @@ def test_zero_velocity_is_neutral_and_finite(toy):
 
 
 def test_far_query_is_finite_and_sensible(toy):
-    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=3)).fit(toy)
+    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=3, precision="float64")).fit(toy)
     far = toy[0].receiver_xy[:20] + np.array([50.0, 50.0])
     d = agent.distances(far)
     # Every flow reverts to its prior: sigma2 = 1, d_cos = 1, so d = kappa + 1 for every demo.
@@ -141,10 +157,10 @@ def test_bad_input_raises(agent):
 
 def test_one_episode_and_short_episodes_work(toy):
     one = HandoverDataset([toy[0]])
-    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=10)).fit(one)
+    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=10, precision="float64")).fit(one)
     np.testing.assert_allclose(agent.predict(toy[0].receiver_xy[:10]), toy[0].giver_xyz[9:39], atol=1e-12)
     short = HandoverDataset([_episode(0, toy[0].receiver_xy[:8], toy[0].giver_xyz[:8]), toy[1]])
-    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=1)).fit(short)
+    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=1, precision="float64")).fit(short)
     pred = agent.predict(toy[0].receiver_xy[:4])
     np.testing.assert_allclose(pred[:5], toy[0].giver_xyz[3:8], atol=1e-12)
     np.testing.assert_allclose(pred[5:], np.repeat(toy[0].giver_xyz[7:8], 25, axis=0), atol=1e-12)
