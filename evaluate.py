@@ -1,0 +1,169 @@
+#!/usr/bin/env python
+"""Reproduce the paper's simulation results (Kim et al., ICRA 2025, Sec. V-A) with one command each.
+
+    python evaluate.py table1 --data PATH --folds 10 --seed 0     # Table I: RMS (mm), ID / OOD
+    python evaluate.py sample-efficiency --data PATH              # RMS vs training-data ratio
+    python evaluate.py tradeoff --data PATH                       # RMS vs per-frame inference time
+
+PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
+omitted for the embedded synthetic default. Every method is scored by the same open-loop protocol
+(``handover_env/evaluation/openloop.py``, summarised in the README). Results go to ``--out``
+(default ``results/<command>/``): Markdown and CSV tables, per-fold and per-episode CSVs, PNG plots.
+Trained BC-MLP / ACT checkpoints are kept under ``<out>/checkpoints`` and reused when the method
+configuration and the training set match (``--no-reuse`` retrains).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+
+from handover_env.evaluation.methods import METHODS, MethodOptions, check_methods  # noqa: E402
+from handover_env.evaluation.reporting import METHOD_LABELS, markdown_table, mean_std  # noqa: E402
+
+QUICK_EPISODES = 30
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="evaluate.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def common(p: argparse.ArgumentParser, default_methods: tuple[str, ...], default_folds: int) -> None:
+        p.add_argument("--data", default=None, metavar="PATH",
+                       help="public-dataset folder (whole_motions/), canonical .npz, or omit for the synthetic default")
+        p.add_argument("--out", default=None, metavar="DIR",
+                       help="output folder (default: results/<command>, or results/<command>-quick with --quick)")
+        p.add_argument("--methods", nargs="+", default=list(default_methods), metavar="NAME",
+                       help=f"methods to run, any of {list(METHODS)} (default: {' '.join(default_methods)})")
+        p.add_argument("--folds", type=int, default=default_folds,
+                       help=f"k of the stratified (ID/OOD) k-fold split (default: {default_folds})")
+        p.add_argument("--seed", type=int, default=0, help="seed of the fold split and of the learned baselines")
+        p.add_argument("--horizon", type=int, default=30, help="predicted frames per query, 30 = 1 s (default: 30)")
+        p.add_argument("--stride", type=int, default=1, help="frames between open-loop queries (default: 1 = every frame)")
+        p.add_argument("--first-query", type=int, default=5,
+                       help="frames of receiver history before the first query (default: 5)")
+        p.add_argument("--inducing-ratio", type=float, default=0.4,
+                       help="SPGP inducing ratio of 'ours' (paper: 0.4)")
+        p.add_argument("--act-steps", type=int, default=None, help="ACT optimisation steps (default: the ACT agent's)")
+        p.add_argument("--bc-epochs", type=int, default=None, help="BC-MLP maximum epochs (default: the BC-MLP agent's)")
+        p.add_argument("--no-reuse", action="store_true", help="retrain BC-MLP/ACT even if a matching checkpoint exists")
+        p.add_argument("--quick", action="store_true",
+                       help=f"small fast run for tests: {QUICK_EPISODES} episodes, 3 folds, query stride 3, "
+                            "tiny training budgets; never for reported numbers")
+        p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+    p = sub.add_parser("table1", help="Table I: stratified k-fold RMS of every method, ID and OOD",
+                       description="Stratified k-fold open-loop RMS (mm) of BC-MLP, ACT, IAAL and ours; writes "
+                                   "table1.md (with the paper's numbers beside ours), table1.csv, per-fold and "
+                                   "per-episode CSVs.")
+    common(p, METHODS, 10)
+    p = sub.add_parser("sample-efficiency", help="RMS vs training-data ratio (PNG + CSV)",
+                       description="For each fold and data ratio, train on that stratified fraction of the "
+                                   "training folds and score the test fold; writes sample_efficiency.png/.csv.")
+    common(p, METHODS, 5)
+    p.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.25, 0.5, 0.75, 1.0],
+                   help="training-data ratios in (0, 1] (default: 0.1 0.25 0.5 0.75 1.0)")
+    p = sub.add_parser("tradeoff", help="RMS vs per-frame inference time, ours at several inducing rates and IAAL",
+                       description="k-fold RMS and the median per-frame streaming cost (update + predict, one "
+                                   "core, same run) of ours at each inducing rate and of IAAL; tradeoff.png/.csv.")
+    common(p, ("ours", "iaal"), 10)
+    p.add_argument("--rates", nargs="+", type=float, default=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
+                   help="inducing rates of ours (default: 0.1 to 1.0 in steps of 0.1)")
+    p.add_argument("--timing-episodes", type=int, default=20,
+                   help="test episodes streamed frame by frame to time each variant (default: 20)")
+    return parser
+
+
+def load_dataset(path: str | None, quick: bool, seed: int):
+    from handover_env.data import generate_synthetic, load_any
+
+    if path is not None and not Path(path).exists():
+        raise FileNotFoundError(f"--data {path}: no such file or folder")
+    if path is None and quick:
+        return generate_synthetic(n=QUICK_EPISODES, ood_fraction=0.2, seed=seed)
+    data = load_any(path, progress=True)
+    if quick and len(data) > QUICK_EPISODES:
+        from handover_env.data.dataset import HandoverDataset
+
+        mask = data.ood_mask
+        n_ood = min(int(mask.sum()), QUICK_EPISODES // 5)
+        import numpy as np
+
+        idx = np.concatenate([np.flatnonzero(~mask)[: QUICK_EPISODES - n_ood], np.flatnonzero(mask)[:n_ood]])
+        data = HandoverDataset([data[i] for i in np.sort(idx)], rate_hz=data.rate_hz, name=data.name + " (quick)")
+    return data
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from handover_env.evaluation import experiments
+    from handover_env.evaluation.openloop import OpenLoopProtocol
+
+    try:
+        methods = check_methods(args.methods)
+        if args.command == "tradeoff" and not set(methods) <= {"ours", "iaal"}:
+            raise ValueError("tradeoff compares the nonparametric methods only: --methods ours [iaal]")
+        folds, stride = (3, max(3, args.stride)) if args.quick else (args.folds, args.stride)
+        protocol = OpenLoopProtocol(horizon=args.horizon, first_query=args.first_query, stride=stride)
+        options = MethodOptions(seed=args.seed, quick=args.quick, inducing_ratio=args.inducing_ratio,
+                                act_steps=args.act_steps, bc_epochs=args.bc_epochs, horizon=args.horizon)
+        dataset = load_dataset(args.data, args.quick, args.seed)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else Path("results") / (args.command + ("-quick" if args.quick else ""))
+    out.mkdir(parents=True, exist_ok=True)
+    progress = not args.no_progress
+    n_ood = int(dataset.ood_mask.sum())
+    print(f"{args.command}: {len(dataset) - n_ood} ID + {n_ood} OOD episodes ({dataset.name}), {folds} folds, "
+          f"methods {methods}, {os.cpu_count()} cores", flush=True)
+    start = time.perf_counter()
+    try:
+        if args.command == "table1":
+            rows = experiments.run_table1(dataset, methods, folds, args.seed, options, protocol, out,
+                                          reuse=not args.no_reuse, progress=progress)
+            print("\n" + markdown_table(
+                ["method", "ID 3D (mm)", "OOD 3D (mm)", "ID paper", "OOD paper"],
+                [[METHOD_LABELS[r["method"]], mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
+                  mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+                  mean_std(r["paper_id_mm"], r["paper_id_std_mm"]), mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"])]
+                 for r in rows]))
+        elif args.command == "sample-efficiency":
+            rows = experiments.run_sample_efficiency(dataset, methods, args.ratios, folds, args.seed, options,
+                                                     protocol, out, reuse=not args.no_reuse, progress=progress)
+            print("\n" + markdown_table(
+                ["method", "ratio", "all 3D (mm)", "ID 3D (mm)", "OOD 3D (mm)"],
+                [[METHOD_LABELS[r["method"]], f"{r['ratio']:g}", mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
+                  mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]), mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"])]
+                 for r in rows]))
+        else:
+            rates = args.rates if "ours" in methods else []
+            rows = experiments.run_tradeoff(dataset, rates, folds, args.seed, options, protocol, out,
+                                            timing_episodes=args.timing_episodes,
+                                            include_iaal="iaal" in methods, progress=progress)
+            print("\n" + markdown_table(
+                ["method", "rate", "median ms/frame", "p99 ms/frame", "all 3D (mm)", "x faster than IAAL",
+                 "RMS vs IAAL"],
+                [[METHOD_LABELS[r["method"]], "" if r["inducing_rate"] is None else f"{r['inducing_rate']:g}",
+                  f"{r['frame_ms_median']:.3f}", f"{r['frame_ms_p99']:.3f}",
+                  mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
+                  f"{r.get('speedup_vs_iaal', float('nan')):.2f}", f"{r.get('rms_cost_vs_iaal_pct', float('nan')):+.2f}%"]
+                 for r in rows]))
+            print(f"timed on 1 core of {os.cpu_count()}")
+    except ValueError as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,339 @@
+"""The paper's simulation experiments: Table I, the sample-efficiency figure and the RMS / inference-time
+trade-off figure (paper Sec. V-A). Every run uses the one open-loop protocol of :mod:`.openloop`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from handover_env.data.dataset import HandoverDataset
+from handover_env.evaluation.methods import MethodOptions, build_agent, check_methods, fit_agent
+from handover_env.evaluation.openloop import OpenLoopProtocol, evaluate_openloop, summarise
+from handover_env.evaluation.reporting import (
+    METHOD_LABELS,
+    PAPER_TABLE1,
+    markdown_table,
+    mean_std,
+    write_csv,
+    write_text,
+)
+
+SQRT3 = math.sqrt(3.0)
+
+
+def _fold_stats(values: list[float]) -> tuple[float, float]:
+    vals = np.asarray([v for v in values if np.isfinite(v)], dtype=np.float64)
+    if vals.size == 0:
+        return float("nan"), float("nan")
+    return float(vals.mean()), float(vals.std(ddof=1)) if vals.size > 1 else 0.0
+
+
+def _check_folds(dataset: HandoverDataset, folds: int) -> None:
+    if folds < 2:
+        raise ValueError(f"--folds must be >= 2, got {folds}")
+    dataset.stratified_kfold(folds, 0)  # raises a clear error when the dataset is too small
+
+
+# ---------------------------------------------------------------------------------------- Table I
+def run_table1(
+    dataset: HandoverDataset,
+    methods: Sequence[str],
+    folds: int,
+    seed: int,
+    options: MethodOptions,
+    protocol: OpenLoopProtocol,
+    out_dir: Path,
+    reuse: bool = True,
+    progress: bool = True,
+) -> list[dict]:
+    """Stratified k-fold open-loop RMS of every method (paper Table I); writes md/csv; returns rows."""
+    methods = check_methods(list(methods))
+    _check_folds(dataset, folds)
+    splits = dataset.stratified_kfold(folds, seed)
+    episode_rows: list[dict] = []
+    fold_rows: list[dict] = []
+    bar = tqdm(total=folds * len(methods), desc="table1", unit="fit", disable=not progress)
+    for f, (train_idx, test_idx) in enumerate(splits):
+        train, test = dataset.subset(train_idx), dataset.subset(test_idx)
+        for name in methods:
+            bar.set_postfix_str(f"fold {f} {name}")
+            t0 = time.perf_counter()
+            agent, reused = fit_agent(name, build_agent(name, options), train, out_dir / "checkpoints", reuse)
+            fit_s = time.perf_counter() - t0
+            records = evaluate_openloop(agent, test, protocol, progress=False)
+            summary = summarise(records)
+            fold_rows.append(
+                {
+                    "method": name,
+                    "fold": f,
+                    "id_rms_3d_mm": summary["id"]["rms_3d_mm"],
+                    "ood_rms_3d_mm": summary["ood"]["rms_3d_mm"],
+                    "n_id": summary["id"]["n_episodes"],
+                    "n_ood": summary["ood"]["n_episodes"],
+                    "fit_seconds": fit_s,
+                    "checkpoint_reused": reused,
+                }
+            )
+            episode_rows += [
+                {"method": name, "fold": f, "source_id": r.source_id, "is_ood": r.is_ood,
+                 "rms_3d_mm": r.rms_3d_mm, "rms_axis_mm": r.rms_axis_mm, "n_queries": r.n_queries}
+                for r in records
+            ]
+            bar.update()
+    bar.close()
+    rows = []
+    for name in methods:
+        mine = [r for r in fold_rows if r["method"] == name]
+        id_m, id_s = _fold_stats([r["id_rms_3d_mm"] for r in mine])
+        ood_m, ood_s = _fold_stats([r["ood_rms_3d_mm"] for r in mine])
+        paper = PAPER_TABLE1[name]
+        rows.append(
+            {
+                "method": name,
+                "id_rms_3d_mm": id_m, "id_std_3d_mm": id_s,
+                "ood_rms_3d_mm": ood_m, "ood_std_3d_mm": ood_s,
+                "id_rms_axis_mm": id_m / SQRT3, "id_std_axis_mm": id_s / SQRT3,
+                "ood_rms_axis_mm": ood_m / SQRT3, "ood_std_axis_mm": ood_s / SQRT3,
+                "paper_id_mm": paper["id"][0], "paper_id_std_mm": paper["id"][1],
+                "paper_ood_mm": paper["ood"][0], "paper_ood_std_mm": paper["ood"][1],
+                "fit_seconds_mean": float(np.mean([r["fit_seconds"] for r in mine])),
+            }
+        )
+    write_csv(rows, out_dir / "table1.csv")
+    write_csv(fold_rows, out_dir / "table1_folds.csv")
+    write_csv(episode_rows, out_dir / "table1_episodes.csv")
+    write_text(table1_markdown(rows, dataset, folds, seed, protocol), out_dir / "table1.md")
+    return rows
+
+
+def table1_markdown(
+    rows: list[dict], dataset: HandoverDataset, folds: int, seed: int, protocol: OpenLoopProtocol
+) -> str:
+    """Table I in the paper's layout, with the paper's numbers beside ours."""
+    header = ["Method", "ID (ours, 3D)", "OOD (ours, 3D)", "ID (ours, per axis)", "OOD (ours, per axis)",
+              "ID (paper)", "OOD (paper)"]
+    body = [
+        [
+            METHOD_LABELS[r["method"]],
+            mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
+            mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+            mean_std(r["id_rms_axis_mm"], r["id_std_axis_mm"]),
+            mean_std(r["ood_rms_axis_mm"], r["ood_std_axis_mm"]),
+            mean_std(r["paper_id_mm"], r["paper_id_std_mm"]),
+            mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"]),
+        ]
+        for r in rows
+    ]
+    n_ood = int(dataset.ood_mask.sum())
+    return (
+        "# Table I: RMS error (mm) of the predicted giver trajectory\n\n"
+        + markdown_table(header, body)
+        + f"\nDataset: {dataset.name or 'unnamed'} ({len(dataset) - n_ood} ID + {n_ood} OOD episodes, "
+        f"{dataset.n_frames} frames). Stratified {folds}-fold split by ID/OOD, seed {seed}; mean ± std over "
+        f"the {folds} folds of the per-fold mean episode RMS. Protocol: horizon {protocol.horizon} frames, "
+        f"queries every {protocol.stride} frame(s) from frame {protocol.first_query}. '3D' is the Euclidean "
+        "error, 'per axis' the same divided by sqrt(3); the paper does not say which it reports. The paper's "
+        "numbers are on its full public set (900 ID + 100 OOD).\n"
+    )
+
+
+# ------------------------------------------------------------------------------ sample efficiency
+def run_sample_efficiency(
+    dataset: HandoverDataset,
+    methods: Sequence[str],
+    ratios: Sequence[float],
+    folds: int,
+    seed: int,
+    options: MethodOptions,
+    protocol: OpenLoopProtocol,
+    out_dir: Path,
+    reuse: bool = True,
+    progress: bool = True,
+) -> list[dict]:
+    """RMS vs training-data ratio (paper Fig. "Sample efficiency"); writes CSV and PNG."""
+    methods = check_methods(list(methods))
+    ratios = [float(r) for r in ratios]
+    if not ratios or any(not 0.0 < r <= 1.0 for r in ratios):
+        raise ValueError(f"ratios must lie in (0, 1], got {ratios}")
+    _check_folds(dataset, folds)
+    splits = dataset.stratified_kfold(folds, seed)
+    per_fold: list[dict] = []
+    bar = tqdm(total=folds * len(ratios) * len(methods), desc="sample-efficiency", unit="fit", disable=not progress)
+    for f, (train_idx, test_idx) in enumerate(splits):
+        test = dataset.subset(test_idx)
+        for ratio in ratios:
+            train = dataset.subset(train_idx).subsample(ratio, seed=seed + f)
+            for name in methods:
+                bar.set_postfix_str(f"fold {f} ratio {ratio} {name}")
+                agent, _ = fit_agent(name, build_agent(name, options), train, out_dir / "checkpoints", reuse)
+                s = summarise(evaluate_openloop(agent, test, protocol, progress=False))
+                per_fold.append({"method": name, "ratio": ratio, "fold": f, "n_train": len(train),
+                                 **{f"{k}_rms_3d_mm": s[k]["rms_3d_mm"] for k in ("all", "id", "ood")}})
+                bar.update()
+    bar.close()
+    rows = []
+    for name in methods:
+        for ratio in ratios:
+            mine = [r for r in per_fold if r["method"] == name and r["ratio"] == ratio]
+            row = {"method": name, "ratio": ratio, "n_train_mean": float(np.mean([r["n_train"] for r in mine]))}
+            for k in ("all", "id", "ood"):
+                m, s = _fold_stats([r[f"{k}_rms_3d_mm"] for r in mine])
+                row[f"{k}_rms_3d_mm"], row[f"{k}_std_3d_mm"] = m, s
+            rows.append(row)
+    write_csv(rows, out_dir / "sample_efficiency.csv")
+    write_csv(per_fold, out_dir / "sample_efficiency_folds.csv")
+    plot_sample_efficiency(rows, [m for m in methods if m != "bc_mlp"] or methods, out_dir / "sample_efficiency.png")
+    return rows
+
+
+def plot_sample_efficiency(rows: list[dict], methods: Sequence[str], path: Path) -> Path:
+    """Mean ± std markers per method and ratio, values written beside the markers (paper style).
+
+    BC-MLP is left out of the picture as in the paper (it is in the CSV).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=150)
+    markers = {"ours": "o", "iaal": "s", "act": "^", "bc_mlp": "D"}
+    for name in methods:
+        mine = sorted((r for r in rows if r["method"] == name), key=lambda r: r["ratio"])
+        x = [r["ratio"] for r in mine]
+        y = [r["all_rms_3d_mm"] for r in mine]
+        e = [r["all_std_3d_mm"] for r in mine]
+        ax.errorbar(x, y, yerr=e, marker=markers.get(name, "o"), capsize=3, label=METHOD_LABELS[name])
+        for xi, yi, ei in zip(x, y, e):
+            ax.annotate(mean_std(yi, ei, 1), (xi, yi), textcoords="offset points", xytext=(4, 6), fontsize=6)
+    ax.set_xlabel("training data ratio")
+    ax.set_ylabel("RMS error (mm, 3D)")
+    ax.set_title("Sample efficiency (mean ± std over folds)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------------------- trade-off
+@contextmanager
+def _one_core():
+    """Pin this process to one core while timing (restores the previous affinity)."""
+    if not hasattr(os, "sched_getaffinity"):
+        yield None
+        return
+    before = os.sched_getaffinity(0)
+    core = min(before)
+    os.sched_setaffinity(0, {core})
+    try:
+        yield core
+    finally:
+        os.sched_setaffinity(0, before)
+
+
+def time_streaming_frames(agent, episodes: Sequence, warmup: int = 3) -> np.ndarray:
+    """Seconds per 30 Hz frame (stream_update + stream_predict) of a streaming planner, all frames."""
+    times = []
+    for ep in episodes:
+        agent.stream_reset()
+        for t, xy in enumerate(ep.receiver_xy):
+            t0 = time.perf_counter()
+            agent.stream_update(xy)
+            agent.stream_predict()
+            if t >= warmup:
+                times.append(time.perf_counter() - t0)
+    return np.asarray(times)
+
+
+def run_tradeoff(
+    dataset: HandoverDataset,
+    rates: Sequence[float],
+    folds: int,
+    seed: int,
+    options: MethodOptions,
+    protocol: OpenLoopProtocol,
+    out_dir: Path,
+    timing_episodes: int = 20,
+    include_iaal: bool = True,
+    progress: bool = True,
+) -> list[dict]:
+    """RMS vs per-frame inference time for ours at several inducing rates and IAAL; CSV + PNG."""
+    rates = [float(r) for r in rates]
+    if not rates or any(not 0.0 < r <= 1.0 for r in rates):
+        raise ValueError(f"inducing rates must lie in (0, 1], got {rates}")
+    _check_folds(dataset, folds)
+    splits = dataset.stratified_kfold(folds, seed)
+    variants = [("ours", r) for r in rates] + ([("iaal", 1.0)] if include_iaal else [])
+    rows = []
+    bar = tqdm(total=len(variants) * folds, desc="tradeoff", unit="fit", disable=not progress)
+    for name, rate in variants:
+        fold_rms, frame_times = {"all": [], "id": [], "ood": []}, []
+        for f, (train_idx, test_idx) in enumerate(splits):
+            bar.set_postfix_str(f"{name} {rate} fold {f}")
+            agent = build_agent(name, options, inducing_ratio=rate).fit(dataset.subset(train_idx))
+            test = dataset.subset(test_idx)
+            s = summarise(evaluate_openloop(agent, test, protocol, progress=False))
+            for k in fold_rms:
+                fold_rms[k].append(s[k]["rms_3d_mm"])
+            if f == 0:  # time on the first fold's fitted model, pinned to one core
+                with _one_core():
+                    frame_times = time_streaming_frames(agent, list(test)[:timing_episodes])
+            bar.update()
+        row = {"method": name, "inducing_rate": rate if name == "ours" else None,
+               "frame_ms_median": float(np.median(frame_times) * 1e3),
+               "frame_ms_p99": float(np.percentile(frame_times, 99) * 1e3),
+               "n_timed_frames": int(frame_times.size), "cores": os.cpu_count()}
+        for k, vals in fold_rms.items():
+            row[f"{k}_rms_3d_mm"], row[f"{k}_std_3d_mm"] = _fold_stats(vals)
+        rows.append(row)
+    bar.close()
+    iaal = next((r for r in rows if r["method"] == "iaal"), None)
+    for r in rows:
+        if iaal is not None:
+            r["speedup_vs_iaal"] = iaal["frame_ms_median"] / r["frame_ms_median"]
+            r["rms_cost_vs_iaal_pct"] = 100.0 * (r["all_rms_3d_mm"] / iaal["all_rms_3d_mm"] - 1.0)
+    write_csv(rows, out_dir / "tradeoff.csv")
+    plot_tradeoff(rows, out_dir / "tradeoff.png")
+    return rows
+
+
+def plot_tradeoff(rows: list[dict], path: Path) -> Path:
+    """RMS (mean ± std over folds) against median per-frame time, one marker per inducing rate."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=150)
+    ours = [r for r in rows if r["method"] == "ours"]
+    ax.errorbar([r["frame_ms_median"] for r in ours], [r["all_rms_3d_mm"] for r in ours],
+                yerr=[r["all_std_3d_mm"] for r in ours], marker="o", capsize=3, label="Ours (SPGP)")
+    for r in ours:
+        ax.annotate(f"{r['inducing_rate']:g}", (r["frame_ms_median"], r["all_rms_3d_mm"]),
+                    textcoords="offset points", xytext=(4, 6), fontsize=7)
+    for r in rows:
+        if r["method"] == "iaal":
+            ax.errorbar([r["frame_ms_median"]], [r["all_rms_3d_mm"]], yerr=[r["all_std_3d_mm"]], marker="*",
+                        markersize=12, capsize=3, linestyle="none", label="IAAL (exact GP)")
+    ax.set_xscale("log")
+    ax.set_xlabel(f"inference time per 30 Hz frame (ms, median, 1 core of {os.cpu_count()})")
+    ax.set_ylabel("RMS error (mm, 3D)")
+    ax.set_title("RMS error vs inference time (labels: inducing rate)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path

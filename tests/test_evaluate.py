@@ -1,0 +1,102 @@
+"""evaluate.py: Table I, sample efficiency and trade-off in --quick mode, checkpoint reuse, bad input."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+
+import evaluate  # noqa: E402
+from handover_env.data import generate_synthetic  # noqa: E402
+from handover_env.evaluation.methods import MethodOptions, build_agent, fit_agent  # noqa: E402
+
+
+def _rows(path: Path) -> list[dict]:
+    with path.open() as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert evaluate.main(["table1", "--quick", "--no-progress", "--out", str(tmp_path)]) == 0
+    rows = _rows(tmp_path / "table1.csv")
+    assert [r["method"] for r in rows] == ["ours", "iaal", "act", "bc_mlp"]
+    for r in rows:
+        for key in ("id_rms_3d_mm", "ood_rms_3d_mm"):
+            assert math.isfinite(float(r[key])) and float(r[key]) > 0
+        assert float(r["id_rms_axis_mm"]) == pytest.approx(float(r["id_rms_3d_mm"]) / math.sqrt(3), rel=1e-4)
+    folds = _rows(tmp_path / "table1_folds.csv")
+    assert len(folds) == 4 * 3  # methods x folds
+    episodes = _rows(tmp_path / "table1_episodes.csv")
+    assert len(episodes) == 4 * 30  # every episode is tested exactly once per method
+    md = (tmp_path / "table1.md").read_text()
+    assert "55.13 ± 2.48" in md and "BC-MLP" in md and "IAAL" in md
+    out = capsys.readouterr().out
+    assert "Ours (SPGP)" in out and "wrote" in out
+
+
+def test_sample_efficiency_quick(tmp_path: Path) -> None:
+    argv = ["sample-efficiency", "--quick", "--no-progress", "--out", str(tmp_path),
+            "--methods", "ours", "bc_mlp", "--ratios", "0.5", "1.0"]
+    assert evaluate.main(argv) == 0
+    rows = _rows(tmp_path / "sample_efficiency.csv")
+    assert {(r["method"], float(r["ratio"])) for r in rows} == {
+        ("ours", 0.5), ("ours", 1.0), ("bc_mlp", 0.5), ("bc_mlp", 1.0)}
+    half = [r for r in rows if r["method"] == "ours" and float(r["ratio"]) == 0.5][0]
+    full = [r for r in rows if r["method"] == "ours" and float(r["ratio"]) == 1.0][0]
+    assert float(half["n_train_mean"]) < float(full["n_train_mean"])
+    assert (tmp_path / "sample_efficiency.png").stat().st_size > 10_000
+
+
+def test_tradeoff_quick(tmp_path: Path) -> None:
+    argv = ["tradeoff", "--quick", "--no-progress", "--out", str(tmp_path), "--rates", "0.2", "1.0",
+            "--timing-episodes", "3"]
+    assert evaluate.main(argv) == 0
+    rows = _rows(tmp_path / "tradeoff.csv")
+    assert [r["method"] for r in rows] == ["ours", "ours", "iaal"]
+    for r in rows:
+        assert float(r["frame_ms_median"]) > 0 and int(r["n_timed_frames"]) > 0
+    iaal = rows[-1]
+    assert float(iaal["speedup_vs_iaal"]) == pytest.approx(1.0)
+    # FITC at rate 1.0 is the exact GP (agents/gp.py), so its RMS equals IAAL's.
+    assert float(rows[1]["all_rms_3d_mm"]) == pytest.approx(float(iaal["all_rms_3d_mm"]), rel=1e-6)
+    assert (tmp_path / "tradeoff.png").stat().st_size > 10_000
+
+
+def test_learned_checkpoint_is_reused(tmp_path: Path) -> None:
+    data = generate_synthetic(n=12, ood_fraction=0.25, seed=3)
+    options = MethodOptions(quick=True, bc_epochs=2)
+    first, reused = fit_agent("bc_mlp", build_agent("bc_mlp", options), data, tmp_path)
+    assert not reused
+    second, reused = fit_agent("bc_mlp", build_agent("bc_mlp", options), data, tmp_path)
+    assert reused
+    ep = data[0]
+    times = np.arange(5, 20)
+    np.testing.assert_array_equal(first.predict_episode(ep, times), second.predict_episode(ep, times))
+    # Another training set is another checkpoint.
+    _, reused = fit_agent("bc_mlp", build_agent("bc_mlp", options), data.subset(range(10)), tmp_path)
+    assert not reused
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["table1", "--methods", "ours", "gpt"], "unknown method"),
+        (["table1", "--data", "/nonexistent/whole_motions"], "no such file"),
+        (["tradeoff", "--methods", "act"], "nonparametric"),
+    ],
+)
+def test_bad_input_gives_clear_error(argv: list[str], message: str, capsys: pytest.CaptureFixture) -> None:
+    assert evaluate.main(argv + ["--no-progress"]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_dataset_too_small_for_folds(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    path = generate_synthetic(n=6, ood_fraction=0.34, seed=1).save(tmp_path / "tiny.npz")
+    assert evaluate.main(["table1", "--data", str(path), "--folds", "10", "--methods", "ours", "--no-progress"]) == 2
+    assert "folds" in capsys.readouterr().err
