@@ -37,6 +37,26 @@ rows the paper defines).
 once to running sums (one batched kernel evaluation of the new point against every inducing
 point, batched mat-vecs); the history is never recomputed. ``predict_sequence`` uses cumulative
 sums of the same per-frame terms, evaluated in batches of frames.
+
+**Defaults and how they were chosen** (open-loop protocol, fold 0 of the stratified 10-fold
+split with seed 0 of the 875-episode development copy: 787 demos, 88 test episodes; 3D RMS of
+the ID test episodes):
+
+* top_k K: 1 -> ~154 mm, 3 -> ~125, 5 -> ~118, 10 -> ~112, 20 -> ~111, 40 -> ~111.5; K = 20.
+  Blending many demos helps because the receiver track says little about the giver's own
+  timing (the object starts to move ~13 frames into every recording, wherever the receiver is).
+* kappa in {0, 0.3, 1, 3, 10} at K = 20: 110.7 to 113.3 mm (0 = variance term only is the
+  worst); kappa = 1 (both terms of Eq. d on their natural [0, 2] and [0, 1] scales).
+* lengthscale in {0.1, 0.2, 0.4} m at K = 20, kappa = 1: 111.4, 110.9, 111.2 mm (flat); 0.15 m is
+  used: short enough that K_mm stays representable, so FITC at ratio 1.0 equals the exact GP to
+  1e-8 on 30 Hz walks (tests/test_gp.py); at 0.3 m the agreement drops to ~1e-6.
+* precision float32: per-frame cost ~halved, flows within 1e-4 of float64, RMS unchanged (see
+  the 10-fold figures in the README).
+
+Far from every demo all flows revert to their prior (mu = 0, sigma2 = 1), every d tends to
+kappa + 1 and the blend becomes an (arbitrary but deterministic) K-demo average at each demo's
+nearest frame: finite and inside the recorded giver workspace, but no longer informative (ID
+test tracks shifted 0.25 / 0.5 / 1 / 2 m away: 3D RMS 106 -> 142 / 200 / 352 / 409 mm).
 """
 
 from __future__ import annotations
