@@ -25,10 +25,10 @@ from pathlib import Path
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
+from typing import TYPE_CHECKING  # noqa: E402
 
-from handover_env.data.dataset import HandoverDataset  # noqa: E402
+if TYPE_CHECKING:  # heavy imports happen after argument parsing, so --help is instant
+    from handover_env.data.dataset import HandoverDataset
 
 SMOKE_EPISODES = 24
 
@@ -36,6 +36,9 @@ SMOKE_EPISODES = 24
 # ---------------------------------------------------------------------------- data
 def load_data(path: str | None, smoke: bool, seed: int) -> HandoverDataset:
     """The training demonstrations: .npz, public folder, or the synthetic default."""
+    import numpy as np
+
+    from handover_env.data.dataset import HandoverDataset
     try:
         from handover_env.data import load_any
     except ImportError:
@@ -72,44 +75,27 @@ def split_test(data: HandoverDataset, folds: int, test_fold: int | None, seed: i
 
 
 # ---------------------------------------------------------------------------- evaluation
-def openloop_rms(agent, test: HandoverDataset, horizon: int) -> dict:
-    """Open-loop RMS (mm) on ``test`` by the shared protocol, ID and OOD separately.
+def openloop_rms(agent, test: HandoverDataset) -> dict:
+    """Open-loop RMS (mm, 3D and per axis; mean +- std over episodes, ID and OOD apart) on ``test``
+    by the shared protocol (``handover_env.evaluation.openloop``: a query at every frame from
+    frame 5, horizon 30, row 0 = the current frame). The protocol calls ``predict_episode``, through
+    which the baselines also read the giver position at the query frame (their ``observation.state``)."""
+    from handover_env.evaluation.openloop import OpenLoopProtocol, evaluate_openloop, summarise
 
-    Uses ``handover_env.evaluation.openloop`` when present; otherwise the same protocol inline:
-    a query at every frame from frame 5 on, the prediction's row h compared with the giver at
-    t + h for the rows inside the episode; per episode the RMS of the 3D Euclidean error, and the
-    per-axis RMS (= 3D / sqrt(3)); mean and std over episodes.
-    """
-    per_ep = []
-    for ep in test:
-        times = np.arange(5, ep.length)
-        pred = agent.predict_episode(ep, times)
-        fut = times[:, None] + np.arange(horizon)[None, :]
-        valid = fut < ep.length
-        truth = ep.giver_xyz[np.minimum(fut, ep.length - 1)]
-        err2 = ((pred - truth) ** 2).sum(-1)[valid]
-        per_ep.append((ep.is_ood, 1000.0 * float(np.sqrt(err2.mean()))))
-    out = {}
-    for name, ood in (("ID", False), ("OOD", True)):
-        vals = np.array([r for o, r in per_ep if o == ood])
-        if vals.size:
-            out[name] = {
-                "n": int(vals.size),
-                "rms3d_mean": float(vals.mean()), "rms3d_std": float(vals.std()),
-                "rms_axis_mean": float(vals.mean() / np.sqrt(3)), "rms_axis_std": float(vals.std() / np.sqrt(3)),
-            }
-    return out
+    return summarise(evaluate_openloop(agent, test, OpenLoopProtocol(horizon=agent.horizon), progress=False))
 
 
 def report(name: str, agent, test: HandoverDataset | None, out: Path, t0: float, val_loss: float) -> None:
+    import torch
+
     summary = {"method": name, "wall_time_s": time.perf_counter() - t0, "final_val_loss": val_loss,
                "threads": torch.get_num_threads(), "loadavg": os.getloadavg()}
     print(f"[{name}] wall time {summary['wall_time_s']:.1f} s, best validation loss {val_loss:.5f}")
     if test is not None:
-        summary["test_rms_mm"] = openloop_rms(agent, test, agent.horizon)
+        summary["test_rms_mm"] = openloop_rms(agent, test)
         for split, r in summary["test_rms_mm"].items():
-            print(f"[{name}] held-out {split} (n={r['n']}): RMS 3D {r['rms3d_mean']:.2f} +- {r['rms3d_std']:.2f} mm,"
-                  f" per axis {r['rms_axis_mean']:.2f} +- {r['rms_axis_std']:.2f} mm")
+            print(f"[{name}] held-out {split} (n={r['n_episodes']}): RMS 3D {r['rms_3d_mm']:.2f} +- "
+                  f"{r['rms_3d_std']:.2f} mm, per axis {r['rms_axis_mm']:.2f} +- {r['rms_axis_std']:.2f} mm")
     (out / "train_summary.json").write_text(json.dumps(summary, indent=1))
 
 
@@ -213,6 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> None:
     args = build_parser().parse_args(argv)
+    import torch
+
     torch.set_num_threads(max(1, args.threads))
     args.func(args)
 

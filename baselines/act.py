@@ -13,8 +13,14 @@ Training goes through LeRobot's machinery: the dataset is exported with
 ``delta_timestamps`` for the action chunk, normalised by ``make_act_pre_post_processors`` with
 statistics (``get_feature_stats``) of the training episodes for all three features (ENV, STATE and
 ACTION all MEAN_STD), and optimised with ``ACTPolicy.forward`` (L1 + KL loss) under AdamW with the
-gradient clipping of LeRobot's ACT preset. At run time ``select_action`` applies LeRobot's
-``ACTTemporalEnsembler`` (``temporal_ensemble_coeff=0.01``, ``n_action_steps=1``), as the paper does.
+gradient clipping of LeRobot's ACT preset.
+
+In an env the agent is a :class:`agents.predictive.PredictiveAgent` like the planner (same ready
+pose, yaw rule and t_f of Theta), except for the ensembling: each new camera frame goes through
+``ACTPolicy.select_action``, i.e. LeRobot's ``ACTTemporalEnsembler``
+(``temporal_ensemble_coeff=0.01``, ``n_action_steps=1``), as the paper does. The returned current
+action plus the ensembler's remaining future rows form the ensembled chunk from which the
+target at t_f is read (:class:`EnsembledChunk`).
 
 Model sizes:
 
@@ -51,8 +57,8 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from safetensors.torch import load_file, save_file  # noqa: E402
 
-from agents.base import Agent, validate_history  # noqa: E402
-from baselines.bc_mlp import _layout_for, ensembled_ahead  # noqa: E402
+from agents.base import validate_history  # noqa: E402
+from agents.predictive import ClosedLoopConfig, PredictiveAgent  # noqa: E402
 from baselines.features import (  # noqa: E402
     ACTION,
     ACTION_DIM,
@@ -63,11 +69,12 @@ from baselines.features import (  # noqa: E402
     FeatureSpec,
     encode_history,
     episode_frames,
-    facing_yaw,
     split_train_val,
     validate_giver,
 )
+from handover_env.config import HandoverParams  # noqa: E402
 from handover_env.data.dataset import Episode, HandoverDataset  # noqa: E402
+from handover_env.envs.observation import ObsLayout  # noqa: E402
 
 CHECKPOINT_TYPE = "act"
 CHECKPOINT_FORMAT = 1
@@ -106,7 +113,6 @@ class ACTAgentConfig:
         seed: seeds initialisation, sampling and the split.
         device: torch device.
         temporal_ensemble_coeff: LeRobot ``ACTTemporalEnsembler`` coefficient used by ``act``.
-        forecast_time: t_f in seconds, how far ahead ``act`` targets.
     """
 
     history: int = 10
@@ -132,7 +138,6 @@ class ACTAgentConfig:
     seed: int = 0
     device: str = "cpu"
     temporal_ensemble_coeff: float = 0.01
-    forecast_time: float = 0.0
 
     def __post_init__(self) -> None:
         if self.paper_scale:
@@ -152,8 +157,6 @@ class ACTAgentConfig:
             raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-        if not 0.0 <= self.forecast_time * 30.0 < self.horizon:
-            raise ValueError(f"forecast_time must be in [0, horizon/30) s, got {self.forecast_time}")
 
     @property
     def spec(self) -> FeatureSpec:
@@ -279,13 +282,55 @@ def _split_from_export(sidecar: dict, val_fraction: float, seed: int) -> tuple[n
 
 
 # ---------------------------------------------------------------------- the agent
-class ACTAgent(Agent):
-    """LeRobot's ``ACTPolicy`` behind the common :class:`Agent` interface."""
+class EnsembledChunk:
+    """The ``TemporalEnsembler`` interface ``PredictiveAgent.act`` reads, over one ensembled chunk.
 
-    def __init__(self, config: ACTAgentConfig | None = None):
+    LeRobot's ensembler already did the averaging inside ``select_action``; this holds its output
+    (the current action and the ensembled future rows, in metres) and interpolates in it.
+    """
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.chunk: np.ndarray | None = None
+        self.latest_start: int | None = None
+
+    @property
+    def empty(self) -> bool:
+        return self.chunk is None
+
+    def add(self, chunk: np.ndarray, start_frame: int) -> None:
+        self.chunk, self.latest_start = np.asarray(chunk, dtype=np.float64), int(start_frame)
+
+    def at(self, frame: float) -> np.ndarray | None:
+        if self.chunk is None:
+            return None
+        k = min(max(float(frame) - self.latest_start, 0.0), float(self.chunk.shape[0] - 1))
+        lo = int(math.floor(k))
+        hi = min(lo + 1, self.chunk.shape[0] - 1)
+        return (1.0 - (k - lo)) * self.chunk[lo] + (k - lo) * self.chunk[hi]
+
+
+class ACTAgent(PredictiveAgent):
+    """LeRobot's ``ACTPolicy`` behind the common agent interface.
+
+    Args:
+        config: model and training settings.
+        params: Theta (t_f is used by ``act``); closed_loop, layout: see ``PredictiveAgent``.
+    """
+
+    def __init__(
+        self,
+        config: ACTAgentConfig | None = None,
+        params: HandoverParams | None = None,
+        closed_loop: ClosedLoopConfig | None = None,
+        layout: ObsLayout | None = None,
+    ):
         from lerobot.policies.act.modeling_act import ACTPolicy
         from lerobot.policies.act.processor_act import make_act_pre_post_processors
 
+        PredictiveAgent.__init__(self, params, closed_loop, layout)
         self.config = config or ACTAgentConfig()
         self.horizon = self.config.horizon
         torch.manual_seed(self.config.seed)
@@ -294,7 +339,7 @@ class ACTAgent(Agent):
         self.preprocessor, self.postprocessor = make_act_pre_post_processors(self.policy.config, None)
         self.fitted = False
         self.train_log: dict = {}
-        self._layout = None
+        self._giver_now: np.ndarray | None = None
 
     # ------------------------------------------------------------------ training
     def fit(
@@ -484,23 +529,32 @@ class ACTAgent(Agent):
 
     # ------------------------------------------------------------------ closed loop
     def reset(self) -> None:
+        """New episode: PredictiveAgent state, LeRobot's ensembler (``policy.reset()``)."""
+        super().reset()
         self.policy.reset()
+        self._ensembler = EnsembledChunk()
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        """(x, y, z, yaw) via ``ACTPolicy.select_action`` (temporal ensembling); yaw faces the receiver."""
+    def stream_predict(self) -> np.ndarray:
+        """``select_action`` on the newest frame; returns the ensembled chunk (H, 3) in metres.
+
+        Row 0 is the action ``select_action`` returns; rows 1.. are LeRobot's ensembled estimates of
+        the next frames (``temporal_ensembler.ensembled_actions``), so t_f can be read from them.
+        """
         self._require_fitted()
-        obs = np.asarray(obs, dtype=np.float64).reshape(-1)
-        if self._layout is None or self._layout.size != obs.size:
-            self._layout = _layout_for(obs.size)
-        track = self._layout.receiver_track(obs)
-        ee = self._layout.unflatten(obs)["ee_pos"]
-        env = torch.as_tensor(encode_history(track, self.config.history), dtype=torch.float32)
-        batch = self.preprocessor({OBS_ENV_STATE: env, OBS_STATE: torch.as_tensor(ee, dtype=torch.float32)})
-        now = self.policy.select_action(batch)  # (1, 3), normalised; the ensembler keeps the future rows
-        ahead = ensembled_ahead(self.policy.temporal_ensembler, now, self.config.forecast_time)
-        target = self.postprocessor(torch.as_tensor(ahead, dtype=torch.float32)[None]).numpy()[0]
-        return np.array([*target, facing_yaw(target, track[-1])], dtype=np.float32)
+        env = torch.as_tensor(encode_history(np.asarray(self._history), self.config.history), dtype=torch.float32)
+        giver = torch.as_tensor(validate_giver(self._giver_now), dtype=torch.float32)
+        batch = self.preprocessor({OBS_ENV_STATE: env, OBS_STATE: giver})
+        now = self.policy.select_action(batch)  # (1, 3), normalised
+        rows = torch.cat([now[:, None], self.policy.temporal_ensembler.ensembled_actions], dim=1)
+        return self.postprocessor(rows).numpy()[0].astype(np.float64)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """(x, y, z, yaw) target (``PredictiveAgent.act``), with ``ee_pos`` as the giver state."""
+        obs = np.asarray(obs)
+        if obs.shape == (self.layout.size,):
+            self._giver_now = obs[self._slices["ee_pos"][0]].astype(np.float64)
+        return super().act(obs)
 
     # ------------------------------------------------------------------ checkpoints
     def _handover_json(self, state: dict | None) -> dict:
@@ -561,8 +615,11 @@ class ACTAgent(Agent):
         return Path(path)
 
     @classmethod
-    def load(cls, path: str | os.PathLike, device: str = "cpu") -> ACTAgent:
-        """Load a checkpoint written by :meth:`save` or ``train.py act`` (local files only)."""
+    def load(cls, path: str | os.PathLike, device: str = "cpu", **closed_loop_kwargs) -> ACTAgent:
+        """Load a checkpoint written by :meth:`save` or ``train.py act`` (local files only).
+
+        ``closed_loop_kwargs`` (params, closed_loop, layout) go to ``PredictiveAgent``.
+        """
         from lerobot.policies.act.modeling_act import ACTPolicy
         from lerobot.processor import PolicyProcessorPipeline
         from lerobot.processor.converters import (
@@ -579,7 +636,8 @@ class ACTAgent(Agent):
             if not (path / name).is_file():
                 raise CheckpointError(f"{path}: missing {name} (incomplete ACT checkpoint)")
         agent = cls.__new__(cls)
-        agent.config, agent.horizon, agent._layout = cfg, cfg.horizon, None
+        PredictiveAgent.__init__(agent, **closed_loop_kwargs)
+        agent.config, agent.horizon, agent._giver_now = cfg, cfg.horizon, None
         try:
             with contextlib.redirect_stdout(io.StringIO()):
                 agent.policy = ACTPolicy.from_pretrained(path, local_files_only=True, strict=True)

@@ -15,9 +15,9 @@ Checkpoint folder (``save``/``load``):
 * ``training_state/``    -- last weights, optimizer state (LeRobot's safetensors format) and
   ``state.json`` (epoch, best validation loss, patience counter, loss curves, split) for resuming
 
-In an env (``act``) the predicted chunk is smoothed with LeRobot's ``ACTTemporalEnsembler``
-(coefficient 0.01, as ACT), and the target is the ensembled position ``forecast_time`` seconds ahead
-(the paper's t_f).
+In an env (``reset``/``act``) it is a :class:`agents.predictive.PredictiveAgent`, exactly like the
+planner: one chunk per new camera frame, ACT-style temporal ensembling, the target at t_f of Theta,
+the same ready pose and yaw rule. The giver state it conditions on is the robot's ``ee_pos``.
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ import torch
 from safetensors.torch import load_file, save_file
 from torch import nn
 
-from agents.base import Agent, validate_history
+from agents.base import validate_history
+from agents.predictive import ClosedLoopConfig, PredictiveAgent
 from baselines.features import (
     CheckpointError,
     FeatureSpec,
@@ -43,11 +44,12 @@ from baselines.features import (
     dataset_frames,
     encode_history,
     episode_frames,
-    facing_yaw,
     split_train_val,
     validate_giver,
 )
+from handover_env.config import HandoverParams
 from handover_env.data.dataset import Episode, HandoverDataset
+from handover_env.envs.observation import ObsLayout
 
 CHECKPOINT_TYPE = "bc_mlp"
 CHECKPOINT_FORMAT = 1
@@ -70,8 +72,6 @@ class BCMLPConfig:
         val_fraction: fraction of episodes held out for validation / early stopping.
         seed: seeds initialisation, shuffling and the split.
         device: torch device (the baselines are meant to run on ``cpu``).
-        temporal_ensemble_coeff: ``ACTTemporalEnsembler`` coefficient used by ``act``.
-        forecast_time: t_f in seconds, how far ahead of now ``act`` targets (0 = the current frame).
     """
 
     history: int = 10
@@ -86,8 +86,6 @@ class BCMLPConfig:
     val_fraction: float = 0.1
     seed: int = 0
     device: str = "cpu"
-    temporal_ensemble_coeff: float = 0.01
-    forecast_time: float = 0.0
 
     def __post_init__(self) -> None:
         self.hidden = tuple(int(h) for h in self.hidden)
@@ -103,8 +101,6 @@ class BCMLPConfig:
             raise ValueError(f"weight_decay must be >= 0, got {self.weight_decay}")
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-        if not 0.0 <= self.forecast_time * 30.0 < self.horizon:
-            raise ValueError(f"forecast_time must be in [0, horizon/30) s, got {self.forecast_time}")
 
     @property
     def spec(self) -> FeatureSpec:
@@ -188,24 +184,34 @@ def _eval_loss(net: BCMLPNet, data: dict[str, torch.Tensor], batch_size: int = 4
     return total / max(weight, 1.0)
 
 
-class BCMLPAgent(Agent):
-    """The BC-MLP baseline behind the common :class:`Agent` interface.
+class BCMLPAgent(PredictiveAgent):
+    """The BC-MLP baseline behind the common agent interface.
 
     ``predict`` and ``predict_sequence`` need the current giver position (see
-    :mod:`baselines.features`); ``predict_episode`` takes it from an episode, ``act`` from the
-    robot's ``ee_pos``.
+    :mod:`baselines.features`); ``predict_episode`` (the open-loop protocol) takes it from the
+    episode at the query frame, ``act`` from the robot's ``ee_pos``.
+
+    Args:
+        config: model and training settings.
+        params: Theta (t_f is used by ``act``); closed_loop, layout: see ``PredictiveAgent``.
     """
 
-    def __init__(self, config: BCMLPConfig | None = None):
+    def __init__(
+        self,
+        config: BCMLPConfig | None = None,
+        params: HandoverParams | None = None,
+        closed_loop: ClosedLoopConfig | None = None,
+        layout: ObsLayout | None = None,
+    ):
         self.config = config or BCMLPConfig()
+        PredictiveAgent.__init__(self, params, closed_loop, layout)
         self.horizon = self.config.horizon
         torch.manual_seed(self.config.seed)
         self.net = BCMLPNet(self.config.spec.env_dim, self.config.horizon, self.config.hidden, self.config.dropout)
         self.net.eval()
         self.fitted = False
         self.train_log: dict = {}
-        self._layout = None
-        self._ensembler = None
+        self._giver_now: np.ndarray | None = None
 
     # ------------------------------------------------------------------ training
     def fit(
@@ -365,24 +371,16 @@ class BCMLPAgent(Agent):
         return self.predict_batch(f.env_state, f.state)
 
     # ------------------------------------------------------------------ closed loop
-    def reset(self) -> None:
-        from lerobot.policies.act.modeling_act import ACTTemporalEnsembler
-
-        self._ensembler = ACTTemporalEnsembler(self.config.temporal_ensemble_coeff, self.config.horizon)
+    def stream_predict(self) -> np.ndarray:
+        """The chunk for the newest camera frame, conditioned on the robot's current TCP."""
+        return self.predict(np.asarray(self._history), self._giver_now)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """(x, y, z, yaw): the ensembled target ``forecast_time`` ahead; yaw faces the receiver."""
-        obs = np.asarray(obs, dtype=np.float64).reshape(-1)
-        if self._layout is None or self._layout.size != obs.size:
-            self._layout = _layout_for(obs.size)
-        if self._ensembler is None:
-            self.reset()
-        track = self._layout.receiver_track(obs)
-        ee = self._layout.unflatten(obs)["ee_pos"]
-        chunk = torch.as_tensor(self.predict(track, ee)[None], dtype=torch.float64)
-        now = self._ensembler.update(chunk)
-        target = ensembled_ahead(self._ensembler, now, self.config.forecast_time)
-        return np.array([*target, facing_yaw(target, track[-1])], dtype=np.float32)
+        """(x, y, z, yaw) target (``PredictiveAgent.act``), with ``ee_pos`` as the giver state."""
+        obs = np.asarray(obs)
+        if obs.shape == (self.layout.size,):
+            self._giver_now = obs[self._slices["ee_pos"][0]].astype(np.float64)
+        return super().act(obs)
 
     # ------------------------------------------------------------------ checkpoints
     def _save(self, out: Path, best: dict, opt: torch.optim.Optimizer, state: dict) -> None:
@@ -435,12 +433,15 @@ class BCMLPAgent(Agent):
         return out
 
     @classmethod
-    def load(cls, path: str | os.PathLike, device: str = "cpu") -> BCMLPAgent:
-        """Load a checkpoint written by :meth:`save` or by ``train.py bc-mlp``."""
+    def load(cls, path: str | os.PathLike, device: str = "cpu", **closed_loop_kwargs) -> BCMLPAgent:
+        """Load a checkpoint written by :meth:`save` or by ``train.py bc-mlp``.
+
+        ``closed_loop_kwargs`` (params, closed_loop, layout) go to the constructor.
+        """
         path = Path(path)
         saved = _read_config(path)
         cfg = BCMLPConfig.from_dict({**saved["config"], "device": device})
-        agent = cls(cfg)
+        agent = cls(cfg, **closed_loop_kwargs)
         weights = path / "model.safetensors"
         if not weights.is_file():
             raise CheckpointError(f"{path}: missing model.safetensors")
@@ -471,27 +472,4 @@ def _read_config(path: Path) -> dict:
     return saved
 
 
-def _layout_for(size: int):
-    """The ObsLayout whose flat size is ``size`` (the env's history W is inferred)."""
-    from handover_env.envs.observation import ObsLayout
-
-    rest = ObsLayout(history=2).size - 4
-    w, rem = divmod(size - rest, 2)
-    if rem or w < 2:
-        raise ValueError(f"observation of size {size} matches no ObsLayout")
-    return ObsLayout(history=w)
-
-
-def ensembled_ahead(ensembler, now: torch.Tensor, forecast_time: float, rate_hz: float = 30.0) -> np.ndarray:
-    """The ensembled position ``forecast_time`` s ahead: ``now`` (k = 0) or the ensembler's k-th future row.
-
-    After ``ACTTemporalEnsembler.update`` consumed the current action, ``ensembled_actions[:, k-1]``
-    is the running weighted average of every prediction made so far for frame t + k.
-    """
-    k = int(round(forecast_time * rate_hz))
-    if k <= 0 or ensembler.ensembled_actions is None or ensembler.ensembled_actions.shape[1] < k:
-        return now[0].cpu().numpy().astype(np.float64)
-    return ensembler.ensembled_actions[0, k - 1].cpu().numpy().astype(np.float64)
-
-
-__all__ = ["BCMLPAgent", "BCMLPConfig", "BCMLPNet", "ensembled_ahead"]
+__all__ = ["BCMLPAgent", "BCMLPConfig", "BCMLPNet"]

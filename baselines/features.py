@@ -220,3 +220,4 @@ def facing_yaw(target_xyz: np.ndarray, receiver_xy: np.ndarray) -> float:
     """Gripper yaw (rad) that points from the target position toward the receiver's base."""
     d = np.asarray(receiver_xy, dtype=np.float64)[:2] - np.asarray(target_xyz, dtype=np.float64)[:2]
     return float(np.arctan2(d[1], d[0])) if np.hypot(*d) > 1e-9 else 0.0
+

@@ -7,6 +7,10 @@ import json
 import numpy as np
 import pytest
 import torch
+import torch as _torch  # noqa: E402
+
+_torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
+
 from baselines_toy import toy_dataset
 
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
@@ -17,7 +21,6 @@ from baselines.features import (
     encode_receiver,
     episode_frames,
 )
-from handover_env.envs.observation import ObsLayout
 
 SMALL = dict(hidden=(32, 32), batch_size=64, max_epochs=4, patience=50)
 
@@ -101,11 +104,11 @@ def test_checkpoint_round_trip_gives_identical_predictions(data, trained, tmp_pa
 
 def test_act_in_env_observation(trained):
     agent, _ = trained
-    layout = ObsLayout(history=30)
+    layout = agent.layout
     parts = {name: np.zeros(shape) for name, shape, _ in layout.fields}
     agent.reset()
     for k in range(5):
-        parts["receiver_xy_history"] = np.tile([2.0 - 0.03 * k, -0.8], (30, 1))
+        parts["receiver_xy_history"] = np.tile([2.0 - 0.03 * k, -0.8], (layout.history, 1))
         parts["receiver_frames_seen"] = np.array([k + 1.0])
         parts["ee_pos"] = np.array([0.3, -0.4, 1.1])
         action = agent.act(layout.flatten(parts))

@@ -10,6 +10,10 @@ import pytest
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 
+import torch as _torch  # noqa: E402
+
+_torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
+
 from baselines_toy import toy_dataset  # noqa: E402
 
 from baselines.features import FeatureSpec, episode_frames  # noqa: E402

@@ -1,0 +1,139 @@
+"""ACT baseline through LeRobot's ACTPolicy: LeRobot data path, training, checkpoints, errors."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+import torch
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+
+import torch as _torch  # noqa: E402
+
+_torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
+
+from baselines_toy import toy_dataset  # noqa: E402
+
+from baselines.act import ACTAgent, ACTAgentConfig, lerobot_samples, open_export  # noqa: E402
+from baselines.features import CheckpointError, FeatureSpec  # noqa: E402
+from handover_env.data.lerobot_export import export_lerobot  # noqa: E402
+
+TINY = dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4,
+            batch_size=16, steps=40, eval_every=20, lr=1e-3)
+
+
+@pytest.fixture(scope="module")
+def data():
+    return toy_dataset(n=8, length=45, seed=2)
+
+
+@pytest.fixture(scope="module")
+def export(data, tmp_path_factory):
+    return export_lerobot(data, tmp_path_factory.mktemp("act") / "lerobot", history=10)
+
+
+@pytest.fixture(scope="module")
+def trained(export, tmp_path_factory):
+    out = tmp_path_factory.mktemp("act") / "ckpt"
+    return ACTAgent(ACTAgentConfig(**TINY)).fit_lerobot(export, out_dir=out), out
+
+
+def test_policy_is_lerobots_state_only_act():
+    from lerobot.configs.types import FeatureType, NormalizationMode
+    from lerobot.policies.act.modeling_act import ACTPolicy
+
+    agent = ACTAgent(ACTAgentConfig(**TINY))
+    pc = agent.policy.config
+    assert isinstance(agent.policy, ACTPolicy)
+    assert pc.image_features == {} and pc.env_state_feature.type is FeatureType.ENV
+    assert pc.robot_state_feature.shape == (3,) and pc.action_feature.shape == (3,)
+    assert pc.chunk_size == 30 and pc.n_action_steps == 1 and pc.temporal_ensemble_coeff == 0.01
+    assert pc.normalization_mapping["ENV"] is NormalizationMode.MEAN_STD
+    assert pc.pretrained_backbone_weights is None and not hasattr(agent.policy.model, "backbone")
+    paper = ACTAgentConfig(paper_scale=True)
+    assert (paper.dim_model, paper.dim_feedforward, paper.n_encoder_layers) == (512, 3200, 4)
+
+
+def test_vectorised_samples_equal_lerobot_getitem(export):
+    ds, _ = open_export(export, "local/handover", FeatureSpec(history=10))
+    samples = lerobot_samples(ds, np.arange(ds.num_episodes))
+    assert samples["observation.state"].shape[0] == len(ds)
+    for i in (0, 1, 44, len(ds) // 2, len(ds) - 1):
+        item = ds[i]
+        for key in ("observation.environment_state", "observation.state", "action", "action_is_pad"):
+            assert torch.equal(item[key], samples[key][i]), (i, key)
+
+
+def test_training_lowers_validation_loss_and_normalises_env(trained):
+    agent, out = trained
+    val = agent.train_log["val_loss"]
+    assert len(val) == 2 and val[-1] < val[0]
+    stats = agent.preprocessor.steps[-1].stats
+    assert "observation.environment_state" in stats  # the ENV feature is normalised too
+    saved = json.loads((out / "handover_act.json").read_text())
+    assert saved["type"] == "act" and saved["training"]["step"] == 40
+
+
+def test_deterministic_under_seed(export, trained):
+    agent, _ = trained
+    again = ACTAgent(ACTAgentConfig(**TINY)).fit_lerobot(export)
+    for k, v in agent.policy.state_dict().items():
+        assert torch.equal(v, again.policy.state_dict()[k]), k
+
+
+def test_resume_continues_exactly(export, trained, tmp_path):
+    agent, _ = trained
+    ACTAgent(ACTAgentConfig(**TINY)).fit_lerobot(export, out_dir=tmp_path, steps=20)
+    resumed = ACTAgent(ACTAgentConfig(**TINY)).fit_lerobot(export, out_dir=tmp_path, resume=True)
+    assert resumed.train_log["step"] == 40
+    np.testing.assert_allclose(resumed.train_log["val_loss"], agent.train_log["val_loss"], rtol=1e-5)
+
+
+def test_checkpoint_round_trip_and_predictions(data, trained, tmp_path):
+    agent, out = trained
+    ep = data[0]
+    times = np.arange(5, ep.length)
+    pred = agent.predict_episode(ep, times)
+    assert pred.shape == (times.size, 30, 3) and np.all(np.isfinite(pred))
+    np.testing.assert_array_equal(ACTAgent.load(out).predict_episode(ep, times), pred)
+    agent.save(tmp_path / "saved")
+    np.testing.assert_array_equal(ACTAgent.load(tmp_path / "saved").predict_episode(ep, times), pred)
+    np.testing.assert_allclose(agent.predict(ep.receiver_xy[:21], ep.giver_xyz[20]), pred[15], atol=1e-5)
+
+
+def test_act_uses_lerobot_temporal_ensembler(trained):
+    agent, _ = trained
+    layout = agent.layout
+    parts = {name: np.zeros(shape) for name, shape, _ in layout.fields}
+    agent.reset()
+    for k in range(4):
+        parts["receiver_xy_history"] = np.tile([2.0 - 0.03 * k, -0.8], (layout.history, 1))
+        parts["receiver_frames_seen"] = np.array([k + 1.0])
+        parts["ee_pos"] = np.array([0.3, -0.4, 1.1])
+        action = agent.act(layout.flatten(parts))
+        assert action.shape == (4,) and np.all(np.isfinite(action))
+    assert agent.policy.temporal_ensembler.ensembled_actions.shape == (1, 29, 3)
+
+
+def test_clear_errors(data, export, trained, tmp_path):
+    _, out = trained
+    with pytest.raises(ValueError, match=r"shape \(20,\), this ACT config needs \(12,\)"):
+        ACTAgent(ACTAgentConfig(**dict(TINY, history=6))).fit_lerobot(export)
+    with pytest.raises(CheckpointError, match="no ACT checkpoint folder"):
+        ACTAgent.load(tmp_path / "missing")
+    (tmp_path / "half").mkdir()
+    (tmp_path / "half" / "handover_act.json").write_text((out / "handover_act.json").read_text())
+    with pytest.raises(CheckpointError, match="missing config.json"):
+        ACTAgent.load(tmp_path / "half")
+    with pytest.raises(CheckpointError, match="not 'act'"):
+        (tmp_path / "bc").mkdir()
+        (tmp_path / "bc" / "handover_act.json").write_text(json.dumps({"type": "bc_mlp", "format": 1}))
+        ACTAgent.load(tmp_path / "bc")
+    with pytest.raises(ValueError, match="horizon H=90 frames is longer than"):
+        ACTAgent(ACTAgentConfig(**dict(TINY, horizon=90))).fit(data)
+    with pytest.raises(ValueError, match="divisible"):
+        ACTAgentConfig(dim_model=30, n_heads=4)
