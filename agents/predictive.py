@@ -23,7 +23,9 @@ Per env step (paper Sec. IV-B/C):
    velocities are meaningless) and again after the gripper has released.
 
 A decrease of ``receiver_frames_seen`` (a new env episode without ``reset()``) resets the
-agent.
+agent. The current observation is available to the hooks as ``self.last_obs`` (agents that
+also condition on the robot's own TCP position, like the learned baselines, read ``ee_pos``
+from it with ``self.layout.unflatten``).
 """
 
 from __future__ import annotations
@@ -94,6 +96,7 @@ class PredictiveAgent(Agent):
         self._ensembler: TemporalEnsembler | None = None
         self._history: list[np.ndarray] = []
         self._frames_seen = 0
+        self.last_obs: np.ndarray | None = None
 
     # ------------------------------------------------------------------ streaming hooks
     def stream_reset(self) -> None:
@@ -130,6 +133,7 @@ class PredictiveAgent(Agent):
         seen = int(round(float(obs[self._slices["receiver_frames_seen"][0]][0])))
         if seen < self._frames_seen:
             self.reset()
+        self.last_obs = obs
         if obs[self._slices["gripper_open"][0]][0] > 0.5 or seen < 1:
             return self._ready()
         new = seen - self._frames_seen
