@@ -107,6 +107,7 @@ def train_bc_mlp(args: argparse.Namespace) -> None:
         history=args.history, horizon=args.horizon, hidden=tuple(args.hidden), lr=args.lr or 1e-3,
         batch_size=args.batch_size or 256, max_epochs=(3 if args.smoke else args.epochs), patience=args.patience,
         val_fraction=args.val_fraction, seed=args.seed, device=args.device,
+        use_giver_state=not args.no_giver_state,
     )
     if args.smoke:
         cfg.hidden = (64, 64)
@@ -175,6 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("--epochs", type=int, default=50, help="maximum epochs (default 50)")
     bc.add_argument("--patience", type=int, default=5, help="early-stopping patience in epochs (default 5)")
     bc.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 256], help="hidden widths")
+    bc.add_argument("--no-giver-state", action="store_true", help="do not condition on the current giver/robot "
+                    "xyz: the receiver history alone, exactly what the planner sees")
     bc.set_defaults(func=train_bc_mlp)
 
     act = sub.add_parser("act", help="ACT: LeRobot's ACTPolicy, state-only, trained on a LeRobot export",

@@ -72,6 +72,9 @@ class BCMLPConfig:
         val_fraction: fraction of episodes held out for validation / early stopping.
         seed: seeds initialisation, shuffling and the split.
         device: torch device (the baselines are meant to run on ``cpu``).
+        use_giver_state: condition on the current giver/robot xyz (default, like ACT's
+            ``observation.state``); False gives a receiver-history-only BC-MLP that needs exactly
+            what the planner sees.
     """
 
     history: int = 10
@@ -86,6 +89,7 @@ class BCMLPConfig:
     val_fraction: float = 0.1
     seed: int = 0
     device: str = "cpu"
+    use_giver_state: bool = True
 
     def __post_init__(self) -> None:
         self.hidden = tuple(int(h) for h in self.hidden)
@@ -118,10 +122,14 @@ class BCMLPConfig:
 class BCMLPNet(nn.Module):
     """Standardise -> MLP -> un-standardise; the statistics are buffers (saved with the weights)."""
 
-    def __init__(self, env_dim: int, horizon: int, hidden: tuple[int, ...], dropout: float = 0.0):
+    def __init__(
+        self, env_dim: int, horizon: int, hidden: tuple[int, ...], dropout: float = 0.0, use_state: bool = True
+    ):
         super().__init__()
         self.horizon = horizon
-        in_dim = env_dim + 3
+        self.use_state = use_state
+        in_dim = env_dim + (3 if use_state else 0)
+        n_in = in_dim
         layers: list[nn.Module] = []
         for width in hidden:
             layers += [nn.Linear(in_dim, width), nn.ReLU()]
@@ -130,14 +138,15 @@ class BCMLPNet(nn.Module):
             in_dim = width
         layers.append(nn.Linear(in_dim, horizon * 3))
         self.mlp = nn.Sequential(*layers)
-        self.register_buffer("in_mean", torch.zeros(env_dim + 3))
-        self.register_buffer("in_std", torch.ones(env_dim + 3))
+        self.register_buffer("in_mean", torch.zeros(n_in))
+        self.register_buffer("in_std", torch.ones(n_in))
         self.register_buffer("out_mean", torch.zeros(3))
         self.register_buffer("out_std", torch.ones(3))
 
     def set_stats(self, frames: FrameArrays) -> None:
         """Set the normalisation statistics from training frames (valid chunk rows only)."""
-        x = np.concatenate([frames.env_state, frames.state], axis=1).astype(np.float64)
+        parts = [frames.env_state, frames.state] if self.use_state else [frames.env_state]
+        x = np.concatenate(parts, axis=1).astype(np.float64)
         y = frames.action[~frames.action_is_pad].astype(np.float64)
         eps = 1e-6
         self.in_mean.copy_(torch.as_tensor(x.mean(0)))
@@ -147,7 +156,8 @@ class BCMLPNet(nn.Module):
 
     def forward_normalized(self, env_state: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         """(B, H, 3) standardised chunk."""
-        x = (torch.cat([env_state, state], dim=-1) - self.in_mean) / self.in_std
+        x = torch.cat([env_state, state], dim=-1) if self.use_state else env_state
+        x = (x - self.in_mean) / self.in_std
         return self.mlp(x).view(-1, self.horizon, 3)
 
     def forward(self, env_state: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
@@ -207,7 +217,10 @@ class BCMLPAgent(PredictiveAgent):
         PredictiveAgent.__init__(self, params, closed_loop, layout)
         self.horizon = self.config.horizon
         torch.manual_seed(self.config.seed)
-        self.net = BCMLPNet(self.config.spec.env_dim, self.config.horizon, self.config.hidden, self.config.dropout)
+        self.net = BCMLPNet(
+            self.config.spec.env_dim, self.config.horizon, self.config.hidden, self.config.dropout,
+            self.config.use_giver_state,
+        )
         self.net.eval()
         self.fitted = False
         self.train_log: dict = {}
@@ -240,7 +253,8 @@ class BCMLPAgent(PredictiveAgent):
         max_epochs = cfg.max_epochs if max_epochs is None else int(max_epochs)
 
         torch.manual_seed(cfg.seed)
-        self.net = BCMLPNet(cfg.spec.env_dim, cfg.horizon, cfg.hidden, cfg.dropout).to(cfg.device)
+        self.net = BCMLPNet(cfg.spec.env_dim, cfg.horizon, cfg.hidden, cfg.dropout, cfg.use_giver_state)
+        self.net.to(cfg.device)
         self.net.set_stats(train)
         opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         state = {
@@ -339,7 +353,7 @@ class BCMLPAgent(PredictiveAgent):
     def predict(self, receiver_history: np.ndarray, giver_xyz: np.ndarray | None = None) -> np.ndarray:
         """(H, 3) future giver xyz from the receiver history and the current giver xyz."""
         hist = validate_history(receiver_history)
-        giver = validate_giver(giver_xyz)
+        giver = validate_giver(giver_xyz) if self.config.use_giver_state else np.zeros(3)
         env = encode_history(hist, self.config.history)
         return self.predict_batch(env[None], giver[None])[0]
 
@@ -353,7 +367,9 @@ class BCMLPAgent(PredictiveAgent):
         """
         receiver_xy = validate_history(receiver_xy)
         if giver_xyz is None:
-            validate_giver(None)
+            if self.config.use_giver_state:
+                validate_giver(None)
+            giver_xyz = np.zeros((receiver_xy.shape[0], 3))
         giver = np.asarray(giver_xyz, dtype=np.float64)
         if giver.shape != (receiver_xy.shape[0], 3):
             raise ValueError(f"giver_xyz must have shape ({receiver_xy.shape[0]}, 3), got {giver.shape}")

@@ -135,3 +135,12 @@ def test_clear_errors(data, trained, tmp_path):
         BCMLPAgent(BCMLPConfig(**SMALL)).predict(data[0].receiver_xy, np.zeros(3))
     with pytest.raises(ValueError, match="history"):
         BCMLPConfig(history=1)
+
+
+def test_receiver_only_variant_needs_no_giver(data):
+    agent = BCMLPAgent(BCMLPConfig(**dict(SMALL, max_epochs=2), use_giver_state=False)).fit(data)
+    ep = data[1]
+    pred = agent.predict(ep.receiver_xy[:15])
+    assert pred.shape == (30, 3)
+    np.testing.assert_allclose(agent.predict_episode(ep, np.array([14]))[0], pred, atol=1e-6)
+    np.testing.assert_allclose(agent.predict_sequence(ep.receiver_xy, np.array([14]))[0], pred, atol=1e-6)
