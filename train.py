@@ -131,7 +131,8 @@ def train_act(args: argparse.Namespace) -> None:
         history=args.history, horizon=args.horizon, paper_scale=args.paper_scale, use_vae=not args.no_vae,
         lr=args.lr or 1e-4, batch_size=args.batch_size or (16 if args.smoke else 64),
         steps=(20 if args.smoke else args.steps), eval_every=(10 if args.smoke else args.eval_every),
-        val_fraction=args.val_fraction, seed=args.seed, device=args.device, **size,
+        val_fraction=args.val_fraction, seed=args.seed, device=args.device,
+        use_giver_state=not args.no_giver_state, **size,
     )
     data = load_data(args.data, args.smoke, args.seed)
     train, test = split_test(data, args.folds, args.test_fold, args.seed)
@@ -189,6 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "ffn 3200, 4 enc layers, VAE 4 layers, latent 32) instead of the CPU default "
                      "(dim 128, 4 heads, ffn 512, 2 enc / 1 dec layers, VAE 1 layer, latent 16)")
     act.add_argument("--no-vae", action="store_true", help="train without ACT's CVAE objective")
+    act.add_argument("--no-giver-state", action="store_true", help="no observation.state input feature: the "
+                     "receiver history alone, exactly what the planner sees")
     act.add_argument("--dim-model", type=int, default=None, help="override the transformer width")
     act.add_argument("--n-heads", type=int, default=None, help="override the attention heads")
     act.add_argument("--dim-feedforward", type=int, default=None, help="override the feed-forward width")

@@ -113,6 +113,10 @@ class ACTAgentConfig:
         seed: seeds initialisation, sampling and the split.
         device: torch device.
         temporal_ensemble_coeff: LeRobot ``ACTTemporalEnsembler`` coefficient used by ``act``.
+        use_giver_state: give ACT ``observation.state`` (the current giver/robot xyz) as an input
+            feature (default). False drops it from ``input_features`` (receiver history only,
+            exactly what the planner sees); the batch still carries the key because LeRobot's
+            ``ACT.forward`` reads its device.
     """
 
     history: int = 10
@@ -138,6 +142,7 @@ class ACTAgentConfig:
     seed: int = 0
     device: str = "cpu"
     temporal_ensemble_coeff: float = 0.01
+    use_giver_state: bool = True
 
     def __post_init__(self) -> None:
         if self.paper_scale:
@@ -170,7 +175,8 @@ class ACTAgentConfig:
         return ACTConfig(
             input_features={
                 OBS_ENV_STATE: PolicyFeature(type=FeatureType.ENV, shape=(self.spec.env_dim,)),
-                OBS_STATE: PolicyFeature(type=FeatureType.STATE, shape=(STATE_DIM,)),
+                **({OBS_STATE: PolicyFeature(type=FeatureType.STATE, shape=(STATE_DIM,))}
+                   if self.use_giver_state else {}),
             },
             output_features={ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(ACTION_DIM,))},
             normalization_mapping={
@@ -502,7 +508,7 @@ class ACTAgent(PredictiveAgent):
     def predict(self, receiver_history: np.ndarray, giver_xyz: np.ndarray | None = None) -> np.ndarray:
         """(H, 3) future giver xyz from the receiver history and the current giver xyz."""
         hist = validate_history(receiver_history)
-        giver = validate_giver(giver_xyz)
+        giver = validate_giver(giver_xyz) if self.config.use_giver_state else np.zeros(3)
         return self.predict_batch(encode_history(hist, self.config.history)[None], giver[None])[0]
 
     def predict_sequence(
@@ -511,7 +517,9 @@ class ACTAgent(PredictiveAgent):
         """Batched open-loop predictions (Q, H, 3); ``giver_xyz`` is the episode's (T, 3) giver."""
         receiver_xy = validate_history(receiver_xy)
         if giver_xyz is None:
-            validate_giver(None)
+            if self.config.use_giver_state:
+                validate_giver(None)
+            giver_xyz = np.zeros((receiver_xy.shape[0], 3))
         giver = np.asarray(giver_xyz, dtype=np.float64)
         if giver.shape != (receiver_xy.shape[0], 3):
             raise ValueError(f"giver_xyz must have shape ({receiver_xy.shape[0]}, 3), got {giver.shape}")
@@ -543,7 +551,8 @@ class ACTAgent(PredictiveAgent):
         """
         self._require_fitted()
         env = torch.as_tensor(encode_history(np.asarray(self._history), self.config.history), dtype=torch.float32)
-        giver = torch.as_tensor(validate_giver(self._giver_now), dtype=torch.float32)
+        state = validate_giver(self._giver_now) if self.config.use_giver_state else np.zeros(3)
+        giver = torch.as_tensor(state, dtype=torch.float32)
         batch = self.preprocessor({OBS_ENV_STATE: env, OBS_STATE: giver})
         now = self.policy.select_action(batch)  # (1, 3), normalised
         rows = torch.cat([now[:, None], self.policy.temporal_ensembler.ensembled_actions], dim=1)

@@ -137,3 +137,11 @@ def test_clear_errors(data, export, trained, tmp_path):
         ACTAgent(ACTAgentConfig(**dict(TINY, horizon=90))).fit(data)
     with pytest.raises(ValueError, match="divisible"):
         ACTAgentConfig(dim_model=30, n_heads=4)
+
+
+def test_receiver_only_variant_drops_the_state_feature(export, data):
+    agent = ACTAgent(ACTAgentConfig(**dict(TINY, steps=4, eval_every=4), use_giver_state=False)).fit_lerobot(export)
+    assert agent.policy.config.robot_state_feature is None
+    ep = data[1]
+    pred = agent.predict(ep.receiver_xy[:15])
+    np.testing.assert_allclose(agent.predict_sequence(ep.receiver_xy, np.array([14]))[0], pred, atol=1e-5)
