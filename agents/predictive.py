@@ -137,8 +137,10 @@ class PredictiveAgent(Agent):
         if obs[self._slices["gripper_open"][0]][0] > 0.5 or seen < 1:
             return self._ready()
         new = seen - self._frames_seen
+        hist_slice = self._slices["receiver_xy_history"][0]
+        track = obs[hist_slice].astype(np.float64).reshape(self.layout.history, 2)
+        track = track[-min(self.layout.history, seen):]  # the valid rows, as ObsLayout.receiver_track
         if new > 0:
-            track = self.layout.receiver_track(obs).astype(np.float64)
             for row in track[-min(new, track.shape[0]):]:
                 self.stream_update(row)
             self._frames_seen = seen
@@ -147,7 +149,7 @@ class PredictiveAgent(Agent):
             return self._ready()
         frame = (seen - 1) + self.params.forecast_time * c.rate_hz
         target = self._ensembler.at(frame)
-        receiver = self.layout.receiver_track(obs)[-1].astype(np.float64)
+        receiver = track[-1]
         yaw = math.atan2(receiver[1] - target[1], receiver[0] - target[0])
         turn = (yaw - c.ready_yaw + math.pi) % (2 * math.pi) - math.pi
         yaw = c.ready_yaw + min(max(turn, -c.max_yaw_turn), c.max_yaw_turn)
