@@ -86,17 +86,21 @@ class ControllerConfig:
             raise ValueError("gains must be >= 0, ref_omega and max_linear_speed > 0")
 
 
+def _target_rotation_cs(c: float, s: float) -> np.ndarray:
+    """:func:`target_rotation` from the cosine and sine of the yaw (it is linear in them)."""
+    z = np.array([c, s, 0.0])
+    x = np.array([0.0, 0.0, -1.0])
+    y = np.cross(z, x)
+    return np.column_stack([x, y, z])
+
+
 def target_rotation(yaw: float) -> np.ndarray:
     """Desired gripper orientation (3x3, columns = gripper x, y, z axes in the world).
 
     The approach axis z is horizontal at heading ``yaw``; the finger joint axis x points down, so
     the fingers close horizontally around an upright bottle.
     """
-    c, s = math.cos(yaw), math.sin(yaw)
-    z = np.array([c, s, 0.0])
-    x = np.array([0.0, 0.0, -1.0])
-    y = np.cross(z, x)
-    return np.column_stack([x, y, z])
+    return _target_rotation_cs(math.cos(yaw), math.sin(yaw))
 
 
 def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
@@ -107,15 +111,42 @@ def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
     return idx
 
 
-def target_rotation_batch(yaw: np.ndarray) -> np.ndarray:
-    """:func:`target_rotation` for many yaws at once: (n, 3, 3)."""
-    yaw = np.asarray(yaw, dtype=float)
-    c, s = np.cos(yaw), np.sin(yaw)
-    out = np.zeros(yaw.shape + (3, 3))
-    out[..., 2, 0] = -1.0  # x = (0, 0, -1)
-    out[..., 0, 1], out[..., 1, 1] = -s, c  # y = z cross x = (-s, c, 0)
-    out[..., 0, 2], out[..., 1, 2] = c, s  # z = (c, s, 0)
+def _rotation_error_map(rot_d: np.ndarray) -> np.ndarray:
+    """The linear map (4, 9) from vec(R) (row-major) to [e_r (3), trace(R_d Rᵀ)].
+
+    With r = R_d Rᵀ the orientation error is e_r = ½ (r21 - r12, r02 - r20, r10 - r01) and
+    r_ab = R_d[a] · R[b]: both e_r and the trace are linear in R.
+    """
+    out = np.zeros((4, 9))
+    out[0, 3:6] += 0.5 * rot_d[2]
+    out[0, 6:9] -= 0.5 * rot_d[1]
+    out[1, 6:9] += 0.5 * rot_d[0]
+    out[1, 0:3] -= 0.5 * rot_d[2]
+    out[2, 0:3] += 0.5 * rot_d[1]
+    out[2, 3:6] -= 0.5 * rot_d[0]
+    out[3] = rot_d.reshape(9)
     return out
+
+
+def _rotation_error_basis() -> np.ndarray:
+    """(3, 36): ``[1, cos ψ, sin ψ] @ basis`` is :func:`_rotation_error_map` of ``target_rotation(ψ)``.
+
+    ``target_rotation`` is linear in (cos ψ, sin ψ) and the error map is linear in R_d.
+    """
+    a0 = _target_rotation_cs(0.0, 0.0)
+    parts = (a0, _target_rotation_cs(1.0, 0.0) - a0, _target_rotation_cs(0.0, 1.0) - a0)
+    return np.stack([_rotation_error_map(p).reshape(36) for p in parts])
+
+
+# Layout of z, the per-tick input of the control law (see ImpedanceController): TCP position (3),
+# twist J q̇ (6), J_prev q̇ (6), 1 (constant wrench), 1 (feed-forward of the plan), vec R (9).
+# The first 16 columns of W_k are the same for every planned tick.
+_Z_POS, _Z_TWIST, _Z_PREV, _Z_CONST, _Z_FF, _Z_ROT, _Z_SIZE = 0, 3, 9, 15, 16, 17, 26
+# Columns of the per-replan matrix Λ P + C (see ImpedanceController._gain_maps).
+_B_TICK = _Z_FF  # [-G_x | -(G_v + G_a / dt) | G_a / dt | c]: W_k[:6, :_Z_FF] for every k
+_B_FF = slice(_Z_FF, _Z_FF + 12)  # Gᵀ rows that multiply one plan tick [x, ψ, v, ψ̇, a, ψ̈]
+_B_ROT = slice(_Z_FF + 12, _Z_FF + 15)  # G_r, the gain on the rotation error
+_B_SIZE = _Z_FF + 15
 
 
 class ImpedanceController:
@@ -127,32 +158,43 @@ class ImpedanceController:
         params: Θ (K and B are used here).
         config: fixed controller settings.
         rest_qpos: the posture the null-space term pulls toward (6,).
+
+    How a tick is evaluated: with Λ frozen between replans the control law is affine in the
+    measured quantities ``z = [x (3), J q̇ (6), J_prev q̇ (6), 1, 1, vec R (9)]`` (TCP position,
+    twist with this tick's and the previous tick's Jacobian, TCP orientation), so
+    ``[wrench, trace(R_d Rᵀ)] = W_k z`` with one (7, 26) matrix per planned tick k, built at each
+    replan (:meth:`_refresh_dynamics`). A tick is then a few small products (numpy's ``dot``
+    with ``out=``, which has the lowest call overhead at this size) into preallocated buffers.
     """
 
     def __init__(self, model: mujoco.MjModel, ids: SceneIds, params: HandoverParams,
                  config: ControllerConfig | None = None, rest_qpos: np.ndarray | None = None) -> None:
         self.model, self.ids = model, ids
         self.config = config or ControllerConfig()
-        self.set_params(params)
         nv = model.nv
-        self._jac = np.zeros((6, nv))
-        self._jacp, self._jacr = self._jac[:3], self._jac[3:]
-        self._minv_jt = np.zeros((6, nv))
+        n = self.config.plan_ticks
+        self._n_plan = n
         self._dof = _as_slice(ids.arm_dof)
         self._qpos_adr = _as_slice(ids.arm_qpos)
-        self._damp6 = self.config.singular_damping * np.eye(6)
-        self._prev_j = np.zeros((6, 6))
-        self._have_prev = False
-        self._zero6 = np.zeros(6)
-        self._err = np.zeros(6)
         self._tcp = ids.tcp_site
+        self._payload_mass = 0.0  # mass of a held object to compensate, kg
+        self.set_params(params)
+        # Jacobians: rows 0:6 this tick's (translation, rotation), rows 6:12 the previous tick's.
+        self._jac12 = np.zeros((12, nv))
+        self._jac_cur, self._jac_prev = self._jac12[0:6], self._jac12[6:12]
+        self._jacp, self._jacr = self._jac12[0:3], self._jac12[3:6]
+        self._j2 = self._jac12[:, self._dof]  # (12, 6) arm columns of both
+        self._j = self._jac12[0:6, self._dof]
+        self._minv_jt = np.zeros((6, nv))
+        self._x_minv = self._minv_jt[:, self._dof]
+        self._lam_inv = np.zeros((6, 6))
+        self._damp6 = self.config.singular_damping * np.eye(6)
+        self._have_prev = False
         self._stale = True
         self._tau_posture = np.zeros(6)
-        self._verr = np.zeros(6)
         self._posture = self.config.posture_stiffness > 0.0 or self.config.posture_damping > 0.0
         self._kn, self._dn = self.config.posture_stiffness, self.config.posture_damping
-        self._wrench = np.zeros(6)
-        self._rhs = np.zeros(6)
+        self._tau0 = np.zeros(6)
         self._tmp6 = np.zeros(6)
         self._tmp6b = np.zeros(6)
         self._rest = np.zeros(6) if rest_qpos is None else np.asarray(rest_qpos, float).copy()
@@ -161,7 +203,7 @@ class ImpedanceController:
         self._limits = TORQUE_LIMITS.copy()
         self._neg_limits = -self._limits
         # Reference filter state and target.
-        self.x_d = np.zeros(3)
+        self._x_start = np.zeros(3)  # reference state at the start of the current plan
         self.v_d = np.zeros(3)
         self.a_d = np.zeros(3)
         self.target_pos = np.zeros(3)
@@ -169,14 +211,22 @@ class ImpedanceController:
         self.target_yaw = 0.0
         self.yaw_d = 0.0
         self.yaw_rate_d = 0.0
-        self._rot_d = target_rotation(0.0)
-        self._payload_mass = 0.0  # mass of a held object to compensate, kg
-        self._gain = np.zeros((6, 18))  # wrench = G s + c (see _refresh_dynamics)
-        self._gain_c = np.zeros(6)
-        self._s = np.zeros(18)
-        self._twist_prev = np.zeros(6)
+        self._gains = np.zeros((6, _B_SIZE))  # Λ P + C (see _gain_maps)
+        self._w_plan = np.zeros((n, 7, _Z_SIZE))  # W_k for each planned tick
+        self._rot_w = np.zeros((6, 9 * n))  # G_r L_k for all k, layout (6, 9, n)
+        self._ff_w = np.zeros((6, n))  # feed-forward column of W_k for all k
+        self._z = np.zeros(_Z_SIZE)
+        self._z[_Z_CONST] = self._z[_Z_FF] = 1.0
+        self._z_pos = self._z[_Z_POS:_Z_TWIST]
+        self._z_twists = self._z[_Z_TWIST:_Z_CONST]
+        self._z_rot = self._z[_Z_ROT:_Z_SIZE]
+        self._out = np.zeros(7)  # [wrench (6), trace(R_d Rᵀ)]
+        self._wrench = self._out[:6]
+        self._tau = np.zeros(6)
         self.last_torque = np.zeros(6)
-        self.last_unclipped = np.zeros(6)
+        self.last_unclipped = self._tau
+        self._bound: mujoco.MjData | None = None
+        self._static_views = isinstance(self._dof, slice) and isinstance(self._qpos_adr, slice)
         self.dt = model.opt.timestep * self.config.ticks
         self._inv_dt = 1.0 / self.dt
         w = self.config.ref_omega
@@ -187,12 +237,37 @@ class ImpedanceController:
         acc = np.array([-w * w, -2.0 * w])
         step = np.array([[1.0 + dt * dt * acc[0], dt + dt * dt * acc[1]], [dt * acc[0], 1.0 + dt * acc[1]]])
         rows, state = [], np.eye(2)
-        for _ in range(self.config.plan_ticks):
+        for _ in range(n):
             a_row = acc @ state
             state = step @ state
             rows.append(np.vstack([state, a_row]))
-        self._powers = np.array(rows)  # (plan_ticks, 3, 2): tick k -> (e, v after the tick, a during it)
-        self._x_plan = np.zeros((0, 3))
+        # (plan_ticks, 3, 3): tick k -> (x_d, v after the tick, a during it) from (e, v, target) at
+        # the start of the plan, e = x_d - target; the third column adds the target to x_d.
+        self._powers = np.zeros((n, 3, 3))
+        self._powers[:, :, :2] = np.array(rows)
+        self._powers[:, 0, 2] = 1.0
+        # Plan buffers, overwritten at each replan. Columns of the filter state: x, y, z, yaw.
+        self._traj = np.zeros((n, 3, 4))  # tick k -> rows (x_d, v, a), columns (x, y, z, yaw)
+        self._traj12 = self._traj.reshape(n, 12)
+        self._x_plan = self._traj[:, 0, :3]
+        self._yaw_plan = self._traj[:, 0, 3]
+        self._v_plan = self._traj[:, 1, :3]
+        self._yaw_rate_plan = self._traj[:, 1, 3]
+        self._cs = np.ones((3, n))  # [1, cos ψ_k, sin ψ_k] for each tick k (columns)
+        self._rot_basis_t = np.ascontiguousarray(_rotation_error_basis().T)  # (36, 3)
+        self._rot_maps = np.zeros((36, n))  # _rotation_error_map(R_d,k) flattened, layout (4, 9, n)
+        self._rot_l = self._rot_maps[:27].reshape(3, 9 * n)  # L_k for all k, layout (3, 9, n)
+        self._plan_i = 0
+
+    @property
+    def x_d(self) -> np.ndarray:
+        """The desired TCP position at the last tick (a copy), m."""
+        i = self._plan_i - 1
+        return self._x_plan[i].copy() if i >= 0 else self._x_start.copy()
+
+    @x_d.setter
+    def x_d(self, value: np.ndarray) -> None:
+        self._x_start = np.asarray(value, dtype=float).copy()
 
     @property
     def payload_mass(self) -> float:
@@ -202,6 +277,7 @@ class ImpedanceController:
     @payload_mass.setter
     def payload_mass(self, mass: float) -> None:
         self._payload_mass = float(mass)
+        self._gain_maps()
         self._stale = True  # the gain matrix includes it
 
     def set_params(self, params: HandoverParams) -> None:
@@ -213,6 +289,40 @@ class ImpedanceController:
         self._bvec = np.array([params.damping] * 3 + [0.0] * 3, dtype=float)
         self._kr6 = np.array([0.0] * 3 + [c.rot_omega**2] * 3)
         self._br6 = np.array([0.0] * 3 + [2.0 * c.rot_zeta * c.rot_omega] * 3)
+        self._gain_maps()
+
+    def _gain_maps(self) -> None:
+        """P and C such that Λ P + C holds every gain block the ticks need (fixed between replans).
+
+        The control law is linear in s = [Δx (6), Δẋ (6), ẍ_d - J̇q̇ (6)]: wrench = G s + c with
+            G = [diag(K) + Λ diag(K_r),  diag(B) + Λ diag(B_r),  Λ + m_obj I_trans],  c = -m_obj g,
+        i.e. G = Λ P_G + C_G. The blocks used are linear column maps S of [G | 0]: the constant
+        columns of W_k (-G_x; -(G_v + G_a / dt) on J q̇; G_a / dt on J_prev q̇, from the backward
+        difference J̇ q̇ ≈ (J - J_prev) q̇ / dt; c), the feed-forward rows and G_r.
+        """
+        dt_inv = 1.0 / (self.model.opt.timestep * self.config.ticks)
+        p_g = np.zeros((6, 19))
+        p_g[:, 0:6] = np.diag(self._kr6)
+        p_g[:, 6:12] = np.diag(self._br6)
+        p_g[:, 12:18] = np.eye(6)
+        c_g = np.zeros((6, 19))
+        c_g[:, 0:6] = np.diag(self._kvec)
+        c_g[:, 6:12] = np.diag(self._bvec)
+        c_g[0:3, 12:15] = self._payload_mass * np.eye(3)
+        sel = np.zeros((19, _B_SIZE))  # column 18 of [G | 0] is the zero pad
+        for k in range(6):
+            if k < 3:
+                sel[k, _Z_POS + k] = -1.0
+            sel[6 + k, _Z_TWIST + k] = -1.0
+            sel[12 + k, _Z_TWIST + k] = -dt_inv
+            sel[12 + k, _Z_PREV + k] = dt_inv
+        for r, col in enumerate((0, 1, 2, 18, 6, 7, 8, 11, 12, 13, 14, 18)):  # x, ψ, v, ψ̇, a, ψ̈
+            sel[col, _B_FF.start + r] = 1.0
+        for k in range(3):
+            sel[3 + k, _B_ROT.start + k] = 1.0
+        self._p_gain = p_g @ sel
+        self._c_gain = c_g @ sel
+        self._c_gain[0:3, _Z_CONST] = -self._payload_mass * GRAVITY
 
     def reset(self, data: mujoco.MjData, rest_qpos: np.ndarray | None = None) -> None:
         """Start the reference at the current TCP pose with zero velocity."""
@@ -247,74 +357,93 @@ class ImpedanceController:
         """
         i = self._plan_i - 1
         if i >= 0:  # the reference state reached by the last tick of the current plan
-            self.x_d = self._x_plan[i]
-            self.v_d = self._v_plan[i]
+            self._x_start = self._x_plan[i].copy()
+            self.v_d = self._v_plan[i].copy()
             self.yaw_d = float(self._yaw_plan[i])
             self.yaw_rate_d = float(self._yaw_rate_plan[i])
-        step = self.goal_pos - self.x_d
-        dist = math.sqrt(float(step @ step))
+        x0, x1, x2 = self._x_start.tolist()
+        g0, g1, g2 = self.goal_pos.tolist()
+        d0, d1, d2 = g0 - x0, g1 - x1, g2 - x2
+        dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         if dist > self._max_step:
-            step *= self._max_step / dist
-        self.target_pos[:] = self.x_d + step
-        s0 = np.stack([self.x_d - self.target_pos, self.v_d])  # (2, 3)
-        traj = self._powers @ s0  # (n, 3 rows: x-err, v, a, 3)
-        self._x_plan = traj[:, 0] + self.target_pos
-        self._v_plan = traj[:, 1]
-        self._a_plan = traj[:, 2]
+            f = self._max_step / dist
+            d0, d1, d2 = d0 * f, d1 * f, d2 * f
+        t0, t1, t2 = x0 + d0, x1 + d1, x2 + d2
+        target = self.target_pos
+        target[0], target[1], target[2] = t0, t1, t2
         # The yaw goes through the same filter, along the shorter way round.
-        dyaw = (self.yaw_d - self.target_yaw + math.pi) % (2 * math.pi) - math.pi
-        yaw_traj = self._powers[:, :2] @ np.array([dyaw, self.yaw_rate_d])
-        self._yaw_plan = yaw_traj[:, 0] + self.target_yaw
-        self._yaw_rate_plan = yaw_traj[:, 1]
-        self._rot_plan = target_rotation_batch(self._yaw_plan)
-        n = self._x_plan.shape[0]
-        self._vd6_plan = np.zeros((n, 6))
-        self._vd6_plan[:, :3] = self._v_plan
-        self._vd6_plan[:, 5] = self._yaw_rate_plan
-        self._a6_plan = np.zeros((n, 6))
-        self._a6_plan[:, :3] = self._a_plan
+        yaw_t = self.target_yaw
+        dyaw = (self.yaw_d - yaw_t + math.pi) % (2 * math.pi) - math.pi
+        v0, v1, v2 = self.v_d.tolist()
+        s0 = np.array(((x0 - t0, x1 - t1, x2 - t2, dyaw), (v0, v1, v2, self.yaw_rate_d), (t0, t1, t2, yaw_t)))
+        traj = self._traj
+        np.dot(self._powers, s0, out=traj)  # (n, 3 rows: x_d, v, a; 4 columns: x, y, z, yaw)
+        cs = self._cs
+        np.cos(self._yaw_plan, out=cs[1])
+        np.sin(self._yaw_plan, out=cs[2])
+        np.dot(self._rot_basis_t, cs, out=self._rot_maps)
+        self._w_plan[:, 6, _Z_ROT:] = self._rot_maps[27:].T  # trace(R_d Rᵀ)
         self._plan_i = 0
         self._stale = True
 
     def _refresh_dynamics(self, data: mujoco.MjData) -> None:
-        """Λ(q) (as a Cholesky factor of Λ^-1), J M^-1 and the null-space posture torque.
+        """Λ(q) (as a Cholesky factor of Λ^-1), J M^-1, the null-space posture torque and W_k.
 
         Refreshed at every replan of the reference (about 30 Hz): Λ and the projector change
-        slowly with q, while J, the errors and the bias forces are updated at every tick.
+        slowly with q, while J, the errors and the bias forces are updated at every tick. Uses
+        this tick's Jacobian (already in ``_jac_cur``).
         """
-        m, ids, dof = self.model, self.ids, self._dof
-        jac = self._jac
-        mujoco.mj_jacSite(m, data, self._jacp, self._jacr, ids.tcp_site)
-        mujoco.mj_solveM(m, data, self._minv_jt, jac)  # rows of J M^-1
-        j = jac[:, dof]
-        x = self._minv_jt[:, dof]
-        lam_inv = x @ j.T
+        mujoco.mj_solveM(self.model, data, self._minv_jt, self._jac_cur)  # rows of J M^-1
+        j = self._j
+        x = self._x_minv
+        lam_inv = self._lam_inv
+        np.dot(x, j.T, out=lam_inv)
         lam_inv += self._damp6
         mujoco.mju_cholFactor(lam_inv, 0.0)  # Λ^-1 = L Lᵀ; Λ v = cholSolve(v)
-        self._lam_chol = lam_inv
-        # The control law is linear in s = [Δx (6), Δẋ (6), ẍ_d - J̇q̇ (6)] with Λ frozen until the
-        # next replan: wrench = G s + c, with
-        #   G = [diag(K) + Λ diag(K_r),  diag(B) + Λ diag(B_r),  Λ + m_obj I_trans],  c = -m_obj g.
-        lam = self._lam
+        lam, eye = self._lam, self._eye6
         for k in range(6):
-            mujoco.mju_cholSolve(lam[k], lam_inv, self._eye6[k])  # Λ is symmetric: rows = columns
-        g = self._gain
-        np.multiply(lam, self._kr6, out=g[:, 0:6])
-        np.multiply(lam, self._br6, out=g[:, 6:12])
-        g[:, 12:18] = lam
-        for k in range(3):
-            g[k, k] += self._kvec[k]
-            g[k, 6 + k] += self._bvec[k]
-            g[k, 12 + k] += self._payload_mass
-        self._gain_c[:3] = -self._payload_mass * GRAVITY
+            mujoco.mju_cholSolve(lam[k], lam_inv, eye[k])  # Λ is symmetric: rows = columns
+        # W_k z = G s_k + c for every planned tick k, with
+        #   s = [x_d - x, L_k vec R, v_d - J q̇, a_d - (J q̇ - J_prev q̇) / dt]
+        # (x_d, v_d, a_d, R_d from the plan; L_k the rotation error map of R_d,k).
+        b = self._gains
+        np.dot(lam, self._p_gain, out=b)
+        b += self._c_gain
+        w_plan, n = self._w_plan, self._n_plan
+        w_plan[:, :6, :_B_TICK] = b[:, :_B_TICK]
+        np.dot(b[:, _B_FF], self._traj12.T, out=self._ff_w)
+        w_plan[:, :6, _Z_FF] = self._ff_w.T
+        np.dot(b[:, _B_ROT], self._rot_l, out=self._rot_w)
+        w_plan[:, :6, _Z_ROT:] = self._rot_w.reshape(6, 9, n).transpose(2, 0, 1)
         # Null-space posture term, N = I - Jᵀ J̄ᵀ with J̄ᵀ = Λ J M^-1.
         if self._posture:
-            tau0 = self._kn * (self._rest - data.qpos[self._qpos_adr]) - self._dn * data.qvel[dof]
-            mujoco.mju_cholSolve(self._tmp6b, lam_inv, x @ tau0)
-            self._tau_posture = tau0 - j.T @ self._tmp6b
-        else:
-            self._tau_posture = self._zero6
+            tau0, tmp = self._tau0, self._tmp6
+            np.subtract(self._rest, self._qpos_v, out=tau0)
+            tau0 *= self._kn
+            np.multiply(self._qvel_v, self._dn, out=tmp)
+            tau0 -= tmp  # k_n (q_rest - q) - d_n q̇
+            np.dot(x, tau0, out=tmp)
+            mujoco.mju_cholSolve(self._tmp6b, lam_inv, tmp)
+            np.dot(self._tmp6b, j, out=tmp)
+            np.subtract(tau0, tmp, out=self._tau_posture)  # N τ_0 = τ_0 - Jᵀ Λ J M^-1 τ_0
         self._stale = False
+
+    def _bind(self, data: mujoco.MjData) -> None:
+        """Keep views of the ``data`` arrays read at every tick (MjData buffers never move)."""
+        self._bound = data
+        self._xpos_v = data.site_xpos[self._tcp]
+        self._xmat_v = data.site_xmat[self._tcp]
+        self._qvel_v = data.qvel[self._dof]
+        self._qpos_v = data.qpos[self._qpos_adr]
+        self._bias_v = data.qfrc_bias[self._dof]
+
+    def _far_rotation(self, i: int) -> None:
+        """Beyond ~120 deg of orientation error: push at full strength (the sin-scaled error,
+        rescaled to magnitude 2, replaces the one already in the wrench)."""
+        e = self._rot_l.reshape(3, 9, self._n_plan)[:, :, i] @ self._z_rot
+        ex, ey, ez = e.tolist()
+        scale = 2.0 / max(math.sqrt(ex * ex + ey * ey + ez * ez), 1e-9)
+        self._wrench += self._gains[:, _B_ROT] @ (e * (scale - 1.0))
 
     def compute(self, data: mujoco.MjData) -> np.ndarray:
         """One control update: advance the reference, return the clipped joint torques (6,).
@@ -322,49 +451,36 @@ class ImpedanceController:
         The returned array is an internal buffer, overwritten by the next call.
         """
         i = self._plan_i
-        if i >= self._x_plan.shape[0]:
+        if i >= self._n_plan:
             self._plan()
             i = 0
         self._plan_i = i + 1
+        if data is not self._bound or not self._static_views:
+            self._bind(data)
+        # J̇ q̇ by a backward difference of J over one tick (cheaper than mj_jacDot):
+        # (J_k - J_{k-1}) q̇_k / dt; on the first tick after reset J_{k-1} = J_k (no J̇ q̇ term).
+        if self._have_prev:
+            self._jac_prev[...] = self._jac_cur
+            mujoco.mj_jacSite(self.model, data, self._jacp, self._jacr, self._tcp)
+        else:
+            mujoco.mj_jacSite(self.model, data, self._jacp, self._jacr, self._tcp)
+            self._jac_prev[...] = self._jac_cur
+            self._have_prev = True
         if self._stale:
             self._refresh_dynamics(data)
-        self.x_d = self._x_plan[i]
-        mujoco.mj_jacSite(self.model, data, self._jacp, self._jacr, self._tcp)
-        dof = self._dof
-        j = self._jac[:, dof]
-        qvel = data.qvel[dof]
-        twist = j @ qvel
-        s = self._s
-        # J̇ q̇ by a backward difference of J over one tick (cheaper than mj_jacDot):
-        # (J_k - J_{k-1}) q̇_k / dt; s[12:18] = ẍ_d - J̇ q̇.
-        if self._have_prev:
-            np.subtract(twist, self._prev_j @ qvel, out=self._tmp6)
-            self._tmp6 *= self._inv_dt
-            np.subtract(self._a6_plan[i], self._tmp6, out=s[12:18])
-        else:
-            s[12:18] = self._a6_plan[i]
-            self._have_prev = True
-        self._prev_j[:] = j
-        # Pose error: translation, and rotation from R_d Rᵀ (exact axis, sin-scaled magnitude).
-        np.subtract(self.x_d, data.site_xpos[self._tcp], out=s[0:3])
-        r = (self._rot_plan[i] @ data.site_xmat[self._tcp].reshape(3, 3).T).tolist()
-        ex = 0.5 * (r[2][1] - r[1][2])
-        ey = 0.5 * (r[0][2] - r[2][0])
-        ez = 0.5 * (r[1][0] - r[0][1])
-        if r[0][0] + r[1][1] + r[2][2] < -0.5:  # beyond ~120 deg: push at full strength
-            scale = 2.0 / max(math.sqrt(ex * ex + ey * ey + ez * ez), 1e-9)
-            ex, ey, ez = ex * scale, ey * scale, ez * scale
-        s[3], s[4], s[5] = ex, ey, ez
-        np.subtract(self._vd6_plan[i], twist, out=s[6:12])
         # Eq. 1 with M = Λ(q): F = K Δx + B Δẋ + Λ (ẍ_d - J̇q̇) for translation (K, B from Θ), plus
         # Λ (ω² e_r + 2ζω Δω) for rotation (fixed gains on the decoupled rotational dynamics), plus
-        # the held object's inertia and weight at the TCP: all in one product, wrench = G s + c.
-        wrench = self._gain @ s
-        wrench += self._gain_c
-        tau = j.T @ wrench
-        tau += data.qfrc_bias[dof]
+        # the held object's inertia and weight at the TCP: all in one product, [wrench, tr] = W_i z.
+        self._z_pos[...] = self._xpos_v
+        self._z_rot[...] = self._xmat_v
+        np.dot(self._j2, self._qvel_v, out=self._z_twists)
+        np.dot(self._w_plan[i], self._z, out=self._out)
+        if self._out[6] < -0.5:  # trace(R_d Rᵀ): beyond ~120 deg
+            self._far_rotation(i)
+        tau = self._tau
+        np.dot(self._wrench, self._j, out=tau)  # Jᵀ F
+        tau += self._bias_v
         tau += self._tau_posture
-        self.last_unclipped = tau
         np.minimum(tau, self._limits, out=self.last_torque)
         np.maximum(self.last_torque, self._neg_limits, out=self.last_torque)
         return self.last_torque
