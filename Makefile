@@ -7,6 +7,10 @@ export HF_HUB_OFFLINE := 1
 export HF_DATASETS_OFFLINE := 1
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
+# One BLAS thread: the per-frame GP mat-vecs are tiny, and threaded BLAS on a shared 2-core
+# machine made fitting 10-30x slower (train.py --threads sets torch's own thread count).
+export OMP_NUM_THREADS ?= 1
+export OPENBLAS_NUM_THREADS ?= 1
 
 .PHONY: demo test bench install clean
 
