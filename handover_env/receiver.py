@@ -146,6 +146,9 @@ class Receiver:
         self.t_hand_raised = math.nan
         self.t_depart = 0.0
         self._reach_from = None
+        self._bound: mujoco.MjData | None = None
+        self._xy_list: list[list[float]] = self._frames_xy.tolist()
+        self._heading_list: list[float] = self._frames_heading.tolist()
         self._raised_hand: np.ndarray | None = None
 
     # ------------------------------------------------------------------ setup
@@ -217,6 +220,8 @@ class Receiver:
         self._shoulder_frames = np.asarray(
             rm.shoulder_position(self._frames_xy, self._frames_heading, self.height), dtype=np.float64)
         self._arm_reach = float(rm.arm_reach(self.height))
+        self._xy_list = self._frames_xy.tolist()  # the same frames as floats for per-step lookups
+        self._heading_list = self._frames_heading.tolist()
         self.state = "walking"
         self.reach = 0.0
         self.t_grasp = math.nan
@@ -254,12 +259,19 @@ class Receiver:
     # ------------------------------------------------------------------ queries
     def base_at(self, t: float) -> tuple[np.ndarray, float]:
         """Base xy and heading at time t (linear interpolation; holds the last frame after the end)."""
-        f = min(max(t * CAMERA_RATE, 0.0), self._frames_xy.shape[0] - 1.0)
-        i = min(int(f), self._frames_xy.shape[0] - 2)
+        x, y, heading = self._base_floats(t)
+        return np.array([x, y]), heading
+
+    def _base_floats(self, t: float) -> tuple[float, float, float]:
+        """:meth:`base_at` as plain floats (x, y, heading)."""
+        n = len(self._xy_list)
+        f = min(max(t * CAMERA_RATE, 0.0), n - 1.0)
+        i = min(int(f), n - 2)
         a = f - i
-        xy = self._frames_xy[i] * (1.0 - a) + self._frames_xy[i + 1] * a
-        heading = self._frames_heading[i] * (1.0 - a) + self._frames_heading[i + 1] * a
-        return xy, float(heading)
+        b = 1.0 - a
+        (x0, y0), (x1, y1) = self._xy_list[i], self._xy_list[i + 1]
+        h0, h1 = self._heading_list[i], self._heading_list[i + 1]
+        return x0 * b + x1 * a, y0 * b + y1 * a, h0 * b + h1 * a
 
     def _at(self, frames: np.ndarray, t: float) -> np.ndarray:
         """Per-frame array ``frames`` (T, k) at time t (linear; holds the last frame)."""
@@ -289,11 +301,12 @@ class Receiver:
         """
         cfg = self.config
         dt = t1 - t0
-        xy1, h1 = self.base_at(t1)
+        bx1, by1, h1 = self._base_floats(t1)
+        xy1 = np.array([bx1, by1])
         if self._hand_prev is None:
             xy0, h0 = self.base_at(t0)
             self._hand_prev = self._hand_target(t0, xy0, h0, object_pos, 0.0)
-            self._base_prev = np.array([xy0[0], xy0[1], h0])
+            self._base_prev = (float(xy0[0]), float(xy0[1]), h0)
         if self.present_after_walk and self.state == "walking" and t1 >= self.duration:
             self.state = "presenting"  # static handover: stop and raise the right hand
             self.reach = 0.0
@@ -304,8 +317,10 @@ class Receiver:
         if object_free and self.hand_mode == "reach":
             if self.state == "walking" and not self.present_after_walk:
                 # Walking past: reach as soon as the object is within arm's reach of the shoulder.
-                sh = self._at(self._shoulder_frames, t1)
-                if np.linalg.norm(object_pos - sh) < self._arm_reach + cfg.reach_margin:
+                sx, sy, sz = self._at(self._shoulder_frames, t1).tolist()
+                ox, oy, oz = object_pos.tolist()
+                dx, dy, dz = ox - sx, oy - sy, oz - sz
+                if math.sqrt(dx * dx + dy * dy + dz * dz) < self._arm_reach + cfg.reach_margin:
                     self.state = "reaching"
             elif self.state == "presenting" and self.reach >= 1.0:
                 # Static: the raised hand waits until the robot brings the object to it.
@@ -317,7 +332,7 @@ class Receiver:
             self.reach = min(1.0, self.reach + dt / cfg.reach_time)
         hand1 = self._hand_target(t1, xy1, h1, object_pos, dt)
         self._hand_next = hand1
-        self._base_next = np.array([xy1[0], xy1[1], h1])
+        self._base_next = (bx1, by1, h1)
 
     def _hand_target(self, t: float, xy: np.ndarray, heading: float, object_pos: np.ndarray,
                      dt: float) -> np.ndarray:
@@ -348,51 +363,80 @@ class Receiver:
                 self._raised_hand = hand.copy()
             return hand
         if self.state == "reaching" and self._reach_from is not None:
-            goal = np.asarray(rm.hand_position(xy, heading, self.height, target_xyz=object_pos, reach=1.0),
-                              dtype=np.float64)
+            goal = self._reach_toward(t, object_pos, 1.0)
             return self._reach_from + self.reach * (goal - self._reach_from)
         if self.reach <= 0.0:
             # Walking: the rest swing (within arm's reach, so the model's reach clip is inactive).
             return self._at(self._rest_hand, t)
-        return np.asarray(rm.hand_position(xy, heading, self.height, target_xyz=object_pos, reach=self.reach),
-                          dtype=np.float64)
+        return self._reach_toward(t, object_pos, self.reach)
+
+    def _reach_toward(self, t: float, target: np.ndarray, reach: float) -> np.ndarray:
+        """``rm.hand_position(base, heading, height, target_xyz=target, reach=reach)`` at time t.
+
+        Uses that model's rest pose and shoulder precomputed at the camera frames (env steps end
+        on frame times) and applies its reach rule: the hand moves the fraction ``reach`` of the
+        straight line from the rest pose to the target and is kept within :func:`rm.arm_reach`
+        of the shoulder.
+        """
+        rest = self._at(self._rest_hand, t)
+        shoulder = self._at(self._shoulder_frames, t)
+        r = min(max(float(reach), 0.0), 1.0)
+        offset = rest + r * (target - rest) - shoulder
+        ox, oy, oz = offset.tolist()
+        dist = math.sqrt(ox * ox + oy * oy + oz * oz)
+        if dist > self._arm_reach:
+            offset *= self._arm_reach / max(dist, 1e-12)
+        return shoulder + offset
 
     def _recorded_hand(self, xy: np.ndarray) -> np.ndarray:
         assert self._frames_hand is not None
         d = np.linalg.norm(self._frames_xy - xy, axis=1)
         return self._frames_hand[int(np.argmin(d))]
 
+    def _bind(self, data: mujoco.MjData) -> None:
+        """Keep views of the ``data`` rows written or read at every tick (MjData buffers never move)."""
+        ids = self.ids
+        self._bound = data
+        self._base_pos_v = data.mocap_pos[ids.base_mocap]
+        self._base_quat_v = data.mocap_quat[ids.base_mocap]
+        self._hand_pos_v = data.mocap_pos[ids.hand_mocap]
+        self._object_pos_v = data.xpos[ids.object_body]
+
     def apply(self, data: mujoco.MjData, alpha: float) -> None:
         """Move the mocap bodies to the fraction ``alpha`` in [0, 1] of the current env step."""
-        ids = self.ids
-        b = self._base_prev + alpha * (self._base_next - self._base_prev)
-        data.mocap_pos[ids.base_mocap, 0] = b[0]
-        data.mocap_pos[ids.base_mocap, 1] = b[1]
-        data.mocap_quat[ids.base_mocap] = (math.cos(b[2] / 2), 0.0, 0.0, math.sin(b[2] / 2))
-        data.mocap_pos[ids.hand_mocap] = self._hand_prev + alpha * (self._hand_next - self._hand_prev)
+        self._set_mocap(data, alpha)
+        self._base_quat_v[1] = self._base_quat_v[2] = 0.0
 
-    def plan_ticks(self, alphas: np.ndarray) -> None:
-        """Set the fractions ``alphas`` of this env step at which the ticks fall."""
-        self._tick_alphas = np.asarray(alphas, dtype=np.float64).tolist()
+    def plan_ticks(self, alphas: np.ndarray | list[float]) -> None:
+        """Set the fractions ``alphas`` of this env step at which the ticks fall (kept, not copied,
+        if given as a list of floats)."""
+        self._tick_alphas = alphas if isinstance(alphas, list) else np.asarray(alphas, dtype=np.float64).tolist()
         self._tick_i = 0
 
     def apply_tick(self, data: mujoco.MjData) -> None:
         """Move the mocap bodies to their pose at the next tick (linear between the keyframes)."""
         a = self._tick_alphas[self._tick_i]
         self._tick_i += 1
-        ids = self.ids
-        b0, b1 = self._base_prev, self._base_next
-        yaw = float(b0[2] + a * (b1[2] - b0[2]))
-        bp = data.mocap_pos[ids.base_mocap]
-        bp[0] = b0[0] + a * (b1[0] - b0[0])
-        bp[1] = b0[1] + a * (b1[1] - b0[1])
-        bq = data.mocap_quat[ids.base_mocap]
+        self._set_mocap(data, a)
+
+    def _set_mocap(self, data: mujoco.MjData, a: float) -> None:
+        """Base xy and yaw and hand xyz at the fraction ``a`` between the keyframes (plain floats)."""
+        if data is not self._bound:
+            self._bind(data)
+        bx0, by0, bh0 = self._base_prev
+        bx1, by1, bh1 = self._base_next
+        yaw = bh0 + a * (bh1 - bh0)
+        bp = self._base_pos_v
+        bp[0] = bx0 + a * (bx1 - bx0)
+        bp[1] = by0 + a * (by1 - by0)
+        bq = self._base_quat_v
         bq[0], bq[3] = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
-        h0, h1 = self._hand_prev, self._hand_next
-        hp = data.mocap_pos[ids.hand_mocap]
-        hp[0] = h0[0] + a * (h1[0] - h0[0])
-        hp[1] = h0[1] + a * (h1[1] - h0[1])
-        hp[2] = h0[2] + a * (h1[2] - h0[2])
+        hx0, hy0, hz0 = self._hand_prev.tolist()
+        hx1, hy1, hz1 = self._hand_next.tolist()
+        hp = self._hand_pos_v
+        hp[0] = hx0 + a * (hx1 - hx0)
+        hp[1] = hy0 + a * (hy1 - hy0)
+        hp[2] = hz0 + a * (hz1 - hz0)
 
     def end_step(self) -> None:
         """The env step is over: its end keyframes become the next step's start."""
@@ -405,10 +449,14 @@ class Receiver:
             return False
         if self.hand_mode == "reach" and self.state != "reaching":
             return False
-        hand = data.mocap_pos[self.ids.hand_mocap]
-        obj = data.xpos[self.ids.object_body]
-        if np.linalg.norm(hand - obj) > self.config.grasp_radius:
+        if data is not self._bound:
+            self._bind(data)
+        hx, hy, hz = self._hand_pos_v.tolist()
+        ox, oy, oz = self._object_pos_v.tolist()
+        dx, dy, dz = hx - ox, hy - oy, hz - oz
+        if math.sqrt(dx * dx + dy * dy + dz * dz) > self.config.grasp_radius:
             return False
+        hand = self._hand_pos_v
         activate_weld(model, data, self.ids.eq_receiver, torquescale=0.2, zero_force=True)
         self.state = "holding"
         self.t_grasp = float(data.time)

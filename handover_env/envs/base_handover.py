@@ -137,7 +137,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._ticks = self.controller.config.ticks
         # Fractions of an env step at which ticks fall, by the global step phase at its start.
         self._tick_alphas = [
-            np.array([k / FRAME_SKIP for k in range(FRAME_SKIP) if (phase + k) % self._ticks == 0])
+            [k / FRAME_SKIP for k in range(FRAME_SKIP) if (phase + k) % self._ticks == 0]
             for phase in range(self._ticks)
         ]
         # Per phase: (tick at the segment start?, physics steps until the next tick or step end).
@@ -161,21 +161,44 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._geom_class[self.ids.receiver_geoms] = 2
         self._force6 = np.zeros(6)
         self._gripper_qpos = self.ids.gripper_driver_qpos
-        self._acc_sl = slice(self.ids.ft_acc_adr, self.ids.ft_acc_adr + 3)
-        self._force_sl = slice(self.ids.ft_force_adr, self.ids.ft_force_adr + 3)
-        self._torque_sl = slice(self.ids.ft_torque_adr, self.ids.ft_torque_adr + 3)
-        self._ft_site = self.ids.ft_site
-        self._grip_body = self.ids.gripper_root_body
         self._eq_receiver = self.ids.eq_receiver
         self._object_body = self.ids.object_body
         arm_act = np.asarray(self.ids.arm_act)
         contiguous = arm_act.size and np.all(np.diff(arm_act) == 1)
         self._arm_act = slice(int(arm_act[0]), int(arm_act[-1]) + 1) if contiguous else arm_act
+        self._act_low, self._act_high = ACTION_LOW.astype(np.float64).tolist(), ACTION_HIGH.astype(np.float64).tolist()
+        self._obs_low64, self._obs_high64 = low.astype(np.float64), high.astype(np.float64)
+        self._obs_out = np.zeros(self.layout.size, dtype=np.float64)
+        self._obs_views = {k: self._obs[v] for k, v in self._slices.items()}
+        self._vel6 = np.zeros(6)
+        self._bind_data()
         self._init_state, self._ready_q = self._settled_start()
         self._renderer: Any = None
         self._viewer: Any = None
         self._global_step = 0
         self._reset_episode_state()
+
+    def _bind_data(self) -> None:
+        """Views of the ``self.data`` rows read or written at every tick or step.
+
+        ``self.data`` lives as long as the env and MjData buffers never move, so the views stay
+        valid; they save the attribute lookups and index arithmetic in the hot loop.
+        """
+        d, ids = self.data, self.ids
+        adrs = (ids.ft_force_adr, ids.ft_torque_adr, ids.ft_acc_adr)
+        lo = min(adrs)
+        self._ft_v = d.sensordata[lo:max(adrs) + 3]  # force, torque and accelerometer readings
+        self._ft_force_i, self._ft_torque_i, self._ft_acc_i = (a - lo for a in adrs)
+        self._ft_xmat_v = d.site_xmat[ids.ft_site]
+        self._grip_w_v = d.cvel[ids.gripper_root_body, 0:3]
+        self._grip_alpha_v = d.cacc[ids.gripper_root_body, 0:3]
+        self._qpos_v = d.qpos
+        self._eq_active_v = d.eq_active
+        self._object_pos_v = d.xpos[ids.object_body]
+        self._tcp_pos_v = d.site_xpos[ids.tcp_site]
+        self._tcp_xmat_v = d.site_xmat[ids.tcp_site]
+        self._hand_mocap_v = d.mocap_pos[ids.hand_mocap]
+        self._arm_ctrl_v = d.ctrl[self._arm_act] if isinstance(self._arm_act, slice) else None
 
     # ------------------------------------------------------------------ start state
     def _settled_start(self) -> tuple[np.ndarray, np.ndarray]:
@@ -265,17 +288,21 @@ class HandoverEnvBase(gym.Env, EzPickle):
         if self.outcome != "running":
             raise RuntimeError("step() called after the episode ended; call reset()")
         a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.shape != (4,) or not np.all(np.isfinite(a)):
+        if a.shape != (4,):
             raise ValueError(f"action must be 4 finite numbers (x, y, z, yaw), got {action!r}")
-        np.clip(a, ACTION_LOW, ACTION_HIGH, out=a)
-        m, d, ids = self.model, self.data, self.ids
+        vals = a.tolist()
+        if not all(math.isfinite(v) for v in vals):
+            raise ValueError(f"action must be 4 finite numbers (x, y, z, yaw), got {action!r}")
+        lo, hi = self._act_low, self._act_high
+        x, y, z, yaw = (min(max(v, lo[k]), hi[k]) for k, v in enumerate(vals))  # np.clip to the Box
+        m, d = self.model, self.data
         t0 = d.time
         if t0 >= self.t_enabled:
-            self.controller.set_target(a[:3], float(a[3]))
+            self.controller.set_target((x, y, z), yaw)
         else:
             self.controller.set_target(READY_POS, READY_YAW)
         t1 = t0 + self.dt
-        self.receiver.plan_step(t0, t1, d.xpos[ids.object_body].copy(), object_free=not self._receiver_holds)
+        self.receiver.plan_step(t0, t1, self._object_pos_v.copy(), object_free=not self._receiver_holds)
         self.receiver.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
 
         # The controller ticks on the global step clock: the schedule of (tick?, physics steps)
@@ -290,7 +317,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.receiver.apply(d, 1.0)
         self.receiver.end_step()
         self._step_count += 1
-        self._hand_frames.append(d.mocap_pos[ids.hand_mocap].copy())
+        self._hand_frames.append(self._hand_mocap_v.copy())
         self._after_step()
         reward = self._reward()
         terminated = self.outcome != "running"
@@ -301,7 +328,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
     # ------------------------------------------------------------------ internals
     @property
     def _receiver_holds(self) -> bool:
-        return bool(self.data.eq_active[self.ids.eq_receiver])
+        return bool(self._eq_active_v[self._eq_receiver])
 
     def _update_payload(self) -> None:
         """Mass and centre of mass (in the F/T site frame) of what hangs below the sensor."""
@@ -324,21 +351,23 @@ class HandoverEnvBase(gym.Env, EzPickle):
         The wrist-force estimate is done in plain floats (3-vectors are cheaper that way than as
         numpy arrays); see the module docstring for the formula.
         """
-        m, d, ids = self.model, self.data, self.ids
-        sd = d.sensordata
+        d = self.data
+        ft = self._ft_v.tolist()
         m_p = self._payload_mass
-        a0, a1, a2 = sd[self._acc_sl].tolist()
-        s0, s1, s2 = sd[self._force_sl].tolist()
+        i = self._ft_acc_i
+        a0, a1, a2 = ft[i], ft[i + 1], ft[i + 2]
+        i = self._ft_force_i
+        s0, s1, s2 = ft[i], ft[i + 1], ft[i + 2]
         l0, l1, l2 = m_p * a0 - s0, m_p * a1 - s1, m_p * a2 - s2  # site frame
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = d.site_xmat[self._ft_site].tolist()
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
         c0, c1, c2 = self._payload_com_f
         cx = r00 * c0 + r01 * c1 + r02 * c2
         cy = r10 * c0 + r11 * c1 + r12 * c2
         cz = r20 * c0 + r21 * c1 + r22 * c2
         # Rigid-payload inertia beyond the site's linear acceleration: m (α × c + ω × (ω × c)),
         # with ω, α of the gripper (world frame, from cvel/cacc) and c its centre of mass.
-        wx, wy, wz = d.cvel[self._grip_body, 0:3].tolist()
-        ax, ay, az = d.cacc[self._grip_body, 0:3].tolist()
+        wx, wy, wz = self._grip_w_v.tolist()
+        ax, ay, az = self._grip_alpha_v.tolist()
         vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx  # ω × c
         gx = r00 * l0 + r01 * l1 + r02 * l2 + m_p * (ay * cz - az * cy + wy * vz - wz * vy)
         gy = r10 * l0 + r11 * l1 + r12 * l2 + m_p * (az * cx - ax * cz + wz * vx - wx * vz)
@@ -357,30 +386,39 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self.released = True
             self.t_release = float(d.time)
             self.release_force = f_mag
-            d.ctrl[ids.gripper_act] = GRIPPER_OPEN_CTRL
-        if self.released and self._gripper_holds and d.qpos[self._gripper_qpos] < GRIPPER_OPEN_ANGLE:
-            d.eq_active[ids.eq_gripper] = 0
+            d.ctrl[self.ids.gripper_act] = GRIPPER_OPEN_CTRL
+        if self.released and self._gripper_holds and self._qpos_v[self._gripper_qpos] < GRIPPER_OPEN_ANGLE:
+            d.eq_active[self.ids.eq_gripper] = 0
             self._gripper_holds = False
             self.controller.payload_mass = 0.0
             self._update_payload()
         rec = self.receiver
-        if rec.state == "reaching" or (rec.hand_mode == "recorded" and not d.eq_active[self._eq_receiver]):
-            rec.try_grasp(m, d)
+        eq_active = self._eq_active_v
+        if rec.state == "reaching" or (rec.hand_mode == "recorded" and not eq_active[self._eq_receiver]):
+            rec.try_grasp(self.model, d)
         if d.ncon:
             self._scan_contacts()
-        if self._gripper_holds or d.eq_active[self._eq_receiver]:
-            self._last_held_z = float(d.xpos[self._object_body, 2])
-        d.ctrl[self._arm_act] = self.controller.compute(d)
+        if self._gripper_holds or eq_active[self._eq_receiver]:
+            self._last_held_z = float(self._object_pos_v[2])
+        if self._arm_ctrl_v is not None:
+            self._arm_ctrl_v[...] = self.controller.compute(d)
+        else:
+            d.ctrl[self._arm_act] = self.controller.compute(d)
 
     def _wrist_torque(self) -> np.ndarray:
         """External torque at the wrist sensor (world frame), static load removed (per env step)."""
-        d = self.data
-        sd = d.sensordata
-        load = self._payload_mass * sd[self._acc_sl]
-        c = self._payload_com
-        t_site = np.array([c[1] * load[2] - c[2] * load[1], c[2] * load[0] - c[0] * load[2],
-                           c[0] * load[1] - c[1] * load[0]]) - sd[self._torque_sl]
-        self.tau_ext = d.site_xmat[self._ft_site].reshape(3, 3) @ t_site
+        ft = self._ft_v.tolist()
+        m_p = self._payload_mass
+        i = self._ft_acc_i
+        l0, l1, l2 = m_p * ft[i], m_p * ft[i + 1], m_p * ft[i + 2]
+        i = self._ft_torque_i
+        c0, c1, c2 = self._payload_com_f
+        t0 = (c1 * l2 - c2 * l1) - ft[i]
+        t1 = (c2 * l0 - c0 * l2) - ft[i + 1]
+        t2 = (c0 * l1 - c1 * l0) - ft[i + 2]
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
+        self.tau_ext = np.array([r00 * t0 + r01 * t1 + r02 * t2, r10 * t0 + r11 * t1 + r12 * t2,
+                                 r20 * t0 + r21 * t1 + r22 * t2])
         return self.tau_ext
 
     def _scan_contacts(self) -> None:
@@ -395,31 +433,37 @@ class HandoverEnvBase(gym.Env, EzPickle):
                     self.peak_contact_force = f
 
     def _after_step(self) -> None:
-        d, ids = self.data, self.ids
-        t = float(d.time)
-        obj = d.xpos[ids.object_body]
+        t = float(self.data.time)
+        obj = self._object_pos_v
+        ox, oy, oz = obj.tolist()
         holds = self._receiver_holds
         if self.peak_contact_force > self.safety_force:
             self.outcome = "unsafe_force"
-        elif (self.released and holds and not self._gripper_holds
-              and float(np.linalg.norm(obj - d.site_xpos[ids.tcp_site])) > self.clear_distance):
+        elif self.released and holds and not self._gripper_holds and self._clear_of_gripper(ox, oy, oz):
             self.outcome = "success"
-        elif not self._gripper_holds and not holds and (obj[2] < self._last_held_z - 0.15 or obj[2] < 0.1):
+        elif not self._gripper_holds and not holds and (oz < self._last_held_z - 0.15 or oz < 0.1):
             self.outcome = "dropped"
         elif not holds and not self.released and self._receiver_passed(obj, t):
             self.outcome = "missed"
 
+    def _clear_of_gripper(self, ox: float, oy: float, oz: float) -> bool:
+        """Whether the object centre is more than ``clear_distance`` from the TCP."""
+        px, py, pz = self._tcp_pos_v.tolist()
+        dx, dy, dz = ox - px, oy - py, oz - pz
+        return math.sqrt(dx * dx + dy * dy + dz * dz) > self.clear_distance
+
     def _receiver_passed(self, obj: np.ndarray, t: float) -> bool:
         if self.static:
             return False
-        xy, heading = self.receiver.base_at(t)
-        behind = (obj[0] - xy[0]) * math.cos(heading) + (obj[1] - xy[1]) * math.sin(heading)
+        x, y, heading = self.receiver._base_floats(t)
+        behind = (float(obj[0]) - x) * math.cos(heading) + (float(obj[1]) - y) * math.sin(heading)
         return behind < -self.miss_distance or t > self.receiver.duration + 1.0
 
     def _reward(self) -> float:
         """-dt per step (time), -dt * excess force over 2 f_r / 10 N, +10 success, -10 failure."""
         r = -self.dt
-        excess = math.sqrt(float(self.f_ext @ self.f_ext)) - 2.0 * self.params.release_force
+        fx, fy, fz = self._f_ext_f
+        excess = math.sqrt(fx * fx + fy * fy + fz * fz) - 2.0 * self.params.release_force
         if excess > 0:
             r -= self.dt * excess / 10.0
         if self.outcome == "success":
@@ -429,37 +473,38 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return float(r)
 
     def _observation(self) -> np.ndarray:
-        d, ids, sl, obs = self.data, self.ids, self._slices, self._obs
+        d, v = self.data, self._obs_views
         t = float(d.time)
         n_true = min(int(math.floor(t * CAMERA_RATE + 1e-6)) + 1, self._receiver_frames.shape[0])
         n = max(1, n_true - self.obs_latency)
         w = self.layout.history
         frames = self._receiver_frames[max(0, n - w):n]
-        hist = obs[sl["receiver_xy_history"]].reshape(w, 2)
+        hist = v["receiver_xy_history"].reshape(w, 2)
         hist[w - frames.shape[0]:] = frames
         hist[: w - frames.shape[0]] = frames[0]
-        obs[sl["receiver_frames_seen"]] = n if t * CAMERA_RATE + 1e-6 >= self.obs_latency else 0
-        obs[sl["ee_pos"]] = d.site_xpos[ids.tcp_site]
-        quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, d.site_xmat[ids.tcp_site])
-        obs[sl["ee_quat"]] = quat
-        jac_vel = np.empty(6)
-        mujoco.mj_objectVelocity(self.model, d, mujoco.mjtObj.mjOBJ_SITE, ids.tcp_site, jac_vel, 0)
-        obs[sl["ee_linvel"]] = jac_vel[3:]
-        obs[sl["ee_angvel"]] = jac_vel[:3]
-        obs[sl["object_pos"]] = d.xpos[ids.object_body]
-        obs[sl["object_held"]] = 1.0 if self._gripper_holds else 0.0
-        obs[sl["wrist_force"]] = self.f_ext
-        obs[sl["wrist_torque"]] = self._wrist_torque()
-        obs[sl["gripper_open"]] = 1.0 if self.released else 0.0
-        obs[sl["time"]] = t
+        v["receiver_frames_seen"][0] = n if t * CAMERA_RATE + 1e-6 >= self.obs_latency else 0
+        v["ee_pos"][...] = self._tcp_pos_v
+        mujoco.mju_mat2Quat(v["ee_quat"], self._tcp_xmat_v)
+        vel = self._vel6
+        mujoco.mj_objectVelocity(self.model, d, mujoco.mjtObj.mjOBJ_SITE, self.ids.tcp_site, vel, 0)
+        v["ee_linvel"][...] = vel[3:]
+        v["ee_angvel"][...] = vel[:3]
+        v["object_pos"][...] = self._object_pos_v
+        v["object_held"][0] = 1.0 if self._gripper_holds else 0.0
+        v["wrist_force"][...] = self.f_ext
+        v["wrist_torque"][...] = self._wrist_torque()
+        v["gripper_open"][0] = 1.0 if self.released else 0.0
+        v["time"][0] = t
         k = max(0, len(self._hand_frames) - 1 - self.obs_latency)
         hand = self._hand_frames[k]
         if self._hand_noise is not None:
             hand = hand + self._hand_noise[min(k, self._hand_noise.shape[0] - 1)]
-        obs[sl["receiver_hand_xyz"]] = hand
-        obs[sl["robot_enabled"]] = 1.0 if t >= self.t_enabled else 0.0
-        return np.clip(obs, self._obs_low, self._obs_high).astype(np.float32)
+        v["receiver_hand_xyz"][...] = hand
+        v["robot_enabled"][0] = 1.0 if t >= self.t_enabled else 0.0
+        out = self._obs_out  # np.clip to the Box bounds (float64 copies of them), then float32
+        np.minimum(self._obs, self._obs_high64, out=out)
+        np.maximum(out, self._obs_low64, out=out)
+        return out.astype(np.float32)
 
     def _info(self) -> dict[str, Any]:
         """Episode facts; values not yet defined (no release, no grasp) are ``None``."""
