@@ -111,6 +111,16 @@ def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
     return idx
 
 
+def _chain_dofs(model: mujoco.MjModel, body: int) -> set[int]:
+    """The dofs of ``body`` and its ancestors: the only nonzero columns of its Jacobians."""
+    dofs: set[int] = set()
+    while body > 0:
+        adr = int(model.body_dofadr[body])
+        dofs.update(range(adr, adr + int(model.body_dofnum[body])))
+        body = int(model.body_parentid[body])
+    return dofs
+
+
 def _rotation_error_map(rot_d: np.ndarray) -> np.ndarray:
     """The linear map (4, 9) from vec(R) (row-major) to [e_r (3), trace(R_d Rᵀ)].
 
@@ -185,6 +195,13 @@ class ImpedanceController:
         self._jacp, self._jacr = self._jac12[0:3], self._jac12[3:6]
         self._j2 = self._jac12[:, self._dof]  # (12, 6) arm columns of both
         self._j = self._jac12[0:6, self._dof]
+        # If the TCP moves only with the arm joints (a fixed-base arm), the other columns of its
+        # Jacobian are exactly zero and the products can run over all nv columns of the
+        # contiguous buffers (MuJoCo's mju_* products have the lowest call overhead).
+        arm = set(np.asarray(ids.arm_dof).tolist())
+        self._full_width = isinstance(self._dof, slice) and _chain_dofs(model, int(model.site_bodyid[ids.tcp_site])) <= arm
+        self._tau_full = np.zeros(nv)  # Jᵀ F over all dofs
+        self._tau_arm = self._tau_full[self._dof] if isinstance(self._dof, slice) else None  # a view
         self._minv_jt = np.zeros((6, nv))
         self._x_minv = self._minv_jt[:, self._dof]
         self._lam_inv = np.zeros((6, 6))
@@ -200,6 +217,7 @@ class ImpedanceController:
         self._rest = np.zeros(6) if rest_qpos is None else np.asarray(rest_qpos, float).copy()
         self._eye6 = np.eye(6)
         self._lam = np.zeros((6, 6))
+        self._lam_rows = [(self._lam[k], self._eye6[k]) for k in range(6)]
         self._limits = TORQUE_LIMITS.copy()
         self._neg_limits = -self._limits
         # Reference filter state and target.
@@ -246,9 +264,11 @@ class ImpedanceController:
         self._powers = np.zeros((n, 3, 3))
         self._powers[:, :, :2] = np.array(rows)
         self._powers[:, 0, 2] = 1.0
+        self._powers_rows = self._powers.reshape(3 * n, 3)
         # Plan buffers, overwritten at each replan. Columns of the filter state: x, y, z, yaw.
         self._traj = np.zeros((n, 3, 4))  # tick k -> rows (x_d, v, a), columns (x, y, z, yaw)
         self._traj12 = self._traj.reshape(n, 12)
+        self._traj_rows = self._traj.reshape(3 * n, 4)
         self._x_plan = self._traj[:, 0, :3]
         self._yaw_plan = self._traj[:, 0, 3]
         self._v_plan = self._traj[:, 1, :3]
@@ -376,12 +396,12 @@ class ImpedanceController:
         dyaw = (self.yaw_d - yaw_t + math.pi) % (2 * math.pi) - math.pi
         v0, v1, v2 = self.v_d.tolist()
         s0 = np.array(((x0 - t0, x1 - t1, x2 - t2, dyaw), (v0, v1, v2, self.yaw_rate_d), (t0, t1, t2, yaw_t)))
-        traj = self._traj
-        np.dot(self._powers, s0, out=traj)  # (n, 3 rows: x_d, v, a; 4 columns: x, y, z, yaw)
+        # (n, 3 rows: x_d, v, a; 4 columns: x, y, z, yaw)
+        mujoco.mju_mulMatMat(self._traj_rows, self._powers_rows, s0)
         cs = self._cs
         np.cos(self._yaw_plan, out=cs[1])
         np.sin(self._yaw_plan, out=cs[2])
-        np.dot(self._rot_basis_t, cs, out=self._rot_maps)
+        mujoco.mju_mulMatMat(self._rot_maps, self._rot_basis_t, cs)
         self._w_plan[:, 6, _Z_ROT:] = self._rot_maps[27:].T  # trace(R_d Rᵀ)
         self._plan_i = 0
         self._stale = True
@@ -397,17 +417,19 @@ class ImpedanceController:
         j = self._j
         x = self._x_minv
         lam_inv = self._lam_inv
-        np.dot(x, j.T, out=lam_inv)
+        if self._full_width:
+            mujoco.mju_mulMatMatT(lam_inv, self._minv_jt, self._jac_cur)
+        else:
+            np.dot(x, j.T, out=lam_inv)
         lam_inv += self._damp6
         mujoco.mju_cholFactor(lam_inv, 0.0)  # Λ^-1 = L Lᵀ; Λ v = cholSolve(v)
-        lam, eye = self._lam, self._eye6
-        for k in range(6):
-            mujoco.mju_cholSolve(lam[k], lam_inv, eye[k])  # Λ is symmetric: rows = columns
+        for lam_k, e_k in self._lam_rows:
+            mujoco.mju_cholSolve(lam_k, lam_inv, e_k)  # Λ is symmetric: rows = columns
         # W_k z = G s_k + c for every planned tick k, with
         #   s = [x_d - x, L_k vec R, v_d - J q̇, a_d - (J q̇ - J_prev q̇) / dt]
         # (x_d, v_d, a_d, R_d from the plan; L_k the rotation error map of R_d,k).
         b = self._gains
-        np.dot(lam, self._p_gain, out=b)
+        np.dot(self._lam, self._p_gain, out=b)
         b += self._c_gain
         w_plan, n = self._w_plan, self._n_plan
         w_plan[:, :6, :_B_TICK] = b[:, :_B_TICK]
@@ -434,6 +456,7 @@ class ImpedanceController:
         self._xpos_v = data.site_xpos[self._tcp]
         self._xmat_v = data.site_xmat[self._tcp]
         self._qvel_v = data.qvel[self._dof]
+        self._qvel_full = data.qvel
         self._qpos_v = data.qpos[self._qpos_adr]
         self._bias_v = data.qfrc_bias[self._dof]
 
@@ -473,13 +496,17 @@ class ImpedanceController:
         # the held object's inertia and weight at the TCP: all in one product, [wrench, tr] = W_i z.
         self._z_pos[...] = self._xpos_v
         self._z_rot[...] = self._xmat_v
-        np.dot(self._j2, self._qvel_v, out=self._z_twists)
-        np.dot(self._w_plan[i], self._z, out=self._out)
+        if self._full_width:
+            mujoco.mju_mulMatVec(self._z_twists, self._jac12, self._qvel_full)
+        else:
+            np.dot(self._j2, self._qvel_v, out=self._z_twists)
+        mujoco.mju_mulMatVec(self._out, self._w_plan[i], self._z)
         if self._out[6] < -0.5:  # trace(R_d Rᵀ): beyond ~120 deg
             self._far_rotation(i)
         tau = self._tau
-        np.dot(self._wrench, self._j, out=tau)  # Jᵀ F
-        tau += self._bias_v
+        mujoco.mju_mulMatTVec(self._tau_full, self._jac_cur, self._wrench)  # Jᵀ F
+        arm = self._tau_arm if self._tau_arm is not None else self._tau_full[self._dof]
+        np.add(arm, self._bias_v, out=tau)
         tau += self._tau_posture
         np.minimum(tau, self._limits, out=self.last_torque)
         np.maximum(self.last_torque, self._neg_limits, out=self.last_torque)
