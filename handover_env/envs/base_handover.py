@@ -314,7 +314,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 tick()
             mj_step(m, d, nstep=n)
         self._global_step += FRAME_SKIP
-        self.f_ext[0], self.f_ext[1], self.f_ext[2] = self._f_ext_f
         self.receiver.apply(d, 1.0)
         self.receiver.end_step()
         self._step_count += 1
@@ -378,7 +377,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         fx += k * (gx - fx)
         fy += k * (gy - fy)
         fz += k * (gz - fz)
-        self._f_ext_f = (fx, fy, fz)  # copied to self.f_ext at the end of the env step
+        self._f_ext_f = (fx, fy, fz)
+        self.f_ext[0], self.f_ext[1], self.f_ext[2] = fx, fy, fz
         f_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
         if f_mag > self.peak_contact_force:
             self.peak_contact_force = f_mag
