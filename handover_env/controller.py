@@ -29,7 +29,9 @@ We implement it as a torque controller, run every ``ticks`` physics steps on a g
 * **Cost.** Λ(q), J M^-1 and the posture torque are refreshed at each replan of the reference
   (about 30 Hz; they change slowly with q); J, the pose and velocity errors, J̇ q̇ and the bias
   forces are updated at every 200 Hz tick. The reference filter is linear, so its next ticks
-  are precomputed in one matrix product per replan.
+  are precomputed in one matrix product per replan. With Λ frozen the whole law is affine in
+  the measured TCP pose and twists, so each planned tick gets one (7, 26) matrix at the replan
+  and a tick is J, three small products and the clip (see :class:`ImpedanceController`).
 """
 
 from __future__ import annotations
@@ -173,8 +175,9 @@ class ImpedanceController:
     measured quantities ``z = [x (3), J q̇ (6), J_prev q̇ (6), 1, 1, vec R (9)]`` (TCP position,
     twist with this tick's and the previous tick's Jacobian, TCP orientation), so
     ``[wrench, trace(R_d Rᵀ)] = W_k z`` with one (7, 26) matrix per planned tick k, built at each
-    replan (:meth:`_refresh_dynamics`). A tick is then a few small products (numpy's ``dot``
-    with ``out=``, which has the lowest call overhead at this size) into preallocated buffers.
+    replan (:meth:`_refresh_dynamics`). A tick is then a few small products into preallocated
+    buffers (MuJoCo's ``mju_mulMatVec``/``mju_mulMatTVec``, which have the lowest call overhead at
+    this size; numpy's ``dot`` with ``out=`` where a strided view is involved).
     """
 
     def __init__(self, model: mujoco.MjModel, ids: SceneIds, params: HandoverParams,
