@@ -26,7 +26,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | 3 | yaw of the (horizontal) gripper's approach axis | -pi | pi | rad |
 
     ## Observation Space
-    ``Box(N,)`` float32 with N = 2 W + 32 (W = ``history``, 30 by default; 92 values). Named parts
+    ``Box(N,)`` float32 with N = 2 W + 30 (W = ``history``, 30 by default; 90 values). Named parts
     (see :class:`handover_env.envs.observation.ObsLayout`):
 
     | Part | Size | Meaning |
