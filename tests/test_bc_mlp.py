@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -144,3 +145,20 @@ def test_receiver_only_variant_needs_no_giver(data):
     assert pred.shape == (30, 3)
     np.testing.assert_allclose(agent.predict_episode(ep, np.array([14]))[0], pred, atol=1e-6)
     np.testing.assert_allclose(agent.predict_sequence(ep.receiver_xy, np.array([14]))[0], pred, atol=1e-6)
+
+
+REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "dynamic_handover_dataset" / "whole_motions"
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason="the development copy of the public dataset is absent")
+def test_learns_real_recordings_by_the_shared_protocol():
+    from handover_env.data.public import load_public_dataset
+    from handover_env.evaluation.openloop import evaluate_openloop, summarise
+
+    real = load_public_dataset(REAL, progress=False)
+    train_idx, test_idx = real.stratified_kfold(10, seed=0)[0]
+    train = real.subset(train_idx[::8])  # ~100 episodes keep the test fast
+    agent = BCMLPAgent(BCMLPConfig(hidden=(128, 128), max_epochs=8, patience=3)).fit(train)
+    summary = summarise(evaluate_openloop(agent, real.subset(test_idx[::4]), progress=False))
+    # a useful predictor: far below the ~0.5 m spread of the giver positions; paper BC-MLP 152 mm
+    assert summary["id"]["rms_3d_mm"] < 200, summary
