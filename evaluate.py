@@ -54,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="SPGP inducing ratio of 'ours' (paper: 0.4)")
         p.add_argument("--act-steps", type=int, default=None, help="ACT optimisation steps (default: the ACT agent's)")
         p.add_argument("--bc-epochs", type=int, default=None, help="BC-MLP maximum epochs (default: the BC-MLP agent's)")
+        p.add_argument("--giver-state", action="store_true",
+                       help="also give BC-MLP and ACT the giver's position at the query frame (observation.state); "
+                            "off by default, as in the paper, where every module sees the receiver base pose only")
         p.add_argument("--no-reuse", action="store_true", help="retrain BC-MLP/ACT even if a matching checkpoint exists")
         p.add_argument("--quick", action="store_true",
                        help=f"small fast run for tests: {QUICK_EPISODES} episodes, 3 folds, query stride 3, "
@@ -114,7 +117,8 @@ def main(argv: list[str] | None = None) -> int:
         folds, stride = (3, max(3, args.stride)) if args.quick else (args.folds, args.stride)
         protocol = OpenLoopProtocol(horizon=args.horizon, first_query=args.first_query, stride=stride)
         options = MethodOptions(seed=args.seed, quick=args.quick, inducing_ratio=args.inducing_ratio,
-                                act_steps=args.act_steps, bc_epochs=args.bc_epochs, horizon=args.horizon)
+                                act_steps=args.act_steps, bc_epochs=args.bc_epochs, horizon=args.horizon,
+                                giver_state=args.giver_state)
         dataset = load_dataset(args.data, args.quick, args.seed)
     except (ValueError, FileNotFoundError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)

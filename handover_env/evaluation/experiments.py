@@ -110,12 +110,17 @@ def run_table1(
     write_csv(rows, out_dir / "table1.csv")
     write_csv(fold_rows, out_dir / "table1_folds.csv")
     write_csv(episode_rows, out_dir / "table1_episodes.csv")
-    write_text(table1_markdown(rows, dataset, folds, seed, protocol), out_dir / "table1.md")
+    write_text(table1_markdown(rows, dataset, folds, seed, protocol, options.giver_state), out_dir / "table1.md")
     return rows
 
 
 def table1_markdown(
-    rows: list[dict], dataset: HandoverDataset, folds: int, seed: int, protocol: OpenLoopProtocol
+    rows: list[dict],
+    dataset: HandoverDataset,
+    folds: int,
+    seed: int,
+    protocol: OpenLoopProtocol,
+    giver_state: bool = False,
 ) -> str:
     """Table I in the paper's layout, with the paper's numbers beside ours."""
     header = ["Method", "ID (ours, 3D)", "OOD (ours, 3D)", "ID (ours, per axis)", "OOD (ours, per axis)",
@@ -141,7 +146,10 @@ def table1_markdown(
         f"the {folds} folds of the per-fold mean episode RMS. Protocol: horizon {protocol.horizon} frames, "
         f"queries every {protocol.stride} frame(s) from frame {protocol.first_query}. '3D' is the Euclidean "
         "error, 'per axis' the same divided by sqrt(3); the paper does not say which it reports. The paper's "
-        "numbers are on its full public set (900 ID + 100 OOD).\n"
+        "numbers are on its full public set (900 ID + 100 OOD). Inputs: every method sees the receiver base "
+        "track up to the query frame"
+        + (", and BC-MLP / ACT also the giver's position at that frame (--giver-state).\n" if giver_state else
+           " and nothing else, as in the paper.\n")
     )
 
 

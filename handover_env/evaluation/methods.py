@@ -36,6 +36,9 @@ class MethodOptions:
         act_steps: ACT optimisation steps (None = the ACT agent's default).
         bc_epochs: BC-MLP maximum epochs (None = the BC-MLP agent's default).
         horizon: predicted frames (the protocol's horizon).
+        giver_state: also give BC-MLP and ACT the giver's position at the query frame
+            (``observation.state``). Off by default: the paper's modules all receive the
+            receiver base pose alone (Sec. V-A), and the nonparametric methods never see it.
     """
 
     seed: int = 0
@@ -44,6 +47,7 @@ class MethodOptions:
     act_steps: int | None = None
     bc_epochs: int | None = None
     horizon: int = 30
+    giver_state: bool = False
 
 
 def check_methods(names: list[str] | tuple[str, ...]) -> list[str]:
@@ -70,13 +74,13 @@ def build_agent(name: str, options: MethodOptions, inducing_ratio: float | None 
         from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
 
         epochs = options.bc_epochs or (3 if options.quick else None)
-        kwargs = {"seed": options.seed, "horizon": options.horizon}
+        kwargs = {"seed": options.seed, "horizon": options.horizon, "use_giver_state": options.giver_state}
         if epochs:
             kwargs["max_epochs"] = epochs
         return BCMLPAgent(BCMLPConfig(**kwargs))
     from baselines.act import ACTAgent, ACTAgentConfig
 
-    kwargs = {"seed": options.seed, "horizon": options.horizon}
+    kwargs = {"seed": options.seed, "horizon": options.horizon, "use_giver_state": options.giver_state}
     steps = options.act_steps or (40 if options.quick else None)
     if steps:
         kwargs["steps"] = steps
