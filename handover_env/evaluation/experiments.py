@@ -36,10 +36,11 @@ def _fold_stats(values: list[float]) -> tuple[float, float]:
     return float(vals.mean()), float(vals.std(ddof=1)) if vals.size > 1 else 0.0
 
 
-def _check_folds(dataset: HandoverDataset, folds: int) -> None:
+def _splits(dataset: HandoverDataset, folds: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The stratified folds; a clear ValueError when ``folds`` < 2 or the dataset is too small."""
     if folds < 2:
         raise ValueError(f"--folds must be >= 2, got {folds}")
-    dataset.stratified_kfold(folds, 0)  # raises a clear error when the dataset is too small
+    return dataset.stratified_kfold(folds, seed)
 
 
 # ---------------------------------------------------------------------------------------- Table I
@@ -56,8 +57,7 @@ def run_table1(
 ) -> list[dict]:
     """Stratified k-fold open-loop RMS of every method (paper Table I); writes md/csv; returns rows."""
     methods = check_methods(list(methods))
-    _check_folds(dataset, folds)
-    splits = dataset.stratified_kfold(folds, seed)
+    splits = _splits(dataset, folds, seed)
     episode_rows: list[dict] = []
     fold_rows: list[dict] = []
     bar = tqdm(total=folds * len(methods), desc="table1", unit="fit", disable=not progress)
@@ -171,8 +171,7 @@ def run_sample_efficiency(
     ratios = [float(r) for r in ratios]
     if not ratios or any(not 0.0 < r <= 1.0 for r in ratios):
         raise ValueError(f"ratios must lie in (0, 1], got {ratios}")
-    _check_folds(dataset, folds)
-    splits = dataset.stratified_kfold(folds, seed)
+    splits = _splits(dataset, folds, seed)
     per_fold: list[dict] = []
     bar = tqdm(total=folds * len(ratios) * len(methods), desc="sample-efficiency", unit="fit", disable=not progress)
     for f, (train_idx, test_idx) in enumerate(splits):
@@ -280,8 +279,7 @@ def run_tradeoff(
     rates = [float(r) for r in rates]
     if not rates or any(not 0.0 < r <= 1.0 for r in rates):
         raise ValueError(f"inducing rates must lie in (0, 1], got {rates}")
-    _check_folds(dataset, folds)
-    splits = dataset.stratified_kfold(folds, seed)
+    splits = _splits(dataset, folds, seed)
     variants = [("ours", r) for r in rates] + ([("iaal", 1.0)] if include_iaal else [])
     rows = []
     bar = tqdm(total=len(variants) * folds, desc="tradeoff", unit="fit", disable=not progress)
