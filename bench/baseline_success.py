@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 import handover_env  # noqa: E402,F401
 from baselines.act import ACTAgent  # noqa: E402
 from baselines.bc_mlp import BCMLPAgent  # noqa: E402
+from handover_env.rollout import run_episode  # noqa: E402
 
 FIRST_SEED = {"id": 0, "ood": 10_000}
 
@@ -43,12 +44,7 @@ def run(agent, kind: str, n: int) -> dict:
     infos = []
     t0 = time.perf_counter()
     for seed in range(FIRST_SEED[kind], FIRST_SEED[kind] + n):
-        obs, info = env.reset(seed=seed, options={"receiver": kind})
-        agent.reset()
-        while True:
-            obs, _, term, trunc, info = env.step(agent.act(obs))
-            if term or trunc:
-                break
+        info = run_episode(env, agent, seed=seed, options={"receiver": kind})
         infos.append(info)
     env.close()
     ok = [i for i in infos if i["is_success"]]

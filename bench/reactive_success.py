@@ -32,6 +32,7 @@ from tqdm import tqdm
 import handover_env  # noqa: F401
 from agents.reactive import ReactiveAgent
 from agents.static import StaticAgent
+from handover_env.rollout import run_episode
 
 SCENARIOS = {
     # name: (env id, receiver kind, first seed, agent factory, success target)
@@ -50,12 +51,7 @@ def evaluate(scenario: str, n: int) -> dict:
     tick = env.unwrapped.controller.dt
     infos, bad_release = [], 0
     for seed in tqdm(range(seed0, seed0 + n), desc=scenario, leave=False):
-        obs, info = env.reset(seed=seed, options={"receiver": kind})
-        agent.reset()
-        while True:
-            obs, _, term, trunc, info = env.step(agent.act(obs))
-            if term or trunc:
-                break
+        info = run_episode(env, agent, seed=seed, options={"receiver": kind})
         if info["released"]:
             t_grasp = info["receiver_grasp_time"]
             t_release = env.unwrapped.t_release

@@ -18,6 +18,7 @@ import gymnasium as gym  # noqa: E402
 
 import handover_env  # noqa: E402,F401
 from agents.reactive import ReactiveAgent  # noqa: E402
+from handover_env.rollout import run_episode  # noqa: E402
 
 
 def _fmt(v: float | None, unit: str) -> str:
@@ -31,23 +32,20 @@ def run(n_id: int = 3, n_ood: int = 2, out: Path = Path("outputs/demo"), frames_
     results = []
     scenarios = [("id", s) for s in range(n_id)] + [("ood", 100 + s) for s in range(n_ood)]
     for k, (kind, seed) in enumerate(scenarios):
-        obs, info = env.reset(seed=seed, options={"receiver": kind})
-        agent.reset()
+        frames: list = []
         save = k == 0
-        frames = []
-        start = time.perf_counter()
-        step = 0
-        while True:
-            obs, _, term, trunc, info = env.step(agent.act(obs))
+
+        def grab(step: int, _info: dict) -> None:
+            nonlocal save
             if save and step % frames_every == 0:
                 try:
                     frames.append(env.render())
                 except Exception as exc:  # no offscreen GL
                     print(f"(no frames: {exc})")
                     save = False
-            step += 1
-            if term or trunc:
-                break
+
+        start = time.perf_counter()
+        info = run_episode(env, agent, seed=seed, options={"receiver": kind}, on_step=grab)
         results.append(info)
         print(f"{kind.upper():3s} seed {seed:3d}: {info['outcome']:12s} handover time {_fmt(info['handover_time'], 's'):>8s}"
               f"  release force {_fmt(info['release_force'], 'N'):>8s}  peak force {info['peak_contact_force']:.1f} N"
