@@ -57,8 +57,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from safetensors.torch import load_file, save_file  # noqa: E402
 
-from agents.base import validate_history  # noqa: E402
-from agents.predictive import ClosedLoopConfig, PredictiveAgent  # noqa: E402
+from agents.predictive import ClosedLoopConfig  # noqa: E402
 from baselines.features import (  # noqa: E402
     ACTION,
     ACTION_DIM,
@@ -68,10 +67,10 @@ from baselines.features import (  # noqa: E402
     CheckpointError,
     FeatureSpec,
     encode_history,
-    episode_frames,
     split_train_val,
     validate_giver,
 )
+from baselines.giver_conditioned import GiverConditionedAgent  # noqa: E402
 from handover_env.config import HandoverParams  # noqa: E402
 from handover_env.data.dataset import Episode, HandoverDataset  # noqa: E402
 from handover_env.envs.observation import ObsLayout  # noqa: E402
@@ -318,13 +317,15 @@ class EnsembledChunk:
         return (1.0 - (k - lo)) * self.chunk[lo] + (k - lo) * self.chunk[hi]
 
 
-class ACTAgent(PredictiveAgent):
+class ACTAgent(GiverConditionedAgent):
     """LeRobot's ``ACTPolicy`` behind the common agent interface.
 
     Args:
         config: model and training settings.
         params: Theta (t_f is used by ``act``); closed_loop, layout: see ``PredictiveAgent``.
     """
+
+    predict_rows_per_batch = 1024  # bounds the transformer's activations in open-loop evaluation
 
     def __init__(
         self,
@@ -336,7 +337,7 @@ class ACTAgent(PredictiveAgent):
         from lerobot.policies.act.modeling_act import ACTPolicy
         from lerobot.policies.act.processor_act import make_act_pre_post_processors
 
-        PredictiveAgent.__init__(self, params, closed_loop, layout)
+        GiverConditionedAgent.__init__(self, params, closed_loop, layout)
         self.config = config or ACTAgentConfig()
         self.horizon = self.config.horizon
         torch.manual_seed(self.config.seed)
@@ -505,36 +506,6 @@ class ACTAgent(PredictiveAgent):
         chunk = self.policy.predict_action_chunk(batch)
         return self.postprocessor(chunk).cpu().numpy().astype(np.float64)
 
-    def predict(self, receiver_history: np.ndarray, giver_xyz: np.ndarray | None = None) -> np.ndarray:
-        """(H, 3) future giver xyz from the receiver history and the current giver xyz."""
-        hist = validate_history(receiver_history)
-        giver = validate_giver(giver_xyz) if self.config.use_giver_state else np.zeros(3)
-        return self.predict_batch(encode_history(hist, self.config.history)[None], giver[None])[0]
-
-    def predict_sequence(
-        self, receiver_xy: np.ndarray, query_times: np.ndarray, giver_xyz: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Batched open-loop predictions (Q, H, 3); ``giver_xyz`` is the episode's (T, 3) giver."""
-        receiver_xy = validate_history(receiver_xy)
-        if giver_xyz is None:
-            if self.config.use_giver_state:
-                validate_giver(None)
-            giver_xyz = np.zeros((receiver_xy.shape[0], 3))
-        giver = np.asarray(giver_xyz, dtype=np.float64)
-        if giver.shape != (receiver_xy.shape[0], 3):
-            raise ValueError(f"giver_xyz must have shape ({receiver_xy.shape[0]}, 3), got {giver.shape}")
-        ep = Episode(receiver_xy, np.zeros((len(giver), 3)), giver, np.tile([1.0, 0, 0, 0], (len(giver), 1)),
-                     False, "query")
-        return self.predict_episode(ep, query_times)
-
-    def predict_episode(self, episode: Episode, query_times: np.ndarray, batch_size: int = 1024) -> np.ndarray:
-        """Open-loop predictions at frames ``query_times`` of ``episode`` (its giver gives the state)."""
-        f = episode_frames(episode, self.config.spec, query_times)
-        if len(f) == 0:
-            return np.zeros((0, self.horizon, 3))
-        return np.concatenate([self.predict_batch(f.env_state[i : i + batch_size], f.state[i : i + batch_size])
-                               for i in range(0, len(f), batch_size)])
-
     # ------------------------------------------------------------------ closed loop
     def reset(self) -> None:
         """New episode: PredictiveAgent state, LeRobot's ensembler (``policy.reset()``)."""
@@ -557,13 +528,6 @@ class ACTAgent(PredictiveAgent):
         now = self.policy.select_action(batch)  # (1, 3), normalised
         rows = torch.cat([now[:, None], self.policy.temporal_ensembler.ensembled_actions], dim=1)
         return self.postprocessor(rows).numpy()[0].astype(np.float64)
-
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        """(x, y, z, yaw) target (``PredictiveAgent.act``), with ``ee_pos`` as the giver state."""
-        obs = np.asarray(obs)
-        if obs.shape == (self.layout.size,):
-            self._giver_now = obs[self._slices["ee_pos"][0]].astype(np.float64)
-        return super().act(obs)
 
     # ------------------------------------------------------------------ checkpoints
     def _handover_json(self, state: dict | None) -> dict:
@@ -645,7 +609,7 @@ class ACTAgent(PredictiveAgent):
             if not (path / name).is_file():
                 raise CheckpointError(f"{path}: missing {name} (incomplete ACT checkpoint)")
         agent = cls.__new__(cls)
-        PredictiveAgent.__init__(agent, **closed_loop_kwargs)
+        GiverConditionedAgent.__init__(agent, **closed_loop_kwargs)
         agent.config, agent.horizon, agent._giver_now = cfg, cfg.horizon, None
         try:
             with contextlib.redirect_stdout(io.StringIO()):

@@ -35,20 +35,17 @@ import torch
 from safetensors.torch import load_file, save_file
 from torch import nn
 
-from agents.base import validate_history
-from agents.predictive import ClosedLoopConfig, PredictiveAgent
+from agents.predictive import ClosedLoopConfig
 from baselines.features import (
     CheckpointError,
     FeatureSpec,
     FrameArrays,
     dataset_frames,
-    encode_history,
-    episode_frames,
     split_train_val,
-    validate_giver,
 )
+from baselines.giver_conditioned import GiverConditionedAgent
 from handover_env.config import HandoverParams
-from handover_env.data.dataset import Episode, HandoverDataset
+from handover_env.data.dataset import HandoverDataset
 from handover_env.envs.observation import ObsLayout
 
 CHECKPOINT_TYPE = "bc_mlp"
@@ -194,7 +191,7 @@ def _eval_loss(net: BCMLPNet, data: dict[str, torch.Tensor], batch_size: int = 4
     return total / max(weight, 1.0)
 
 
-class BCMLPAgent(PredictiveAgent):
+class BCMLPAgent(GiverConditionedAgent):
     """The BC-MLP baseline behind the common agent interface.
 
     ``predict`` and ``predict_sequence`` need the current giver position (see
@@ -214,7 +211,7 @@ class BCMLPAgent(PredictiveAgent):
         layout: ObsLayout | None = None,
     ):
         self.config = config or BCMLPConfig()
-        PredictiveAgent.__init__(self, params, closed_loop, layout)
+        GiverConditionedAgent.__init__(self, params, closed_loop, layout)
         self.horizon = self.config.horizon
         torch.manual_seed(self.config.seed)
         self.net = BCMLPNet(
@@ -350,53 +347,10 @@ class BCMLPAgent(PredictiveAgent):
         self.net.eval()
         return self.net(env, st).cpu().numpy().astype(np.float64)
 
-    def predict(self, receiver_history: np.ndarray, giver_xyz: np.ndarray | None = None) -> np.ndarray:
-        """(H, 3) future giver xyz from the receiver history and the current giver xyz."""
-        hist = validate_history(receiver_history)
-        giver = validate_giver(giver_xyz) if self.config.use_giver_state else np.zeros(3)
-        env = encode_history(hist, self.config.history)
-        return self.predict_batch(env[None], giver[None])[0]
-
-    def predict_sequence(
-        self, receiver_xy: np.ndarray, query_times: np.ndarray, giver_xyz: np.ndarray | None = None
-    ) -> np.ndarray:
-        """Batched open-loop predictions at ``query_times``: (Q, H, 3).
-
-        ``giver_xyz`` is the episode's (T, 3) giver trajectory; only its rows at the query times
-        (the current frames) are read.
-        """
-        receiver_xy = validate_history(receiver_xy)
-        if giver_xyz is None:
-            if self.config.use_giver_state:
-                validate_giver(None)
-            giver_xyz = np.zeros((receiver_xy.shape[0], 3))
-        giver = np.asarray(giver_xyz, dtype=np.float64)
-        if giver.shape != (receiver_xy.shape[0], 3):
-            raise ValueError(f"giver_xyz must have shape ({receiver_xy.shape[0]}, 3), got {giver.shape}")
-        return self.predict_episode(
-            Episode(receiver_xy, np.zeros((len(giver), 3)), giver, np.tile([1.0, 0, 0, 0], (len(giver), 1)),
-                    False, "query"),
-            query_times,
-        )
-
-    def predict_episode(self, episode: Episode, query_times: np.ndarray) -> np.ndarray:
-        """Open-loop predictions at frames ``query_times`` of ``episode`` (its giver gives the state)."""
-        f = episode_frames(episode, self.config.spec, query_times)
-        if len(f) == 0:
-            return np.zeros((0, self.horizon, 3))
-        return self.predict_batch(f.env_state, f.state)
-
     # ------------------------------------------------------------------ closed loop
     def stream_predict(self) -> np.ndarray:
         """The chunk for the newest camera frame, conditioned on the robot's current TCP."""
         return self.predict(np.asarray(self._history), self._giver_now)
-
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        """(x, y, z, yaw) target (``PredictiveAgent.act``), with ``ee_pos`` as the giver state."""
-        obs = np.asarray(obs)
-        if obs.shape == (self.layout.size,):
-            self._giver_now = obs[self._slices["ee_pos"][0]].astype(np.float64)
-        return super().act(obs)
 
     # ------------------------------------------------------------------ checkpoints
     def _save(self, out: Path, best: dict, opt: torch.optim.Optimizer, state: dict) -> None:
