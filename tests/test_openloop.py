@@ -11,6 +11,7 @@ from agents.base import Agent
 from handover_env.data.dataset import Episode, HandoverDataset
 from handover_env.evaluation import (
     OpenLoopProtocol,
+    episode_errors,
     episode_rms,
     evaluate_openloop,
     kfold_rms,
@@ -101,6 +102,30 @@ def test_evaluate_summarise_and_kfold():
     fold_means = [f["id"]["rms_3d_mm"] for f in out["per_fold"]]
     assert math.isclose(out["id"][0], np.mean(fold_means)) and math.isclose(out["id"][1], np.std(fold_means, ddof=1))
     assert math.isclose(out["id_axis"][0], out["id"][0] / math.sqrt(3))
+
+
+def test_current_frame_error_reads_row_zero_only_per_coordinate():
+    ep = _episode(50)
+    rms, now_axis, n = episode_errors(_Oracle(ep.giver_xyz, offset=(0.03, 0.04, 0.0)), ep)
+    assert math.isclose(rms, 50.0, rel_tol=1e-12)
+    assert math.isclose(now_axis, 50.0 / math.sqrt(3), rel_tol=1e-12)  # 0.05 m in 3D = 28.87 mm per coordinate
+
+    class _LateDrift(_Oracle):
+        """Exact at row 0, 0.1 m off in z on every later row."""
+
+        def predict(self, receiver_history):
+            out = super().predict(receiver_history).copy()
+            out[1:, 2] += 0.1
+            return out
+
+    rms, now_axis, n = episode_errors(_LateDrift(ep.giver_xyz), ep)
+    assert now_axis == 0.0 and rms > 50.0
+    recs = evaluate_openloop(_LateDrift(ep.giver_xyz), HandoverDataset([ep]), progress=False)
+    assert recs[0].rms_now_axis_mm == 0.0 and summarise(recs)["all"]["rms_now_axis_mm"] == 0.0
+    out = kfold_rms(lambda: _Constant(offset=(0.0, 0.0, 1.0)),
+                    HandoverDataset([_episode(40 + i, ood=(i % 4 == 0), sid=f"e{i}") for i in range(12)]),
+                    k=3, seed=0, progress=False)
+    assert math.isfinite(out["id_now_axis"][0]) and math.isfinite(out["ood_now_axis"][0])
 
 
 def test_bad_predictions_and_settings_raise():

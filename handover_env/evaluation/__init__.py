@@ -3,6 +3,7 @@
 from handover_env.evaluation.openloop import (
     EpisodeRecord,
     OpenLoopProtocol,
+    episode_errors,
     episode_rms,
     evaluate_openloop,
     kfold_rms,
@@ -13,6 +14,7 @@ from handover_env.evaluation.openloop import (
 __all__ = [
     "EpisodeRecord",
     "OpenLoopProtocol",
+    "episode_errors",
     "episode_rms",
     "evaluate_openloop",
     "kfold_rms",
