@@ -13,7 +13,16 @@ Training goes through LeRobot's machinery: the dataset is exported with
 ``delta_timestamps`` for the action chunk, normalised by ``make_act_pre_post_processors`` with
 statistics (``get_feature_stats``) of the training episodes for all three features (ENV, STATE and
 ACTION all MEAN_STD), and optimised with ``ACTPolicy.forward`` (L1 + KL loss) under AdamW with the
-gradient clipping of LeRobot's ACT preset.
+gradient clipping of LeRobot's ACT preset. ``fit_lerobot(..., episodes=...)`` trains on a subset of
+an export's episodes (split and statistics from that subset only), so k-fold evaluations export
+the whole dataset once (:mod:`handover_env.evaluation.act_folds`).
+
+CPU cost (receiver-only default model, batch 64, one thread, 2-core AMD EPYC VM): a step is
+~5.4 GFLOP of forward + backward, ~117 ms (8.6 steps/s). Besides the model itself, training
+avoids: reading the export column by column (~80 s a fold, now one batch read), calling the
+preprocessor per batch (the samples are normalised once, bitwise the same tensors), the per-parameter
+AdamW loop (``fused=True``) and most of ``torch.bernoulli_``'s dropout-mask cost
+(:class:`DropoutMasks`, ``fast_dropout``). Before these the same loop ran at ~7 steps/s.
 
 In an env the agent is a :class:`agents.predictive.PredictiveAgent` like the planner (same ready
 pose, yaw rule and t_f of Theta), except for the ensembling: each new camera frame goes through
@@ -24,7 +33,7 @@ target at t_f is read (:class:`EnsembledChunk`).
 
 Model sizes:
 
-* default (trains on one CPU core in ~25 min on the 875-episode set): ``dim_model=128``,
+* default (8000 steps train on one CPU core in ~16 min on the 875-episode set): ``dim_model=128``,
   ``n_heads=4``, ``dim_feedforward=512``, 2 encoder layers, 1 decoder layer, VAE with
   1 encoder layer and ``latent_dim=16``, dropout 0.1, ``kl_weight=10``.
 * ``paper_scale=True`` (``--paper-scale``): LeRobot's/ACT's defaults, ``dim_model=512``,
@@ -116,6 +125,9 @@ class ACTAgentConfig:
             feature (default). False drops it from ``input_features`` (receiver history only,
             exactly what the planner sees); the batch still carries the key because LeRobot's
             ``ACT.forward`` reads its device.
+        fast_dropout: during CPU training, draw the masks of the policy's ``nn.Dropout`` modules
+            from :class:`DropoutMasks` (same p and scaling, ~1/8 of the step time saved on one core)
+            instead of ``torch.bernoulli_``. False trains with PyTorch's own dropout everywhere.
     """
 
     history: int = 10
@@ -142,6 +154,7 @@ class ACTAgentConfig:
     device: str = "cpu"
     temporal_ensemble_coeff: float = 0.01
     use_giver_state: bool = True
+    fast_dropout: bool = True
 
     def __post_init__(self) -> None:
         if self.paper_scale:
@@ -242,9 +255,11 @@ def lerobot_samples(ds, episode_indices: np.ndarray) -> dict[str, torch.Tensor]:
     Reads the parquet columns once and applies ``ds.delta_indices`` exactly as
     ``LeRobotDataset.__getitem__`` does (indices clamped to the episode, ``action_is_pad`` outside
     it); ``tests/test_act.py`` checks the result equals ``ds[i]`` item by item. One pass through
-    ``__getitem__`` costs ~2 ms per frame, too slow to repeat every step on 2 cores.
+    ``__getitem__`` costs ~2 ms per frame, too slow to repeat every step on 2 cores. The columns are
+    read as one numpy batch: ``datasets``' lazy column objects convert row by row, which took ~80 s
+    for the 100k frames of the public set.
     """
-    cols = ds.hf_dataset.with_format("numpy")
+    cols = ds.hf_dataset.with_format("numpy")[:]  # one batch read (~0.4 s); column access iterates rows (~80 s)
     env = np.asarray(cols[OBS_ENV_STATE], dtype=np.float32)
     state = np.asarray(cols[OBS_STATE], dtype=np.float32)
     action = np.asarray(cols[ACTION], dtype=np.float32)
@@ -265,6 +280,19 @@ def lerobot_samples(ds, episode_indices: np.ndarray) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(np.concatenate(v)) for k, v in out.items()}
 
 
+def normalise_samples(preprocessor, samples: dict[str, torch.Tensor], chunk: int = 32_768) -> dict[str, torch.Tensor]:
+    """``samples`` passed through LeRobot's ``preprocessor`` once, instead of once per batch.
+
+    The pipeline (rename, batch dim, device, ``NormalizerProcessorStep``) is elementwise over rows,
+    so normalising all rows up front and indexing a batch afterwards gives bitwise the same tensors
+    as indexing first and normalising the batch (``tests/test_act.py`` checks it). ``chunk`` rows at
+    a time bound the pipeline's temporaries.
+    """
+    n = int(next(iter(samples.values())).shape[0])
+    parts = [preprocessor({k: v[i : i + chunk] for k, v in samples.items()}) for i in range(0, max(n, 1), chunk)]
+    return {k: torch.cat([part[k] for part in parts]) if parts else samples[k] for k in samples}
+
+
 def feature_stats(samples: dict[str, torch.Tensor]) -> dict[str, dict[str, np.ndarray]]:
     """LeRobot ``get_feature_stats`` of the training samples (action over its per-frame values)."""
     from lerobot.datasets.compute_stats import get_feature_stats
@@ -277,13 +305,103 @@ def feature_stats(samples: dict[str, torch.Tensor]) -> dict[str, dict[str, np.nd
     }
 
 
-def _split_from_export(sidecar: dict, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """The same stratified episode split as BC-MLP's, from the export's ID/OOD flags."""
+def check_episodes(episodes: np.ndarray | None, n_export: int) -> np.ndarray:
+    """Export episode indices to train on (all of them for None), validated: 1-D, unique, in range."""
+    if episodes is None:
+        return np.arange(n_export, dtype=np.int64)
+    arr = np.asarray(episodes)
+    if arr.ndim != 1 or (arr.size and not np.issubdtype(arr.dtype, np.integer)):
+        raise ValueError(f"episodes must be a 1-D array of export episode indices, got dtype {arr.dtype}, "
+                         f"shape {arr.shape}")
+    arr = arr.astype(np.int64)
+    if arr.size < 2:
+        raise ValueError(f"need at least 2 episodes for a train/validation split, got {arr.size}")
+    if arr.min() < 0 or arr.max() >= n_export:
+        raise ValueError(f"episode indices must lie in [0, {n_export - 1}] (the export has {n_export} episodes)")
+    if np.unique(arr).size != arr.size:
+        raise ValueError("episode indices must be unique")
+    return arr
+
+
+def _split_from_export(
+    sidecar: dict, val_fraction: float, seed: int, episodes: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The same stratified episode split as BC-MLP's, from the export's ID/OOD flags.
+
+    With ``episodes`` (export indices) only those are split, in the given order, so training on
+    ``episodes`` of a whole-dataset export splits exactly like training on an export of just those
+    episodes. Returns export episode indices (train, val).
+    """
+    chosen = check_episodes(episodes, len(sidecar["source_id"]))
     stub = HandoverDataset(
-        [Episode(np.zeros((2, 2)), np.zeros((2, 3)), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)), ood, sid)
-         for sid, ood in zip(sidecar["source_id"], sidecar["is_ood"], strict=True)]
+        [Episode(np.zeros((2, 2)), np.zeros((2, 3)), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)),
+                 bool(sidecar["is_ood"][i]), sidecar["source_id"][i])
+         for i in chosen]
     )
-    return split_train_val(stub, val_fraction, seed)
+    train, val = split_train_val(stub, val_fraction, seed)
+    return chosen[train], chosen[val]
+
+
+# ---------------------------------------------------------------------- fast dropout masks
+class DropoutMasks:
+    """Bernoulli keep-masks for dropout, drawn from numpy's SFC64 and re-seeded every step.
+
+    ``torch.nn.Dropout`` on CPU draws its mask with ``bernoulli_`` (one mt19937 draw per element,
+    ~7.5 ms for the 1M-element feed-forward activations of a batch of 64): about a fifth of an ACT
+    step on one core. This draws the same i.i.d. Bernoulli(1 - p) mask (keep if a uniform 32-bit
+    word >= round(p 2^32), i.e. p exact to 2^-32) from SFC64's raw output at ~1 ns per element.
+    Seeding from ``(seed, step)`` keeps training deterministic and resumable without extra state.
+    """
+
+    def __init__(self, seed: int) -> None:
+        self.seed = int(seed) % 2**63
+        self.reseed(0)
+
+    def reseed(self, step: int) -> None:
+        self._bits = np.random.SFC64(np.random.SeedSequence([self.seed, int(step)]))
+
+    def noise(self, shape: torch.Size, p: float, dtype: torch.dtype) -> torch.Tensor:
+        """Keep-mask scaled by 1/(1-p) (what ATen's dropout multiplies the input by)."""
+        n = math.prod(shape)
+        words = self._bits.random_raw((n + 1) // 2).view(np.uint32)[:n]
+        threshold = np.uint32(min(round(p * 2.0**32), 2**32 - 1))
+        np_dtype = np.float64 if dtype == torch.float64 else np.float32
+        noise = np.multiply(words >= threshold, np_dtype(1.0 / (1.0 - p)), dtype=np_dtype)
+        return torch.from_numpy(noise).view(shape).to(dtype)
+
+
+class FastDropout(torch.nn.Dropout):
+    """``nn.Dropout`` (same p, same train/eval behaviour) with its mask from :class:`DropoutMasks`."""
+
+    def __init__(self, p: float, masks: DropoutMasks) -> None:
+        super().__init__(p)
+        self.masks = masks
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.training or self.p == 0.0:
+            return x
+        return x * self.masks.noise(x.shape, self.p, x.dtype)
+
+
+@contextlib.contextmanager
+def fast_dropout(policy: torch.nn.Module, masks: DropoutMasks):
+    """Swap every ``nn.Dropout`` module of ``policy`` for a :class:`FastDropout` while training.
+
+    Only the dropout *modules* are swapped (the residual and feed-forward dropouts, ~87% of the
+    dropped elements); ``nn.MultiheadAttention``'s internal attention dropout stays PyTorch's.
+    The originals are put back on exit; dropout modules hold no weights, so checkpoints are unchanged.
+    """
+    swapped = []
+    for parent in list(policy.modules()):
+        for name, child in list(parent.named_children()):
+            if type(child) is torch.nn.Dropout:
+                setattr(parent, name, FastDropout(child.p, masks))
+                swapped.append((parent, name, child))
+    try:
+        yield swapped
+    finally:
+        for parent, name, child in swapped:
+            setattr(parent, name, child)
 
 
 # ---------------------------------------------------------------------- the agent
@@ -325,7 +443,9 @@ class ACTAgent(GiverConditionedAgent):
         params: Theta (t_f is used by ``act``); closed_loop, layout: see ``PredictiveAgent``.
     """
 
-    predict_rows_per_batch = 1024  # bounds the transformer's activations in open-loop evaluation
+    # Rows per network call in open-loop evaluation: bounds the activations, and 256 rows run ~1.7x
+    # faster than 1024 on one core (the decoder's activations stay in cache).
+    predict_rows_per_batch = 256
 
     def __init__(
         self,
@@ -381,6 +501,7 @@ class ACTAgent(GiverConditionedAgent):
         progress: bool = False,
         steps: int | None = None,
         log: Callable[[str], None] | None = None,
+        episodes: np.ndarray | None = None,
     ) -> ACTAgent:
         """Train on a LeRobot export at ``root`` (see :mod:`handover_env.data.lerobot_export`).
 
@@ -392,6 +513,10 @@ class ACTAgent(GiverConditionedAgent):
             progress: tqdm bar with the loss.
             steps: overrides ``config.steps``.
             log: called with one line per validation pass.
+            episodes: train on these export episode indices only (default: all). The train /
+                validation split and the normalisation statistics come from these episodes alone,
+                exactly as if only they had been exported (the evaluation exports the whole dataset
+                once and trains each fold on its training episodes).
         """
         from lerobot.policies.act.modeling_act import ACTPolicy
         from lerobot.policies.act.processor_act import make_act_pre_post_processors
@@ -399,7 +524,7 @@ class ACTAgent(GiverConditionedAgent):
         cfg = self.config
         total_steps = cfg.steps if steps is None else int(steps)
         ds, sidecar = open_export(root, repo_id, cfg.spec)
-        train_ep, val_ep = _split_from_export(sidecar, cfg.val_fraction, cfg.seed)
+        train_ep, val_ep = _split_from_export(sidecar, cfg.val_fraction, cfg.seed, episodes)
         train = lerobot_samples(ds, train_ep)
         val = lerobot_samples(ds, val_ep)
         stats = feature_stats(train)
@@ -407,7 +532,10 @@ class ACTAgent(GiverConditionedAgent):
         torch.manual_seed(cfg.seed)
         self.policy = ACTPolicy(cfg.policy_config())
         self.preprocessor, self.postprocessor = make_act_pre_post_processors(self.policy.config, stats)
-        opt = torch.optim.AdamW(self.policy.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        train = normalise_samples(self.preprocessor, train)  # once, not per batch: same tensors
+        val = normalise_samples(self.preprocessor, val)
+        opt = torch.optim.AdamW(self.policy.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay,
+                                fused=cfg.device == "cpu")
         state = {
             "step": 0, "best_val": math.inf, "best_step": -1, "train_loss": [], "val_loss": [],
             "wall_time_s": 0.0,
@@ -420,7 +548,7 @@ class ACTAgent(GiverConditionedAgent):
                 raise CheckpointError("resume needs the checkpoint folder (out_dir)")
             state, best = self._load_training_state(Path(out_dir), opt, state["split"])
 
-        n = train[OBS_STATE].shape[0]
+        n = train[ACTION].shape[0]
         per_epoch = max(1, n // cfg.batch_size)
         t_start = time.perf_counter() - state["wall_time_s"]
         bar = None
@@ -430,40 +558,43 @@ class ACTAgent(GiverConditionedAgent):
             bar = tqdm(total=total_steps, initial=state["step"], desc="act", unit="step")
         running, count = 0.0, 0
         perm = None
-        while state["step"] < total_steps:
-            step = state["step"]
-            epoch, pos = divmod(step, per_epoch)
-            if perm is None or pos == 0:  # the permutation depends only on (seed, epoch): resumable
-                perm = torch.randperm(n, generator=torch.Generator().manual_seed(cfg.seed * 100_003 + epoch))
-            idx = perm[pos * cfg.batch_size : (pos + 1) * cfg.batch_size]
-            self.policy.train()
-            batch = self.preprocessor({k: v[idx] for k, v in train.items()})
-            loss, _ = self.policy.forward(batch)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(self.policy.parameters(), cfg.grad_clip_norm)
-            opt.step()
-            running += loss.item()
-            count += 1
-            state["step"] = step + 1
-            if bar is not None:
-                bar.update(1)
-                if count % 25 == 0:
-                    bar.set_postfix(loss=f"{running / count:.4f}")
-            if state["step"] % cfg.eval_every == 0 or state["step"] == total_steps:
-                val_l1 = self._val_l1(val)
-                state["train_loss"].append(running / max(count, 1))
-                state["val_loss"].append(val_l1)
-                running, count = 0.0, 0
-                if val_l1 < state["best_val"]:
-                    state["best_val"], state["best_step"] = val_l1, state["step"]
-                    best = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
-                state["wall_time_s"] = time.perf_counter() - t_start
-                if log is not None:
-                    log(f"step {state['step']:6d}  train {state['train_loss'][-1]:.4f}  val L1 {val_l1:.4f}  "
-                        f"best {state['best_val']:.4f} @ {state['best_step']}")
-                if out_dir is not None:
-                    self._save_checkpoint(Path(out_dir), best, opt, state)
+        masks = DropoutMasks(cfg.seed)
+        use_fast = cfg.fast_dropout and torch.device(cfg.device).type == "cpu"
+        with fast_dropout(self.policy, masks) if use_fast else contextlib.nullcontext():
+            while state["step"] < total_steps:
+                step = state["step"]
+                epoch, pos = divmod(step, per_epoch)
+                if perm is None or pos == 0:  # the permutation depends only on (seed, epoch): resumable
+                    perm = torch.randperm(n, generator=torch.Generator().manual_seed(cfg.seed * 100_003 + epoch))
+                idx = perm[pos * cfg.batch_size : (pos + 1) * cfg.batch_size]
+                self.policy.train()
+                masks.reseed(step)
+                loss, _ = self.policy.forward({k: v[idx] for k, v in train.items()})
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.policy.parameters(), cfg.grad_clip_norm)
+                opt.step()
+                running += loss.item()
+                count += 1
+                state["step"] = step + 1
+                if bar is not None:
+                    bar.update(1)
+                    if count % 25 == 0:
+                        bar.set_postfix(loss=f"{running / count:.4f}")
+                if state["step"] % cfg.eval_every == 0 or state["step"] == total_steps:
+                    val_l1 = self._val_l1(val)
+                    state["train_loss"].append(running / max(count, 1))
+                    state["val_loss"].append(val_l1)
+                    running, count = 0.0, 0
+                    if val_l1 < state["best_val"]:
+                        state["best_val"], state["best_step"] = val_l1, state["step"]
+                        best = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
+                    state["wall_time_s"] = time.perf_counter() - t_start
+                    if log is not None:
+                        log(f"step {state['step']:6d}  train {state['train_loss'][-1]:.4f}  val L1 {val_l1:.4f}  "
+                            f"best {state['best_val']:.4f} @ {state['best_step']}")
+                    if out_dir is not None:
+                        self._save_checkpoint(Path(out_dir), best, opt, state)
         if bar is not None:
             bar.close()
         self.policy.load_state_dict(best)
@@ -473,13 +604,17 @@ class ACTAgent(GiverConditionedAgent):
         return self
 
     @torch.no_grad()
-    def _val_l1(self, val: dict[str, torch.Tensor], batch_size: int = 1024) -> float:
-        """Masked L1 of the normalised chunk (the reconstruction term of ACT's loss), zero latent."""
+    def _val_l1(self, val: dict[str, torch.Tensor], batch_size: int = 256) -> float:
+        """Masked L1 of the normalised chunk (the reconstruction term of ACT's loss), zero latent.
+
+        ``val`` is already normalised (:func:`normalise_samples`). Batches of 256 rows: a pass over
+        a fold's ~10k validation frames takes ~3 s on one core, against ~5.5 s with 1024.
+        """
         self.policy.eval()
         total, weight = 0.0, 0.0
-        n = val[OBS_STATE].shape[0]
+        n = val[ACTION].shape[0]
         for i in range(0, n, batch_size):
-            batch = self.preprocessor({k: v[i : i + batch_size] for k, v in val.items()})
+            batch = {k: v[i : i + batch_size] for k, v in val.items()}
             pred = self.policy.predict_action_chunk(batch)
             valid = (~batch["action_is_pad"]).unsqueeze(-1).to(pred.dtype)
             total += float(((pred - batch[ACTION]).abs() * valid).sum())

@@ -18,7 +18,17 @@ _torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
 
 from baselines_toy import toy_dataset  # noqa: E402
 
-from baselines.act import ACTAgent, ACTAgentConfig, lerobot_samples, open_export  # noqa: E402
+from baselines.act import (  # noqa: E402
+    ACTAgent,
+    ACTAgentConfig,
+    DropoutMasks,
+    FastDropout,
+    fast_dropout,
+    feature_stats,
+    lerobot_samples,
+    normalise_samples,
+    open_export,
+)
 from baselines.features import CheckpointError, FeatureSpec  # noqa: E402
 from handover_env.data.lerobot_export import export_lerobot  # noqa: E402
 
@@ -145,3 +155,84 @@ def test_receiver_only_variant_drops_the_state_feature(export, data):
     ep = data[1]
     pred = agent.predict(ep.receiver_xy[:15])
     np.testing.assert_allclose(agent.predict_sequence(ep.receiver_xy, np.array([14]))[0], pred, atol=1e-5)
+
+
+def test_normalising_once_equals_the_per_batch_preprocessor(export):
+    """fit_lerobot normalises all samples up front; a batch of them is bitwise the pipeline's batch."""
+    from lerobot.policies.act.processor_act import make_act_pre_post_processors
+
+    ds, _ = open_export(export, "local/handover", FeatureSpec(history=10))
+    samples = lerobot_samples(ds, np.arange(ds.num_episodes))
+    for giver in (True, False):
+        agent = ACTAgent(ACTAgentConfig(**TINY, use_giver_state=giver))
+        pre, _ = make_act_pre_post_processors(agent.policy.config, feature_stats(samples))
+        whole = normalise_samples(pre, samples, chunk=50)  # several chunks
+        assert set(whole) == set(samples)
+        idx = torch.randperm(len(ds), generator=torch.Generator().manual_seed(1))[:37]
+        batch = pre({k: v[idx] for k, v in samples.items()})
+        for key in samples:
+            assert torch.equal(whole[key][idx], batch[key]), key
+        env = whole["observation.environment_state"]
+        np.testing.assert_allclose(env.mean(0).numpy(), 0.0, atol=1e-4)  # really normalised
+        state_changed = not torch.equal(whole["observation.state"], samples["observation.state"])
+        assert state_changed == giver  # only an input feature is normalised
+
+
+def test_training_on_export_episodes_equals_exporting_them(data, export, tmp_path):
+    """episodes=: split and statistics from those episodes only, the same model as their own export."""
+    chosen = np.array([0, 2, 3, 5, 6, 7])
+    cfg = dict(TINY, steps=12, eval_every=6)
+    sub = ACTAgent(ACTAgentConfig(**cfg)).fit_lerobot(
+        export_lerobot(data.subset(chosen), tmp_path / "sub", history=10))
+    part = ACTAgent(ACTAgentConfig(**cfg)).fit_lerobot(export, episodes=chosen)
+    ids = {data[i].source_id for i in chosen}
+    split = part.train_log["split"]
+    assert set(split["train"]) | set(split["val"]) == ids and not set(split["train"]) & set(split["val"])
+    assert split == sub.train_log["split"]
+    for k, v in sub.policy.state_dict().items():
+        assert torch.equal(v, part.policy.state_dict()[k]), k
+    assert part.train_log["val_loss"] == sub.train_log["val_loss"]
+    # The normaliser's statistics are those of the chosen training episodes, not of the whole export.
+    ds, _ = open_export(export, "local/handover", FeatureSpec(history=10))
+    train_ep = [i for i in chosen if data[i].source_id in set(split["train"])]
+    mean = feature_stats(lerobot_samples(ds, np.array(train_ep)))["observation.environment_state"]["mean"]
+    every = feature_stats(lerobot_samples(ds, np.arange(len(data))))["observation.environment_state"]["mean"]
+    got = part.preprocessor.steps[-1].stats["observation.environment_state"]["mean"]
+    np.testing.assert_allclose(np.asarray(got), mean, rtol=1e-6)
+    assert not np.allclose(np.asarray(got), every, rtol=1e-3)
+    with pytest.raises(ValueError, match="unique"):
+        ACTAgent(ACTAgentConfig(**cfg)).fit_lerobot(export, episodes=np.array([0, 1, 1]))
+    with pytest.raises(ValueError, match=r"must lie in \[0, 7\]"):
+        ACTAgent(ACTAgentConfig(**cfg)).fit_lerobot(export, episodes=np.array([0, 8]))
+
+
+def test_fast_dropout_is_bernoulli_dropout():
+    masks = DropoutMasks(seed=3)
+    drop = FastDropout(0.1, masks).train()
+    x = torch.ones(1000, 1000, requires_grad=True)
+    y = drop(x)
+    values = torch.unique(y.detach())
+    assert values.tolist() == pytest.approx([0.0, 1 / 0.9])
+    kept = float((y != 0).float().mean())
+    assert abs(kept - 0.9) < 4 * (0.9 * 0.1 / 1e6) ** 0.5  # 4 sigma
+    y.sum().backward()
+    assert torch.equal(x.grad, y.detach())  # d(x * noise)/dx = noise
+    assert torch.equal(drop.eval()(x), x)
+    masks.reseed(5)
+    a = masks.noise(torch.Size([4, 1000]), 0.1, torch.float32)
+    masks.reseed(5)
+    assert torch.equal(a, masks.noise(torch.Size([4, 1000]), 0.1, torch.float32))  # resumable: (seed, step)
+    masks.reseed(6)
+    assert not torch.equal(a, masks.noise(torch.Size([4, 1000]), 0.1, torch.float32))
+    # Rows are independent: adjacent rows of one draw do not repeat each other.
+    assert not torch.equal(a[0], a[1])
+
+
+def test_fast_dropout_swaps_only_while_training():
+    agent = ACTAgent(ACTAgentConfig(**TINY))
+    before = [type(m) for m in agent.policy.modules()]
+    n_dropout = sum(t is torch.nn.Dropout for t in before)
+    with fast_dropout(agent.policy, DropoutMasks(0)) as swapped:
+        assert len(swapped) == n_dropout > 0
+        assert not any(type(m) is torch.nn.Dropout for m in agent.policy.modules())
+    assert [type(m) for m in agent.policy.modules()] == before
