@@ -24,7 +24,14 @@ from pathlib import Path
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 
-from handover_env.evaluation.methods import METHODS, MethodOptions, check_methods  # noqa: E402
+from handover_env.evaluation.methods import (  # noqa: E402
+    ACT_EVAL_STEPS,
+    METHODS,
+    QUICK_ACT_STEPS,
+    MethodOptions,
+    check_methods,
+    default_workers,
+)
 from handover_env.evaluation.reporting import METHOD_LABELS, markdown_table, mean_std  # noqa: E402
 
 QUICK_EPISODES = 30
@@ -52,11 +59,16 @@ def build_parser() -> argparse.ArgumentParser:
                        help="frames of receiver history before the first query (default: 5)")
         p.add_argument("--inducing-ratio", type=float, default=0.4,
                        help="SPGP inducing ratio of 'ours' (paper: 0.4)")
-        p.add_argument("--act-steps", type=int, default=None, help="ACT optimisation steps (default: the ACT agent's)")
+        p.add_argument("--act-steps", type=int, default=None,
+                       help=f"ACT optimisation steps (default: {ACT_EVAL_STEPS} for the k-fold evaluations, "
+                            f"{QUICK_ACT_STEPS} with --quick; train.py keeps the agent's own 8000)")
         p.add_argument("--bc-epochs", type=int, default=None, help="BC-MLP maximum epochs (default: the BC-MLP agent's)")
         p.add_argument("--giver-state", action="store_true",
                        help="also give BC-MLP and ACT the giver's position at the query frame (observation.state); "
                             "off by default, as in the paper, where every module sees the receiver base pose only")
+        p.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="processes that train ACT's fold models in parallel, one torch thread each "
+                            "(default: one per core, at most 2; 1 trains them one after another)")
         p.add_argument("--no-reuse", action="store_true", help="retrain BC-MLP/ACT even if a matching checkpoint exists")
         p.add_argument("--quick", action="store_true",
                        help=f"small fast run for tests: {QUICK_EPISODES} episodes, 3 folds, query stride 3, "
@@ -118,7 +130,8 @@ def main(argv: list[str] | None = None) -> int:
         protocol = OpenLoopProtocol(horizon=args.horizon, first_query=args.first_query, stride=stride)
         options = MethodOptions(seed=args.seed, quick=args.quick, inducing_ratio=args.inducing_ratio,
                                 act_steps=args.act_steps, bc_epochs=args.bc_epochs, horizon=args.horizon,
-                                giver_state=args.giver_state)
+                                giver_state=args.giver_state,
+                                workers=default_workers() if args.workers is None else args.workers)
         dataset = load_dataset(args.data, args.quick, args.seed)
     except (ValueError, FileNotFoundError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
@@ -135,18 +148,22 @@ def main(argv: list[str] | None = None) -> int:
             rows = experiments.run_table1(dataset, methods, folds, args.seed, options, protocol, out,
                                           reuse=not args.no_reuse, progress=progress)
             print("\n" + markdown_table(
-                ["method", "ID 3D (mm)", "OOD 3D (mm)", "ID paper", "OOD paper"],
+                ["method", "ID 3D (mm)", "OOD 3D (mm)", "ID current frame", "OOD current frame", "ID paper",
+                 "OOD paper"],
                 [[METHOD_LABELS[r["method"]], mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
                   mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+                  mean_std(r["id_now_axis_mm"], r["id_now_axis_std_mm"]),
+                  mean_std(r["ood_now_axis_mm"], r["ood_now_axis_std_mm"]),
                   mean_std(r["paper_id_mm"], r["paper_id_std_mm"]), mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"])]
                  for r in rows]))
         elif args.command == "sample-efficiency":
             rows = experiments.run_sample_efficiency(dataset, methods, args.ratios, folds, args.seed, options,
                                                      protocol, out, reuse=not args.no_reuse, progress=progress)
             print("\n" + markdown_table(
-                ["method", "ratio", "all 3D (mm)", "ID 3D (mm)", "OOD 3D (mm)"],
+                ["method", "ratio", "all 3D (mm)", "ID 3D (mm)", "OOD 3D (mm)", "all current frame (mm)"],
                 [[METHOD_LABELS[r["method"]], f"{r['ratio']:g}", mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
-                  mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]), mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"])]
+                  mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]), mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+                  mean_std(r["all_now_axis_mm"], r["all_now_axis_std_mm"])]
                  for r in rows]))
         else:
             rates = args.rates if "ours" in methods else []

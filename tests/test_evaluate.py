@@ -32,6 +32,10 @@ def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture)
         assert float(r["id_rms_axis_mm"]) == pytest.approx(float(r["id_rms_3d_mm"]) / math.sqrt(3), rel=1e-4)
     folds = _rows(tmp_path / "table1_folds.csv")
     assert len(folds) == 4 * 3  # methods x folds
+    for r in rows:  # the current-frame column is the mean over folds of each fold's row-0 per-axis RMS
+        mine = [float(f["id_now_axis_mm"]) for f in folds if f["method"] == r["method"]]
+        assert float(r["id_now_axis_mm"]) == pytest.approx(sum(mine) / len(mine), rel=1e-4)  # CSV keeps 6 digits
+        assert 0 < float(r["id_now_axis_mm"]) < float(r["id_rms_3d_mm"])
     episodes = _rows(tmp_path / "table1_episodes.csv")
     assert len(episodes) == 4 * 30  # every episode is tested exactly once per method
     md = (tmp_path / "table1.md").read_text()
@@ -89,6 +93,8 @@ def test_learned_checkpoint_is_reused(tmp_path: Path) -> None:
         (["table1", "--methods", "ours", "gpt"], "unknown method"),
         (["table1", "--data", "/nonexistent/whole_motions"], "no such file"),
         (["tradeoff", "--methods", "act"], "nonparametric"),
+        (["table1", "--workers", "0"], "workers"),
+        (["table1", "--act-steps", "0"], "act_steps"),
     ],
 )
 def test_bad_input_gives_clear_error(argv: list[str], message: str, capsys: pytest.CaptureFixture) -> None:

@@ -4,6 +4,8 @@
 exact GPs, ``bc_mlp`` and ``act`` the learned baselines. The learned baselines are trained once per
 (method, configuration, training set, seed) and their checkpoints are reused when a matching one
 exists under the cache folder; the nonparametric methods fit in seconds and are never cached.
+The experiments pre-train ACT's models for all folds in parallel worker processes into that same
+cache (:mod:`handover_env.evaluation.act_folds`), so :func:`fit_agent` then only loads them.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import hashlib
 import json
 import os
 import shutil
-from dataclasses import asdict, dataclass, is_dataclass
+from dataclasses import asdict, dataclass, field, is_dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +24,16 @@ from handover_env.data.dataset import HandoverDataset
 
 METHODS: tuple[str, ...] = ("ours", "iaal", "act", "bc_mlp")
 LEARNED: frozenset[str] = frozenset({"act", "bc_mlp"})
-_COMPLETE = "evaluate_complete.json"
+COMPLETE = "evaluate_complete.json"
+
+ACT_EVAL_STEPS = 3_000
+"""ACT optimisation steps of the k-fold evaluations (``MethodOptions.act_steps=None``); see MethodOptions."""
+QUICK_ACT_STEPS = 40
+
+
+def default_workers() -> int:
+    """Processes for the ACT fold pre-training: one per core, at most 2."""
+    return max(1, min(2, os.cpu_count() or 1))
 
 
 @dataclass(frozen=True)
@@ -33,12 +44,25 @@ class MethodOptions:
         seed: seeds the learned baselines (initialisation, shuffling, validation split).
         quick: tiny training budgets for tests (``--quick``); never used for reported numbers.
         inducing_ratio: the SPGP inducing ratio of ``ours`` (paper: 0.4).
-        act_steps: ACT optimisation steps (None = the ACT agent's default).
+        act_steps: ACT optimisation steps. None = :data:`ACT_EVAL_STEPS` (3000; 40 with ``quick``),
+            the k-fold budget, not ``train.py``'s 8000: 10 folds of ACT must fit in ~40 min on 2
+            cores. Measured on the 2-core box (receiver-only ACT, batch 64, one torch thread per
+            fold, validation every ``steps // 8``): 8.6 steps/s for one fold alone, 8.1-8.2 steps/s
+            each with 2 folds training side by side (6.6 each while another job also loaded the
+            box); a validation pass over a fold's ~10k held-out frames takes ~3.3 s; the single
+            875-episode LeRobot export takes ~100 s. A 3000-step fold thus takes ~6.6 min, and
+            10 folds in 2 workers ~33 min of training + ~2 min export (~44 min on a shared box).
+            A 787-episode training set reaches validation L1 0.264 / 0.258 / 0.249 / 0.246
+            after 1000 / 2000 / 3000 / 5000 steps: 3000 is within ~1% of 5000.
         bc_epochs: BC-MLP maximum epochs (None = the BC-MLP agent's default).
         horizon: predicted frames (the protocol's horizon).
         giver_state: also give BC-MLP and ACT the giver's position at the query frame
             (``observation.state``). Off by default: the paper's modules all receive the
             receiver base pose alone (Sec. V-A), and the nonparametric methods never see it.
+        workers: processes that pre-train the ACT fold models in parallel (each with one torch
+            thread) before the fold loop; default one per core, at most 2. 1 trains them one
+            after another in this process. Either way every fold trains on its episodes of one
+            shared LeRobot export (:mod:`handover_env.evaluation.act_folds`).
     """
 
     seed: int = 0
@@ -48,6 +72,13 @@ class MethodOptions:
     bc_epochs: int | None = None
     horizon: int = 30
     giver_state: bool = False
+    workers: int = field(default_factory=default_workers)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.workers, (int, np.integer)) or self.workers < 1:
+            raise ValueError(f"workers must be a positive integer, got {self.workers!r}")
+        if self.act_steps is not None and self.act_steps < 1:
+            raise ValueError(f"act_steps must be positive, got {self.act_steps!r}")
 
 
 def check_methods(names: list[str] | tuple[str, ...]) -> list[str]:
@@ -81,10 +112,9 @@ def build_agent(name: str, options: MethodOptions, inducing_ratio: float | None 
     from baselines.act import ACTAgent, ACTAgentConfig
 
     kwargs = {"seed": options.seed, "horizon": options.horizon, "use_giver_state": options.giver_state}
-    steps = options.act_steps or (40 if options.quick else None)
-    if steps:
-        kwargs["steps"] = steps
-        kwargs["eval_every"] = max(1, min(1000, steps // 4))
+    steps = options.act_steps or (QUICK_ACT_STEPS if options.quick else ACT_EVAL_STEPS)
+    kwargs["steps"] = steps
+    kwargs["eval_every"] = max(1, steps // 8)  # 8 validation passes pick the best checkpoint
     if options.quick:
         kwargs.update(dim_model=32, dim_feedforward=64, n_heads=2, n_encoder_layers=1, batch_size=32)
     return ACTAgent(ACTAgentConfig(**kwargs))
@@ -105,6 +135,43 @@ def _config_dict(agent: Agent) -> dict:
     return asdict(config) if is_dataclass(config) else {}
 
 
+def checkpoint_slot(
+    name: str, agent: Agent, train: HandoverDataset, cache_dir: str | os.PathLike
+) -> tuple[Path, str]:
+    """``(folder, key source)`` of ``agent``'s checkpoint for ``train`` under ``cache_dir``.
+
+    The folder is ``<cache_dir>/<name>-<key>`` with the key a hash of (method, configuration,
+    training-set fingerprint); the key source (JSON) is what :func:`mark_complete` writes.
+    """
+    key_src = json.dumps(
+        {"method": name, "config": _config_dict(agent), "train": dataset_fingerprint(train)},
+        sort_keys=True,
+        default=str,
+    )
+    key = hashlib.sha1(key_src.encode()).hexdigest()[:16]
+    return Path(cache_dir) / f"{name}-{key}", key_src
+
+
+def is_complete(folder: str | os.PathLike, key_src: str) -> bool:
+    """True when ``folder`` holds a finished checkpoint written for ``key_src``."""
+    marker = Path(folder) / COMPLETE
+    return marker.is_file() and marker.read_text() == key_src
+
+
+def mark_complete(folder: str | os.PathLike, key_src: str) -> None:
+    """Mark a checkpoint folder finished (written last, after the checkpoint itself)."""
+    (Path(folder) / COMPLETE).write_text(key_src)
+
+
+def fresh_folder(folder: str | os.PathLike) -> Path:
+    """Empty ``folder`` (deleting an old or unfinished checkpoint there)."""
+    folder = Path(folder)
+    if folder.exists():
+        shutil.rmtree(folder)
+    folder.mkdir(parents=True)
+    return folder
+
+
 def fit_agent(
     name: str,
     agent: Agent,
@@ -121,23 +188,15 @@ def fit_agent(
     if name not in LEARNED or cache_dir is None:
         kwargs = {"progress": progress} if name in LEARNED else {}
         return agent.fit(train, **kwargs), False
-    key_src = json.dumps(
-        {"method": name, "config": _config_dict(agent), "train": dataset_fingerprint(train)},
-        sort_keys=True,
-        default=str,
-    )
-    key = hashlib.sha1(key_src.encode()).hexdigest()[:16]
-    folder = Path(cache_dir) / f"{name}-{key}"
+    folder, key_src = checkpoint_slot(name, agent, train, cache_dir)
     cls = type(agent)
-    if reuse and (folder / _COMPLETE).is_file():
+    if reuse and is_complete(folder, key_src):
         try:
             return cls.load(folder), True  # type: ignore[attr-defined]
         except Exception as exc:  # an incompatible or damaged checkpoint is retrained, not trusted
             print(f"  checkpoint {folder} unusable ({exc}); retraining", flush=True)
-    if folder.exists():
-        shutil.rmtree(folder)
-    folder.mkdir(parents=True)
+    fresh_folder(folder)
     agent.fit(train, out_dir=folder, progress=progress)  # type: ignore[call-arg]
     agent.save(folder)  # type: ignore[attr-defined]
-    (folder / _COMPLETE).write_text(key_src)
+    mark_complete(folder, key_src)
     return agent, False
