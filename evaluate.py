@@ -165,6 +165,11 @@ def main(argv: list[str] | None = None) -> int:
                   mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]), mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
                   mean_std(r["all_now_axis_mm"], r["all_now_axis_std_mm"])]
                  for r in rows]))
+            horizon, now = experiments.degradation_pct(rows), experiments.degradation_pct(rows, "all_now_axis_mm")
+            if horizon:
+                lo, hi = min(args.ratios), max(args.ratios)
+                print(f"RMS at ratio {lo:g} vs {hi:g} (all episodes, 1 s horizon 3D / current frame): " + ", ".join(
+                    f"{METHOD_LABELS[m]} {horizon[m]:+.1f}% / {now[m]:+.1f}%" for m in horizon))
         else:
             rates = args.rates if "ours" in methods else []
             rows = experiments.run_tradeoff(dataset, rates, folds, args.seed, options, protocol, out,

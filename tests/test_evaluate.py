@@ -44,7 +44,7 @@ def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture)
     assert "Ours (SPGP)" in out and "wrote" in out
 
 
-def test_sample_efficiency_quick(tmp_path: Path) -> None:
+def test_sample_efficiency_quick(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     argv = ["sample-efficiency", "--quick", "--no-progress", "--out", str(tmp_path),
             "--methods", "ours", "bc_mlp", "--ratios", "0.5", "1.0"]
     assert evaluate.main(argv) == 0
@@ -54,6 +54,12 @@ def test_sample_efficiency_quick(tmp_path: Path) -> None:
     half = [r for r in rows if r["method"] == "ours" and float(r["ratio"]) == 0.5][0]
     full = [r for r in rows if r["method"] == "ours" and float(r["ratio"]) == 1.0][0]
     assert float(half["n_train_mean"]) < float(full["n_train_mean"])
+    from handover_env.evaluation.experiments import degradation_pct
+
+    typed = [{k: (v if k == "method" else float(v)) for k, v in r.items()} for r in rows]
+    pct = degradation_pct(typed)
+    assert pct["ours"] == pytest.approx(100 * (float(half["all_rms_3d_mm"]) / float(full["all_rms_3d_mm"]) - 1))
+    assert "RMS at ratio 0.5 vs 1" in capsys.readouterr().out
     assert (tmp_path / "sample_efficiency.png").stat().st_size > 10_000
 
 

@@ -263,31 +263,52 @@ def run_sample_efficiency(
     return rows
 
 
+def degradation_pct(rows: list[dict], key: str = "all_rms_3d_mm") -> dict[str, float]:
+    """Per method, how much worse (%) ``key`` is at the smallest training ratio than at the largest.
+
+    The paper's sample-efficiency claim in one number: the nonparametric methods should degrade
+    less than ACT as the data shrinks.
+    """
+    out = {}
+    for name in dict.fromkeys(r["method"] for r in rows):
+        mine = sorted((r for r in rows if r["method"] == name), key=lambda r: r["ratio"])
+        if len(mine) >= 2:
+            out[name] = 100.0 * (mine[0][key] / mine[-1][key] - 1.0)
+    return out
+
+
 def plot_sample_efficiency(rows: list[dict], methods: Sequence[str], path: Path) -> Path:
     """Mean ± std markers per method and ratio, values written beside the markers (paper style).
 
-    BC-MLP is left out of the picture as in the paper (it is in the CSV).
+    Two panels, all test episodes: the 1 s horizon RMS (3D) and the current-frame per-axis RMS
+    (the reading that matches the paper's Table I). BC-MLP is left out of the picture as in the
+    paper (it is in the CSV).
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=150)
+    fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.2), dpi=150)
     markers = {"ours": "o", "iaal": "s", "act": "^", "bc_mlp": "D"}
-    for name in methods:
-        mine = sorted((r for r in rows if r["method"] == name), key=lambda r: r["ratio"])
-        x = [r["ratio"] for r in mine]
-        y = [r["all_rms_3d_mm"] for r in mine]
-        e = [r["all_std_3d_mm"] for r in mine]
-        ax.errorbar(x, y, yerr=e, marker=markers.get(name, "o"), capsize=3, label=METHOD_LABELS[name])
-        for xi, yi, ei in zip(x, y, e):
-            ax.annotate(mean_std(yi, ei, 1), (xi, yi), textcoords="offset points", xytext=(4, 6), fontsize=6)
-    ax.set_xlabel("training data ratio")
-    ax.set_ylabel("RMS error (mm, 3D)")
-    ax.set_title("Sample efficiency (mean ± std over folds)")
-    ax.grid(alpha=0.3)
-    ax.legend()
+    panels = (("all_rms_3d_mm", "all_std_3d_mm", "RMS error over the 1 s horizon (mm, 3D)"),
+              ("all_now_axis_mm", "all_now_axis_std_mm", "current-frame RMS error (mm, per axis)"))
+    for ax, (key, std_key, label) in zip(axes, panels, strict=True):
+        for k, name in enumerate(methods):
+            mine = sorted((r for r in rows if r["method"] == name), key=lambda r: r["ratio"])
+            dodge = 0.008 * (k - (len(methods) - 1) / 2)  # ours and IAAL nearly coincide: keep both visible
+            x = [r["ratio"] + dodge for r in mine]
+            y = [r[key] for r in mine]
+            e = [r[std_key] for r in mine]
+            line = ax.errorbar(x, y, yerr=e, marker=markers.get(name, "o"), capsize=3, label=METHOD_LABELS[name])
+            for xi, yi, ei in zip(x, y, e, strict=True):  # staggered so the methods' labels do not overlap
+                ax.annotate(mean_std(yi, ei, 1), (xi, yi), textcoords="offset points", xytext=(5, 6 + 8 * k),
+                            fontsize=6, color=line.lines[0].get_color())
+        ax.set_xlabel("training data ratio")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend()
+    fig.suptitle("Sample efficiency (all test episodes; mean ± std over folds)")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
