@@ -26,7 +26,7 @@ import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -272,7 +272,9 @@ def _run_jobs(jobs: list[ACTJob], workers: int, progress: bool, log: Callable[[s
                                  initializer=_init_worker) as pool:
             pending = {pool.submit(train_job, job) for job in jobs}
             while pending:
-                finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
+                # FIRST_COMPLETED, not FIRST_EXCEPTION: the latter only returns once *all* jobs are
+                # done (or one failed), so nothing would be reported while the folds train
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in finished:
                     if fut.exception() is not None:  # stop: queued jobs are dropped, running ones finish
                         pool.shutdown(wait=True, cancel_futures=True)
