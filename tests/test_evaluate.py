@@ -44,6 +44,19 @@ def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture)
     assert "Ours (SPGP)" in out and "wrote" in out
 
 
+def test_table1_folds_in_two_processes_equal_the_serial_loop(tmp_path: Path) -> None:
+    """map_folds: the same per-episode errors whether the folds run in-process or in 2 workers."""
+    tables = []
+    for workers in ("1", "2"):
+        out = tmp_path / workers
+        argv = ["table1", "--quick", "--no-progress", "--methods", "ours", "bc_mlp", "--workers", workers,
+                "--out", str(out)]
+        assert evaluate.main(argv) == 0
+        tables.append(_rows(out / "table1_episodes.csv"))
+    assert len(tables[0]) == 2 * 30
+    assert tables[0] == tables[1]
+
+
 def test_sample_efficiency_quick(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     argv = ["sample-efficiency", "--quick", "--no-progress", "--out", str(tmp_path),
             "--methods", "ours", "bc_mlp", "--ratios", "0.5", "1.0"]

@@ -9,6 +9,7 @@ import os
 import time
 from collections.abc import Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -16,6 +17,7 @@ import numpy as np
 from tqdm import tqdm
 
 from handover_env.data.dataset import HandoverDataset
+from handover_env.evaluation.fold_pool import map_folds
 from handover_env.evaluation.methods import MethodOptions, build_agent, check_methods, fit_agent
 from handover_env.evaluation.openloop import OpenLoopProtocol, evaluate_openloop, summarise
 from handover_env.evaluation.reporting import (
@@ -68,6 +70,62 @@ def _pretrain_act(
 
 
 # ---------------------------------------------------------------------------------------- Table I
+@dataclass(frozen=True)
+class _Table1Fold:
+    """One fold of Table I: what :func:`_table1_fold` needs besides the dataset."""
+
+    fold: int
+    train_idx: np.ndarray
+    test_idx: np.ndarray
+    methods: tuple[str, ...]
+    options: MethodOptions
+    protocol: OpenLoopProtocol
+    cache_dir: Path
+    reuse: bool
+    act_fit_seconds: float | None  # ACT trained up front in this run: its training time, else None
+
+
+def _table1_fold(dataset: HandoverDataset, job: _Table1Fold) -> tuple[list[dict], list[dict]]:
+    """Fit every method on the fold's training episodes and score it on its test episodes.
+
+    Returns ``(fold rows, episode rows)``. Runs in a :func:`map_folds` worker or in-process.
+    """
+    train, test = dataset.subset(job.train_idx), dataset.subset(job.test_idx)
+    fold_rows: list[dict] = []
+    episode_rows: list[dict] = []
+    for name in job.methods:
+        t0 = time.perf_counter()
+        pretrained = name == "act" and job.act_fit_seconds is not None
+        agent, reused = fit_agent(name, build_agent(name, job.options), train, job.cache_dir,
+                                  job.reuse or pretrained)
+        fit_s = time.perf_counter() - t0
+        if pretrained:
+            fit_s, reused = job.act_fit_seconds, False
+        records = evaluate_openloop(agent, test, job.protocol, progress=False)
+        summary = summarise(records)
+        fold_rows.append(
+            {
+                "method": name,
+                "fold": job.fold,
+                "id_rms_3d_mm": summary["id"]["rms_3d_mm"],
+                "ood_rms_3d_mm": summary["ood"]["rms_3d_mm"],
+                "id_now_axis_mm": summary["id"]["rms_now_axis_mm"],
+                "ood_now_axis_mm": summary["ood"]["rms_now_axis_mm"],
+                "n_id": summary["id"]["n_episodes"],
+                "n_ood": summary["ood"]["n_episodes"],
+                "fit_seconds": fit_s,
+                "checkpoint_reused": reused,
+            }
+        )
+        episode_rows += [
+            {"method": name, "fold": job.fold, "source_id": r.source_id, "is_ood": r.is_ood,
+             "rms_3d_mm": r.rms_3d_mm, "rms_axis_mm": r.rms_axis_mm, "rms_now_axis_mm": r.rms_now_axis_mm,
+             "n_queries": r.n_queries}
+            for r in records
+        ]
+    return fold_rows, episode_rows
+
+
 def run_table1(
     dataset: HandoverDataset,
     methods: Sequence[str],
@@ -91,43 +149,16 @@ def run_table1(
     splits = _splits(dataset, folds, seed)
     act_runs = _pretrain_act(dataset, methods, [tr for tr, _ in splits], [f"fold {f}" for f in range(folds)],
                              options, out_dir, reuse, workers, progress)
-    episode_rows: list[dict] = []
-    fold_rows: list[dict] = []
-    bar = tqdm(total=folds * len(methods), desc="table1", unit="fit", disable=not progress)
-    for f, (train_idx, test_idx) in enumerate(splits):
-        train, test = dataset.subset(train_idx), dataset.subset(test_idx)
-        for name in methods:
-            bar.set_postfix_str(f"fold {f} {name}")
-            t0 = time.perf_counter()
-            agent, reused = fit_agent(name, build_agent(name, options), train, out_dir / "checkpoints",
-                                      reuse or (name == "act" and act_runs is not None))
-            fit_s = time.perf_counter() - t0
-            if name == "act" and act_runs is not None and act_runs[f].trained:
-                fit_s, reused = act_runs[f].fit_seconds, False
-            records = evaluate_openloop(agent, test, protocol, progress=False)
-            summary = summarise(records)
-            fold_rows.append(
-                {
-                    "method": name,
-                    "fold": f,
-                    "id_rms_3d_mm": summary["id"]["rms_3d_mm"],
-                    "ood_rms_3d_mm": summary["ood"]["rms_3d_mm"],
-                    "id_now_axis_mm": summary["id"]["rms_now_axis_mm"],
-                    "ood_now_axis_mm": summary["ood"]["rms_now_axis_mm"],
-                    "n_id": summary["id"]["n_episodes"],
-                    "n_ood": summary["ood"]["n_episodes"],
-                    "fit_seconds": fit_s,
-                    "checkpoint_reused": reused,
-                }
-            )
-            episode_rows += [
-                {"method": name, "fold": f, "source_id": r.source_id, "is_ood": r.is_ood,
-                 "rms_3d_mm": r.rms_3d_mm, "rms_axis_mm": r.rms_axis_mm, "rms_now_axis_mm": r.rms_now_axis_mm,
-                 "n_queries": r.n_queries}
-                for r in records
-            ]
-            bar.update()
-    bar.close()
+    n_workers = options.workers if workers is None else int(workers)
+    jobs = [
+        _Table1Fold(f, train_idx, test_idx, tuple(methods), options, protocol, out_dir / "checkpoints",
+                    reuse, None if act_runs is None or not act_runs[f].trained else act_runs[f].fit_seconds)
+        for f, (train_idx, test_idx) in enumerate(splits)
+    ]
+    results = map_folds(_table1_fold, dataset, jobs, workers=n_workers, progress=progress, desc="table1",
+                        label=lambda job: f"fold {job.fold}")
+    fold_rows = [row for fold, _ in results for row in fold]
+    episode_rows = [row for _, eps in results for row in eps]
     rows = []
     for name in methods:
         mine = [r for r in fold_rows if r["method"] == name]
@@ -201,6 +232,37 @@ def table1_markdown(
 
 
 # ------------------------------------------------------------------------------ sample efficiency
+@dataclass(frozen=True)
+class _RatioJob:
+    """One (fold, training ratio) cell of the sample-efficiency sweep."""
+
+    fold: int
+    ratio: float
+    train_idx: np.ndarray  # the subsampled training episodes, as indices of the dataset
+    test_idx: np.ndarray
+    methods: tuple[str, ...]
+    options: MethodOptions
+    protocol: OpenLoopProtocol
+    cache_dir: Path
+    reuse: bool
+
+
+def _ratio_job(dataset: HandoverDataset, job: _RatioJob) -> list[dict]:
+    """Fit every method on the cell's training episodes; one per-fold row per method.
+
+    ACT always loads the model :func:`_pretrain_act` just trained or found.
+    """
+    train, test = dataset.subset(job.train_idx), dataset.subset(job.test_idx)
+    rows = []
+    for name in job.methods:
+        agent, _ = fit_agent(name, build_agent(name, job.options), train, job.cache_dir, job.reuse or name == "act")
+        s = summarise(evaluate_openloop(agent, test, job.protocol, progress=False))
+        rows.append({"method": name, "ratio": job.ratio, "fold": job.fold, "n_train": len(train),
+                     **{f"{k}_rms_3d_mm": s[k]["rms_3d_mm"] for k in ("all", "id", "ood")},
+                     **{f"{k}_now_axis_mm": s[k]["rms_now_axis_mm"] for k in ("all", "id", "ood")}})
+    return rows
+
+
 def run_sample_efficiency(
     dataset: HandoverDataset,
     methods: Sequence[str],
@@ -225,27 +287,18 @@ def run_sample_efficiency(
     splits = _splits(dataset, folds, seed)
     train_sets = {(f, ratio): dataset.subset(train_idx).subsample(ratio, seed=seed + f)
                   for f, (train_idx, _) in enumerate(splits) for ratio in ratios}
-    if "act" in methods:
-        from handover_env.evaluation.act_folds import episode_indices
+    from handover_env.evaluation.act_folds import episode_indices
 
-        _pretrain_act(dataset, methods, [episode_indices(dataset, t) for t in train_sets.values()],
-                      [f"fold {f} ratio {r:g}" for f, r in train_sets], options, out_dir, reuse, workers, progress)
-    per_fold: list[dict] = []
-    bar = tqdm(total=folds * len(ratios) * len(methods), desc="sample-efficiency", unit="fit", disable=not progress)
-    for f, (_, test_idx) in enumerate(splits):
-        test = dataset.subset(test_idx)
-        for ratio in ratios:
-            train = train_sets[(f, ratio)]
-            for name in methods:
-                bar.set_postfix_str(f"fold {f} ratio {ratio} {name}")
-                agent, _ = fit_agent(name, build_agent(name, options), train, out_dir / "checkpoints",
-                                     reuse or name == "act")
-                s = summarise(evaluate_openloop(agent, test, protocol, progress=False))
-                per_fold.append({"method": name, "ratio": ratio, "fold": f, "n_train": len(train),
-                                 **{f"{k}_rms_3d_mm": s[k]["rms_3d_mm"] for k in ("all", "id", "ood")},
-                                 **{f"{k}_now_axis_mm": s[k]["rms_now_axis_mm"] for k in ("all", "id", "ood")}})
-                bar.update()
-    bar.close()
+    train_idx = {key: episode_indices(dataset, t) for key, t in train_sets.items()}
+    _pretrain_act(dataset, methods, list(train_idx.values()), [f"fold {f} ratio {r:g}" for f, r in train_sets],
+                  options, out_dir, reuse, workers, progress)
+    jobs = [_RatioJob(f, ratio, train_idx[(f, ratio)], test_idx, tuple(methods), options, protocol,
+                      out_dir / "checkpoints", reuse)
+            for f, (_, test_idx) in enumerate(splits) for ratio in ratios]
+    results = map_folds(_ratio_job, dataset, jobs, workers=options.workers if workers is None else int(workers),
+                        progress=progress, desc="sample-efficiency",
+                        label=lambda job: f"fold {job.fold} ratio {job.ratio:g}")
+    per_fold = [row for rows_ in results for row in rows_]
     rows = []
     for name in methods:
         for ratio in ratios:
