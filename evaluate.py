@@ -67,8 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="also give BC-MLP and ACT the giver's position at the query frame (observation.state); "
                             "off by default, as in the paper, where every module sees the receiver base pose only")
         p.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="processes that train ACT's fold models in parallel, one torch thread each "
-                            "(default: one per core, at most 2; 1 trains them one after another)")
+                       help="processes that train ACT's fold models, and then run the folds (table1) or "
+                            "the fold x ratio cells (sample-efficiency), in parallel, one torch thread each "
+                            "(default: one per core, at most 2; 1 runs everything in this process); the "
+                            "results do not depend on it. tradeoff always times on one core")
         p.add_argument("--no-reuse", action="store_true", help="retrain BC-MLP/ACT even if a matching checkpoint exists")
         p.add_argument("--quick", action="store_true",
                        help=f"small fast run for tests: {QUICK_EPISODES} episodes, 3 folds, query stride 3, "

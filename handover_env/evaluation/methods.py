@@ -52,6 +52,8 @@ class MethodOptions:
             box); a validation pass over a fold's ~10k held-out frames takes ~3.3 s; the single
             875-episode LeRobot export takes ~100 s. A 3000-step fold thus takes ~6.6 min, and
             10 folds in 2 workers ~33 min of training + ~2 min export (~44 min on a shared box).
+            The full Table I run measured 41 min for the 10 ACT folds (444-517 s each, 2 at a
+            time) after a 105 s export, 56 min in all with the then still serial fold loop.
             A 787-episode training set reaches validation L1 0.264 / 0.258 / 0.249 / 0.246
             after 1000 / 2000 / 3000 / 5000 steps: 3000 is within ~1% of 5000.
         bc_epochs: BC-MLP maximum epochs (None = the BC-MLP agent's default).
@@ -60,9 +62,10 @@ class MethodOptions:
             (``observation.state``). Off by default: the paper's modules all receive the
             receiver base pose alone (Sec. V-A), and the nonparametric methods never see it.
         workers: processes that pre-train the ACT fold models in parallel (each with one torch
-            thread) before the fold loop; default one per core, at most 2. 1 trains them one
-            after another in this process. Either way every fold trains on its episodes of one
-            shared LeRobot export (:mod:`handover_env.evaluation.act_folds`).
+            thread) and then run the folds (:mod:`handover_env.evaluation.fold_pool`); default
+            one per core, at most 2. 1 runs everything in this process. Either way every ACT
+            fold trains on its episodes of one shared LeRobot export
+            (:mod:`handover_env.evaluation.act_folds`), and the results are the same.
     """
 
     seed: int = 0
