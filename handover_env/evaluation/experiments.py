@@ -357,6 +357,7 @@ def plot_sample_efficiency(rows: list[dict], methods: Sequence[str], path: Path)
             for xi, yi, ei in zip(x, y, e, strict=True):  # staggered so the methods' labels do not overlap
                 ax.annotate(mean_std(yi, ei, 1), (xi, yi), textcoords="offset points", xytext=(5, 6 + 8 * k),
                             fontsize=6, color=line.lines[0].get_color())
+        ax.set_xlim(right=max(r["ratio"] for r in rows) + 0.15)  # room for the right-most labels
         ax.set_xlabel("training data ratio")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
