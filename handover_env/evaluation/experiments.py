@@ -69,19 +69,25 @@ def _pretrain_act(
                         labels=labels, progress=progress)
 
 
-# ---------------------------------------------------------------------------------------- Table I
 @dataclass(frozen=True)
-class _Table1Fold:
-    """One fold of Table I: what :func:`_table1_fold` needs besides the dataset."""
+class _FoldJob:
+    """What one fold job of :func:`map_folds` needs besides the dataset: its split and how to fit."""
 
     fold: int
-    train_idx: np.ndarray
+    train_idx: np.ndarray  # training episodes, as indices of the dataset
     test_idx: np.ndarray
     methods: tuple[str, ...]
     options: MethodOptions
     protocol: OpenLoopProtocol
     cache_dir: Path
     reuse: bool
+
+
+# ---------------------------------------------------------------------------------------- Table I
+@dataclass(frozen=True)
+class _Table1Fold(_FoldJob):
+    """One fold of Table I."""
+
     act_fit_seconds: float | None  # ACT trained up front in this run: its training time, else None
 
 
@@ -233,18 +239,10 @@ def table1_markdown(
 
 # ------------------------------------------------------------------------------ sample efficiency
 @dataclass(frozen=True)
-class _RatioJob:
-    """One (fold, training ratio) cell of the sample-efficiency sweep."""
+class _RatioJob(_FoldJob):
+    """One (fold, training ratio) cell of the sample-efficiency sweep; ``train_idx`` is subsampled."""
 
-    fold: int
     ratio: float
-    train_idx: np.ndarray  # the subsampled training episodes, as indices of the dataset
-    test_idx: np.ndarray
-    methods: tuple[str, ...]
-    options: MethodOptions
-    protocol: OpenLoopProtocol
-    cache_dir: Path
-    reuse: bool
 
 
 def _ratio_job(dataset: HandoverDataset, job: _RatioJob) -> list[dict]:
@@ -292,8 +290,8 @@ def run_sample_efficiency(
     train_idx = {key: episode_indices(dataset, t) for key, t in train_sets.items()}
     _pretrain_act(dataset, methods, list(train_idx.values()), [f"fold {f} ratio {r:g}" for f, r in train_sets],
                   options, out_dir, reuse, workers, progress)
-    jobs = [_RatioJob(f, ratio, train_idx[(f, ratio)], test_idx, tuple(methods), options, protocol,
-                      out_dir / "checkpoints", reuse)
+    jobs = [_RatioJob(f, train_idx[(f, ratio)], test_idx, tuple(methods), options, protocol,
+                      out_dir / "checkpoints", reuse, ratio)
             for f, (_, test_idx) in enumerate(splits) for ratio in ratios]
     results = map_folds(_ratio_job, dataset, jobs, workers=options.workers if workers is None else int(workers),
                         progress=progress, desc="sample-efficiency",
