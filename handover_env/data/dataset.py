@@ -147,22 +147,7 @@ class HandoverDataset:
         Returns:
             ``k`` pairs ``(train_indices, test_indices)``; the test sets partition the dataset.
         """
-        if not isinstance(k, (int, np.integer)) or k < 2:
-            raise ValueError(f"k must be an integer >= 2, got {k!r}")
-        mask = self.ood_mask
-        for label, count in (("ID", int((~mask).sum())), ("OOD", int(mask.sum()))):
-            if 0 < count < k:
-                raise ValueError(
-                    f"cannot make {k} stratified folds: only {count} {label} episodes "
-                    f"(each fold needs at least one); use fewer folds or more data"
-                )
-        if len(self) < k:
-            raise ValueError(f"cannot make {k} folds from {len(self)} episodes")
-        rng = np.random.default_rng(seed)
-        fold_of = np.empty(len(self), dtype=np.int64)
-        for stratum in (np.flatnonzero(~mask), np.flatnonzero(mask)):
-            perm = rng.permutation(stratum)
-            fold_of[perm] = np.arange(perm.size) % k
+        fold_of = stratified_fold_ids(self.ood_mask, k, seed)
         all_idx = np.arange(len(self))
         return [(all_idx[fold_of != f], all_idx[fold_of == f]) for f in range(k)]
 
@@ -256,3 +241,38 @@ class HandoverDataset:
                 raise DatasetError(f"{path}: {exc}") from exc
         name = str(content["name"]) if "name" in content else ""
         return cls(episodes, rate_hz=float(content["rate_hz"]), name=name)
+
+
+def stratified_fold_ids(ood_mask: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
+    """The fold (0 .. k-1) of every episode in a stratified k-fold split by the ID/OOD flag.
+
+    Each stratum (ID, OOD) is shuffled with ``np.random.default_rng(seed)`` and dealt round-robin
+    into ``k`` folds. This is the assignment behind :meth:`HandoverDataset.stratified_kfold` (the
+    paper's Table I protocol); other splits (e.g. the receiver calibration's halves) reuse it so
+    that they agree with Table I's folds on the same episodes in the same order.
+
+    Args:
+        ood_mask: (N,) bool, True for OOD episodes, in dataset order.
+        k: number of folds, >= 2.
+        seed: seed of the shuffle.
+
+    Raises:
+        ValueError: ``k`` < 2, fewer than ``k`` episodes, or a non-empty stratum smaller than ``k``.
+    """
+    if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or k < 2:
+        raise ValueError(f"k must be an integer >= 2, got {k!r}")
+    mask = np.asarray(ood_mask, dtype=bool).reshape(-1)
+    for label, count in (("ID", int((~mask).sum())), ("OOD", int(mask.sum()))):
+        if 0 < count < k:
+            raise ValueError(
+                f"cannot make {k} stratified folds: only {count} {label} episodes "
+                f"(each fold needs at least one); use fewer folds or more data"
+            )
+    if mask.size < k:
+        raise ValueError(f"cannot make {k} folds from {mask.size} episodes")
+    rng = np.random.default_rng(seed)
+    fold_of = np.empty(mask.size, dtype=np.int64)
+    for stratum in (np.flatnonzero(~mask), np.flatnonzero(mask)):
+        perm = rng.permutation(stratum)
+        fold_of[perm] = np.arange(perm.size) % k
+    return fold_of
