@@ -98,6 +98,24 @@ def _noise(summary: dict) -> list[str]:
     return lines
 
 
+def _grasp(summary: dict) -> list[str]:
+    groups = ("calibration/all", "held_out/all", "calibration/id", "calibration/ood")
+    first = summary["grasp_radius"][groups[0]]
+    lines = _header(["group", "what"] + [f"r = {r:.2f} m" for r in first["radius"]])
+    for g in groups:
+        gr = summary["grasp_radius"][g]
+        for key, what in (("within_window", "within r, transfer -0.2 .. +0.5 s"),
+                          ("anywhere", "within r, anywhere")):
+            cells = " | ".join(f"{100 * v:.0f} %" for v in gr[key])
+            lines.append(f"| {_label(g)} | {what} | {cells} |")
+    lines += ["", *_header(["group", "joint 15 to object"] + [f"{q} %" for q in first["quantile"]])]
+    for g in groups:
+        gr = summary["grasp_radius"][g]
+        for key, what in (("d15_transfer", "at the transfer"), ("d15_min_window", "min, -0.2 .. +0.5 s")):
+            lines.append(f"| {_label(g)} | {what} | " + " | ".join(_num(v, "m") for v in gr[key]) + " |")
+    return lines
+
+
 def write_markdown(
     summary: dict,
     path: str | os.PathLike,
@@ -165,6 +183,15 @@ def write_markdown(
         "",
         "## Quantities: median [25 %, 75 %] over recordings",
         *_headline(summary),
+        "",
+        "## Grasp radius for a replayed recorded hand",
+        "",
+        "Share of all recordings (no transfer = a miss) whose smoothed joint 15 comes within r of the "
+        "object, and quantiles of that distance over recordings with a transfer. The recorded hand "
+        "is offset from the OptiTrack object by the ZED-OptiTrack calibration and the tracker: "
+        "it is never on the object.",
+        "",
+        *_grasp(summary),
         "",
         "## Track noise, recorded and after `smooth_track`",
         "",

@@ -39,6 +39,8 @@ from handover_env.data.transfer import (
 
 #: Slow-down window around the transfer, s (before, after).
 SLOWDOWN_WINDOW = (1.0, 0.5)
+#: Window around the transfer in which a replayed recorded hand may close on the object, s.
+GRASP_WINDOW = (0.2, 0.5)
 #: Window of the figures' aligned traces around the transfer, s (before, after).
 TRACE_WINDOW = (2.0, 1.5)
 #: Track noise: a pelvis faster than this (m/s) or a hand step longer than this (m/frame) is a spike.
@@ -105,6 +107,7 @@ MEASURES: dict[str, tuple[str, str, str]] = {
     "d15_transfer": ("hand-object distance", "joint 15 to object at transfer", "m"),
     "dnear_transfer": ("hand-object distance", "nearest of 14-17 to object at transfer", "m"),
     "d15_min_hold": ("hand-object distance", "joint 15: min over transfer .. release", "m"),
+    "d15_min_window": ("hand-object distance", "joint 15: min over transfer -0.2 s .. +0.5 s", "m"),
     "d15_min": ("hand-object distance", "joint 15: min over the recording", "m"),
     "d15_transfer_raw": ("hand-object distance", "joint 15 at transfer, unsmoothed tracks", "m"),
     "d15_min_raw": ("hand-object distance", "joint 15: min over the recording, unsmoothed", "m"),
@@ -240,6 +243,9 @@ def analyse_recording(
         arm_length=arm_length(r), d15_transfer=d15[k], dnear_transfer=detection.distance[k],
         d15_transfer_raw=np.linalg.norm(raw_r[k, R_HAND] - raw_o[k]),
     )
+    before_k, after_k = (int(round(w * rate_hz)) for w in GRASP_WINDOW)
+    grasp = slice(max(0, k - before_k), k + after_k + 1)
+    m["d15_min_window"] = float(d15[grasp].min())
     m["reach_fraction"] = m["hand_shoulder_transfer"] / m["arm_length"]
     moved = o[k, :2] - o[0, :2]
     m["object_moved_before"] = float(np.linalg.norm(o[k] - o[0]))

@@ -41,6 +41,9 @@ from handover_env.data.transfer_measures import (
 )
 
 QUANTILES = (5, 25, 50, 75, 95)
+#: Grasp radii (m) and quantiles (%) of the recorded-hand grasp table.
+GRASP_RADII = (0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.35)
+GRASP_QUANTILES = (50, 80, 90, 95, 99)
 HALVES = ("calibration", "held_out")
 KINDS = ("id", "ood", "all")
 DEFAULT_FOLDS, DEFAULT_SEED, DEFAULT_CALIBRATION_FOLDS = 10, 0, 5
@@ -208,6 +211,31 @@ def _noise(group: list[RecordingResult]) -> dict:
     return out
 
 
+def grasp_radius(group: list[RecordingResult]) -> dict[str, list[float]]:
+    """How often a replayed recorded hand (joint 15, smoothed) would close on the object.
+
+    For each radius of :data:`GRASP_RADII`: the fraction of the group's recordings whose hand
+    comes within it of the object in the window :data:`~.transfer_measures.GRASP_WINDOW` around the
+    transfer (recordings without a transfer count as misses), and anywhere in the recording.
+    Also the 50/80/90/95/99 % quantiles of the joint-15 distance at the transfer and its minimum
+    over that window, over recordings with a transfer.
+    """
+    n = max(1, len(group))
+    window = np.array([r.analysis.measures["d15_min_window"] for r in group], dtype=np.float64)
+    anywhere = np.array([r.analysis.measures["d15_min"] for r in group], dtype=np.float64)
+    out: dict[str, list[float]] = {
+        "radius": list(GRASP_RADII),
+        "within_window": [round(float(np.sum(window <= r)) / n, 4) for r in GRASP_RADII],
+        "anywhere": [round(float(np.sum(anywhere <= r)) / n, 4) for r in GRASP_RADII],
+        "quantile": list(GRASP_QUANTILES),
+    }
+    for name in ("d15_transfer", "d15_min_window"):
+        v = np.array([r.analysis.measures[name] for r in group], dtype=np.float64)
+        v = v[np.isfinite(v)]
+        out[name] = [round(float(np.percentile(v, q)), 4) if v.size else None for q in GRASP_QUANTILES]
+    return out
+
+
 def rules() -> dict[str, float | int | str]:
     """The constants of the detectors and of the filter, for the report."""
     names = (
@@ -263,6 +291,7 @@ def summarise(
             for name in MEASURES
         },
         "noise": {g: _noise(v) for g, v in groups.items() if g.endswith("/all")},
+        "grasp_radius": {g: grasp_radius(v) for g, v in groups.items()},
     }
 
 
