@@ -20,7 +20,8 @@ Per env step (paper Sec. IV-B/C):
    ``ready_yaw +- max_yaw_turn`` (the robot faces the receiver's path, -y, and turns at most
    45 deg toward where the receiver is; the rotation is otherwise fixed, gripper horizontal).
 4. **Ready pose** until the receiver has been seen for ``min_frames`` frames (the first
-   velocities are meaningless) and again after the gripper has released.
+   velocities are meaningless) and again once the gripper has released and its fingers have let
+   go of the object (until then it holds its last target).
 
 A decrease of ``receiver_frames_seen`` (a new env episode without ``reset()``) resets the
 agent. The current observation is available to the hooks as ``self.last_obs`` (agents that
@@ -96,6 +97,7 @@ class PredictiveAgent(Agent):
         self._ensembler: TemporalEnsembler | None = None
         self._history: list[np.ndarray] = []
         self._frames_seen = 0
+        self._last: np.ndarray | None = None
         self.last_obs: np.ndarray | None = None
 
     # ------------------------------------------------------------------ streaming hooks
@@ -117,6 +119,7 @@ class PredictiveAgent(Agent):
         self.stream_reset()
         self._ensembler = TemporalEnsembler(self.horizon, self.closed_loop.ensemble_m)
         self._frames_seen = 0
+        self._last: np.ndarray | None = None
 
     def _ready(self) -> np.ndarray:
         c = self.closed_loop
@@ -134,7 +137,13 @@ class PredictiveAgent(Agent):
         if seen < self._frames_seen:
             self.reset()
         self.last_obs = obs
-        if obs[self._slices["gripper_open"][0]][0] > 0.5 or seen < 1:
+        if obs[self._slices["gripper_open"][0]][0] > 0.5:
+            # Released: hold the last target while the fingers open around the object (pulling
+            # away now would drag it out of the person's hand), then go back to the ready pose.
+            if obs[self._slices["object_held"][0]][0] > 0.5 and self._last is not None:
+                return self._last.copy()
+            return self._ready()
+        if seen < 1:
             return self._ready()
         new = seen - self._frames_seen
         hist_slice = self._slices["receiver_xy_history"][0]
@@ -153,4 +162,5 @@ class PredictiveAgent(Agent):
         yaw = math.atan2(receiver[1] - target[1], receiver[0] - target[0])
         turn = (yaw - c.ready_yaw + math.pi) % (2 * math.pi) - math.pi
         yaw = c.ready_yaw + min(max(turn, -c.max_yaw_turn), c.max_yaw_turn)
-        return np.array([target[0], target[1], target[2], yaw], dtype=np.float32)
+        self._last = np.array([target[0], target[1], target[2], yaw], dtype=np.float32)
+        return self._last.copy()

@@ -1,44 +1,38 @@
-"""The MuJoCo side of the receiver: mocap bodies, reach/grasp/pull state machine and replay.
+"""The simulated person: walks, reaches, grasps and pulls, and moves the body's targets in MuJoCo.
 
-How a person walks and reaches is modelled once, in :mod:`handover_env.receiver_motion` (shared
-with the synthetic dataset); this module only drives the scene's two mocap bodies with it:
+The body (:mod:`handover_env.body_model`) follows per-segment targets through soft welds. This
+module decides where those targets are, at the env's 30 Hz and, interpolated, at every 200 Hz
+controller tick:
 
-* ``receiver_base`` (legs, torso, head capsules, sized for the body height) follows the base
-  trajectory: a scripted ID/OOD walker from ``receiver_motion.base_trajectory`` or a recorded
-  track (replay). Between 30 Hz frames it is interpolated linearly at the 200 Hz control tick.
-* ``receiver_hand`` (the right hand) follows a small state machine::
+* **Walking.** The nominal motion (:class:`handover_env.person.PersonMotion`: a recorded person or
+  the scripted walker) is played back at a speed factor rho (1 = as recorded). A person waiting
+  for an object they cannot reach yet slows down (rho falls at ``slow_rate`` per second, not
+  below ``min_speed_factor``) and speeds up again once it is within reach; the camera sees the
+  pelvis of this played-back walk.
+* **Reaching** (``hand_mode="reach"``, the modelled hand): the person reaches when the object
+  will be at a comfortable place along their own path soon: its grasp point is predicted to come
+  within ``comfort_reach`` of the right shoulder when it is ``meet_forward`` ahead of it, in at
+  most ``reach_lead_time``. The hand then moves on a minimum-jerk path re-planned every step
+  toward the moving grasp point (Hoff & Arbib 1993), with a nominal duration ``reach_duration``.
+  The arm follows by two-link inverse kinematics (:func:`handover_env.gait.arm_pose`). If the
+  object falls behind the shoulder by ``give_up_behind`` unheld, the person walks on (a miss).
+* **Recorded hand** (``hand_mode="recorded"``): the right arm is the recorded one; when the
+  recorded grip point comes within ``close_radius`` of the object's grasp point, the hand closes
+  onto it on a minimum-jerk path of ``close_time`` (the last few cm a hand travels when it
+  grasps; the ZED hand joint sits 0.04-0.16 m off the object at the recorded transfers).
+* **Grasp rule**: the hand grasps when its grip point (the RIGHT_HAND joint) is within
+  ``grasp_radius`` of the object's grasp point (on the bottle's axis, ``grasp_offset`` below its
+  centre, below the gripper's pads): the ``receiver_grasp`` weld switches on with zero initial
+  force. Then the hand draws the object toward the carry pose while the person walks on, which
+  is the pull that the wrist sensor measures.
+* **Static handover** (``present_after_walk``): the person stops (see
+  :func:`handover_env.person.stopped`), raises the right hand to ``PRESENT_OFFSET`` from the
+  shoulder in ``present_time`` and waits until the robot brings the object within
+  ``present_reach``; then takes it.
 
-      walking --object within arm's reach--> reaching --hand at object--> holding
-
-  ``walking``: the natural hand swing (``hand_position(..., reach=0)``). ``reaching``: the
-  reach fraction rises to 1 in ``reach_time`` s toward the object. ``holding``: the hand grasps
-  (the ``receiver_grasp`` weld between hand and object is switched on at the current relative
-  pose) and then withdraws toward the carry pose beside the hip at ``pull_speed`` while the body
-  keeps walking, so it pulls. The weld is soft (solref 0.06 s) and the robot arm is compliant,
-  so the pull is a physical, bounded force that the wrist F/T sensor measures.
-
-  For the static handover (``present_after_walk``) the receiver does not reach while walking; it
-  stops at the end of its walk and raises the right hand (``presenting``: forward and to the
-  right of the shoulder); the time the hand is fully raised is ``t_hand_raised`` (what a hand
-  detector would see). The hand then waits and takes the object only once the robot has brought
-  it within ``present_reach`` of the hand.
-
-  ``t_depart`` is when the receiver leaves its start point (first camera frame faster than
-  ``depart_speed``): the start of the paper's handover time (Sec. V-C).
-
-Why welds, not finger friction: the grasp on both sides is a weld equality (gripper<->object
-while the 2F-85 is closed, hand<->object once the receiver holds it). A friction grasp with the
-Menagerie 2F-85 (mesh pads, 5 N actuator) is slow to simulate and brittle under the arm's soft
-impedance; what the handover needs is (a) a hold that transmits the pull to the wrist sensor and
-(b) a release that really lets go. The gripper weld is switched off only when the fingers have
-physically opened past the object (driver angle below ``GRIPPER_OPEN_ANGLE``), so a release
-without a receiver grasp lets the object fall: drops remain real outcomes.
-
-The replay receiver takes arrays (base xy (T, 2), optionally hand xyz (T, 3), at 30 Hz) or a
-:class:`handover_env.data.dataset.Episode`; by default its hand reaches for the simulated object
-like a scripted walker (the recorded hand went to where the *human* giver held the object);
-``hand_mode="recorded"`` replays the recorded hand instead and grasps only if it passes within
-``grasp_radius`` of the object.
+Effort (``effort()``): the largest grip-shoulder distance while reaching or holding, the time
+the arm is out (reaching, raised, or holding before the release), the time lost to slowing
+down and the slowest speed factor, and how far contact pushed the pelvis off its target.
 """
 
 from __future__ import annotations
@@ -50,122 +44,167 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from handover_env import receiver_motion as rm
-from handover_env.scene import SceneIds, activate_weld
+from handover_env.body_model import BodyIds, apply_dims, weld_lag_times
+from handover_env.gait import arm_pose
+from handover_env.min_jerk import min_jerk_step
+from handover_env.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
+from handover_env.grip import ArmGrip
+from handover_env.scene import SceneIds
+from handover_env.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, mat_to_quat
 
-CAMERA_RATE = 30.0
+CAMERA_RATE = RATE
+STATES = ("walking", "reaching", "holding", "presenting", "presented", "passed")
+#: Re-planning horizon of a hand that holds a point fixed to the body (s): it follows within
+#: a few frames.
+HOLD_TRACKING = 0.15
+#: The arm counts as straight at this fraction of its full length (the elbow never locks).
+STRAIGHT_ARM = 0.97
+#: The farthest the trunk turns and leans toward a far hand target, rad (20 deg).
+TRUNK_MAX_TURN = math.radians(20.0)
+#: The torso and the segments it carries (head, both arms), which turn with it.
+_UPPER_BODY = tuple(i for i in range(len(SEGMENTS)) if i == SEG["torso"] or SEGMENTS[i].parent in (
+    SEG["torso"], SEG["upper_arm_r"], SEG["forearm_r"], SEG["upper_arm_l"], SEG["forearm_l"]))
+#: An object behind the person counts as walked past only if it is within this distance, m.
+PASS_DISTANCE = 1.2
+#: Where the static receiver holds the raised right hand: forward, right and up from the
+#: shoulder in the body frame, m (a hand held out in front, below shoulder height).
+PRESENT_OFFSET = (0.30, -0.15, -0.15)
 
 
 @dataclass(frozen=True)
 class ReceiverConfig:
-    """Reach/grasp/pull behaviour of the receiver.
+    """How the person reaches, grasps, holds, slows down and pulls (see the module docstring).
+
+    The defaults are calibrated on the calibration half (Table I folds 0-4) of the development
+    copy's ID recordings by ``python -m handover_env.data transfer-stats``
+    (``docs/calibration/receiver_calibration.md``; medians unless said otherwise):
 
     Args:
-        reach_margin: the hand starts reaching when the object is within ``arm_reach + margin`` of
-            the shoulder (m; negative = only well within reach).
-        reach_time: seconds for the reach fraction to go from 0 to 1.
-        grasp_radius: the hand grasps when it is this close to the object centre, m.
-        pull_speed: speed at which the holding hand withdraws toward the carry pose, m/s.
-        carry_forward: the carry pose, m in front of the pelvis (hand beside the hip).
-        present_reach: static receiver (``present_after_walk``): it keeps the raised hand still
-            and reaches for the object only once the robot has brought it this close to the
-            hand, m (the robot delivers to the detected hand, Meng et al. 2022).
-        depart_speed: the receiver "leaves the start point" at the first camera frame at which
-            its pelvis moves faster than this, m/s (start of the paper's handover time).
+        reach_duration: onset to grasp of a reach, s (0.63).
+        reach_lead_time: the reach starts when the object will be at the meeting point within
+            this time, s (the onset leads the transfer by the reach duration, 0.63).
+        meet_forward: how far ahead of the pelvis, along the walk, people take the object, m (0.35).
+        comfort_fraction: the farthest people take the object from, as a fraction of their arm
+            length (shoulder-elbow-wrist-hand joints): p95 of the object-shoulder distance over
+            the arm length at transfer, 1.10 (median 0.86; the grip centre lies beyond the hand
+            joint, and the trunk turns toward the object). People start to reach for an object
+            that they can reach when they meet it (straight arm and turned trunk); if it will be
+            farther than this fraction, they also slow down (down to ``min_speed_factor``).
+        min_speed_factor: the slowest people walk while waiting for the object, as a fraction of
+            their own speed (p25 of the minimum walking speed in the handover window relative to
+            the speed before the reach, 0.82; the median, 0.91, is above the same measure in a
+            window without a handover, 0.75: people do not slow down for a handover that is on
+            time). ``slow_rate``: how fast the speed factor changes, 1/s.
+        give_up_behind: an unheld object this far behind the shoulder (along the walk) is left
+            behind: the person walks past, m.
+        hold_time: after the grasp the arm stays out, moving with the body, for this long before
+            drawing back, s (arm-extended time 1.30 s minus the reach, 0.67; the hand is drawn
+            back 0.37 s before the giver lets go, 1.0 s after the grasp: 0.63).
+        pull_time: how long drawing the hand back to the carry pose takes, s.
+        grasp_radius: the hand grasps when its grip point is this close to the grasp point, m,
+        grasp_speed: and moves relative to it slower than this, m/s (a hand closes on an object
+            it has caught up with; the grip is then :mod:`handover_env.grip`'s spring).
+        grasp_offset: the grasp point's offset from the object's centre along its axis, m (the
+            top of the bottle, above the gripper's pads).
+        approach_distance, approach_height: the hand approaches the grasp point from this far
+            toward the person and this far above it, closing in over the last ``close_time``, m.
+        close_radius: recorded hand: the hand closes onto the object once the recorded grip point
+            is this close to it, m (0.25: within the window -0.2 s .. +0.5 s around the transfer
+            the recorded hand joint comes this close in 95.5 % of the recordings; 0.20 m: 89 %).
+        close_time: the closing motion's duration, s.
+        carry_forward: the carry pose is this far forward of the hand's walking swing, m.
+        present_time: static handover: time to raise the hand, s.
+        present_reach: static handover: the raised hand takes the object once it is this close, m.
     """
 
-    reach_margin: float = 0.0
-    reach_time: float = 0.5
-    grasp_radius: float = 0.05
-    pull_speed: float = 0.4
+    reach_duration: float = 0.63
+    reach_lead_time: float = 0.63
+    meet_forward: float = 0.35
+    comfort_fraction: float = 1.10
+    min_speed_factor: float = 0.82
+    slow_rate: float = 1.5
+    give_up_behind: float = 0.35
+    hold_time: float = 0.63
+    pull_time: float = 0.5
+    grasp_radius: float = 0.03
+    grasp_speed: float = 0.2
+    grasp_offset: float = 0.06
+    approach_distance: float = 0.12
+    approach_height: float = 0.04
+    close_radius: float = 0.25
+    close_time: float = 0.25
     carry_forward: float = 0.15
+    present_time: float = 0.8
     present_reach: float = 0.15
-    depart_speed: float = 0.25
 
     def __post_init__(self) -> None:
-        vals = (self.reach_margin, self.reach_time, self.grasp_radius, self.pull_speed, self.carry_forward,
-                self.present_reach, self.depart_speed)
-        if not all(math.isfinite(v) for v in vals):
-            raise ValueError("ReceiverConfig values must be finite")
-        if (self.reach_time <= 0 or self.grasp_radius <= 0 or self.pull_speed <= 0 or self.present_reach <= 0
-                or self.depart_speed <= 0):
-            raise ValueError("reach_time, grasp_radius, pull_speed, present_reach and depart_speed must be > 0")
+        for name, value in self.__dict__.items():
+            if not math.isfinite(value):
+                raise ValueError(f"ReceiverConfig.{name} must be finite, got {value}")
+        positive = ("reach_lead_time", "reach_duration", "slow_rate", "grasp_radius", "grasp_speed",
+                    "close_radius", "close_time", "pull_time", "present_time", "present_reach")
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"ReceiverConfig.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("hold_time", "approach_distance", "approach_height"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"ReceiverConfig.{name} must be >= 0, got {getattr(self, name)}")
+        if not 0 < self.min_speed_factor <= 1:
+            raise ValueError(f"min_speed_factor must be in (0, 1], got {self.min_speed_factor}")
+        if not 0 < self.comfort_fraction <= 2:
+            raise ValueError(f"comfort_fraction must be in (0, 2], got {self.comfort_fraction}")
 
 
-def _heading_from_track(xy: np.ndarray) -> np.ndarray:
-    """Walking direction (yaw) of a recorded base track, smoothed, -x when standing still."""
-    vel = np.gradient(xy, axis=0) if len(xy) > 1 else np.zeros_like(xy)
-    kernel = np.ones(9) / 9.0
-    vel = np.stack([np.convolve(np.pad(vel[:, i], 4, mode="edge"), kernel, "valid") for i in range(2)], axis=1)
-    heading = np.empty(len(xy))
-    last = math.pi
-    for k, (vx, vy) in enumerate(vel):
-        if vx * vx + vy * vy > 0.05**2:
-            last = math.atan2(vy, vx)
-        heading[k] = last
-    return np.unwrap(heading)
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (..., 4) quaternions."""
+    w1, x1, y1, z1 = np.moveaxis(a, -1, 0)
+    w2, x2, y2, z2 = np.moveaxis(b, -1, 0)
+    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2], axis=-1)
 
 
-def _as_array(value: Any, shape1: int, name: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != shape1 or arr.shape[0] < 2:
-        raise ValueError(f"replay {name} must have shape (T>=2, {shape1}), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"replay {name} contains NaN or inf")
-    return arr
+def _quat_to_mat(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 class Receiver:
-    """Drives the receiver mocap bodies and the receiver's grasp.
+    """Drives the simulated person in a compiled handover scene.
 
     Args:
-        model: compiled scene.
-        ids: scene indices.
-        config: reach/grasp/pull behaviour.
+        model: the compiled scene (its receiver geometry is resized at every reset).
+        ids: scene indices (``ids.body`` holds the receiver's).
+        config: behaviour settings.
     """
 
     def __init__(self, model: mujoco.MjModel, ids: SceneIds, config: ReceiverConfig | None = None) -> None:
-        self.model, self.ids = model, ids
+        self.model, self.ids, self.body = model, ids, ids.body
         self.config = config or ReceiverConfig()
-        self._geom_defaults = {
-            gid: (model.geom_size[gid].copy(), model.geom_pos[gid].copy(), float(model.geom_rbound[gid]))
-            for gid in ids.receiver_geoms
-        }
-        self.kind = "id"
-        self.height = 1.75
-        self.walker: Any = None
-        self.state = "walking"
-        self.reach = 0.0
-        self.t_grasp = math.nan
-        self._frames_xy = np.zeros((2, 2))
-        self._frames_heading = np.zeros(2)
-        self._frames_hand: np.ndarray | None = None
-        self.hand_mode = "reach"
-        self.source_id = ""
+        self.grip = ArmGrip(model, int(ids.body.bodies[SEG["hand_r"]]), ids.body.grip_site, ids.object_body)
+        self._v6 = np.zeros(6)
+        self.motion: PersonMotion | None = None
+        self.kind, self.source_id, self.hand_mode = "id", "", "reach"
         self.present_after_walk = False
-        self.t_hand_raised = math.nan
-        self.t_depart = 0.0
-        self._reach_from = None
-        self._bound: mujoco.MjData | None = None
-        self._xy_list: list[list[float]] = self._frames_xy.tolist()
-        self._heading_list: list[float] = self._frames_heading.tolist()
-        self._raised_hand: np.ndarray | None = None
+        self._reset_state()
 
     # ------------------------------------------------------------------ setup
     def reset(self, rng: np.random.Generator, kind: str = "id", height: float | None = None,
               speed: float | None = None, episode: Any = None, hand_mode: str = "reach",
-              walker_overrides: dict | None = None) -> None:
-        """Choose the receiver for a new episode.
+              walker_overrides: dict | None = None, stop_x: float | None = None) -> None:
+        """Choose the person for a new episode (validates everything before changing state).
 
         Args:
-            rng: the env's ``np_random`` (all randomness comes from it).
+            rng: the env's ``np_random``.
             kind: ``"id"`` or ``"ood"`` scripted walker, or ``"replay"``.
-            height: body height, m (scripted: overrides the sampled one; replay: default 1.75).
-            speed: nominal walking speed, m/s (scripted walkers only).
-            episode: for ``"replay"``: an ``Episode`` or a dict with ``receiver_xy`` (T, 2) and
-                optionally ``receiver_hand_xyz`` (T, 3), at 30 Hz.
-            hand_mode: replay only: ``"reach"`` (model reach) or ``"recorded"``.
-            walker_overrides: extra ``WalkerParams`` fields for scripted walkers (e.g. end_x).
+            height: body height, m (scripted: fixes it; replay: default measured / 1.725).
+            speed: nominal walking speed, m/s (scripted only).
+            episode: for ``"replay"``: a ``Recording``, an ``Episode`` or a dict of arrays
+                (``receiver_xy``, optionally ``receiver_pose``, ``source_id``).
+            hand_mode: ``"reach"`` (modelled hand) or ``"recorded"`` (replay with a skeleton).
+            walker_overrides: extra ``WalkerParams`` fields for scripted walkers.
+            stop_x: static handover: stop at this pelvis x and present the hand.
         """
         if kind not in ("id", "ood", "replay"):
             raise ValueError(f"receiver must be 'id', 'ood' or 'replay', got {kind!r}")
@@ -175,300 +214,498 @@ class Receiver:
             raise ValueError(f"height must be in [1.2, 2.2] m, got {height}")
         if speed is not None and not (0.1 <= float(speed) <= 2.5):
             raise ValueError(f"speed must be in [0.1, 2.5] m/s, got {speed}")
-        self.kind, self.hand_mode = kind, hand_mode if kind == "replay" else "reach"
-        self._frames_hand = None
         if kind == "replay":
             if episode is None:
-                raise ValueError("receiver='replay' needs options['episode'] (an Episode or a dict of arrays)")
-            get = (lambda k: episode.get(k)) if isinstance(episode, dict) else (lambda k: getattr(episode, k, None))
-            xy_src = get("receiver_xy")
-            if xy_src is None:
-                raise ValueError("replay episode needs 'receiver_xy' (T, 2)")
-            xy = _as_array(xy_src, 2, "receiver_xy")
-            hand = get("receiver_hand_xyz")
-            if hand is not None:
-                hand = _as_array(hand, 3, "receiver_hand_xyz")
-                if hand.shape[0] != xy.shape[0]:
-                    raise ValueError(f"replay arrays disagree in length: {xy.shape[0]} vs {hand.shape[0]}")
-            if hand_mode == "recorded" and hand is None:
-                raise ValueError("hand_mode='recorded' needs 'receiver_hand_xyz' in the episode")
-            self._frames_hand = hand if hand_mode == "recorded" else None
-            self._frames_xy = xy
-            self._frames_heading = _heading_from_track(xy)
-            self.height = float(height) if height is not None else 1.75
-            self.walker = None
-            self.source_id = str(get("source_id") or "replay")
+                raise ValueError("receiver='replay' needs options['episode'] (a Recording, Episode or dict)")
+            motion = recorded_motion(episode, height)
+            if hand_mode == "recorded" and not motion.has_skeleton:
+                raise ValueError("hand_mode='recorded' needs the recorded skeleton (a Recording or "
+                                 "a dict with 'receiver_pose')")
         else:
-            overrides = dict(walker_overrides or {})
-            if height is not None:
-                overrides["height"] = float(height)
-            if speed is not None:
-                overrides["speed"] = float(speed)
-            self.walker = rm.sample_walker(rng, kind, **overrides)
-            traj = rm.base_trajectory(self.walker, rate_hz=CAMERA_RATE)
-            self._frames_xy = np.asarray(traj.xy, dtype=np.float64)
-            self._frames_heading = np.unwrap(np.asarray(traj.heading, dtype=np.float64))
-            self.height = float(self.walker.height)
-            self.source_id = f"scripted_{kind}"
-        self._scale_body(self.height)
-        self.t_depart = self._departure_time(self._frames_xy)
-        # The hand's rest pose (walking swing) and the shoulder at every camera frame, computed
-        # once with the shared motion model (vectorised): env steps end on frame times, so the
-        # per-step lookups below give the same values as calling the model at each step.
-        self._rest_hand = np.asarray(
-            rm.hand_position(self._frames_xy, self._frames_heading, self.height), dtype=np.float64)
-        self._shoulder_frames = np.asarray(
-            rm.shoulder_position(self._frames_xy, self._frames_heading, self.height), dtype=np.float64)
-        self._arm_reach = float(rm.arm_reach(self.height))
-        self._xy_list = self._frames_xy.tolist()  # the same frames as floats for per-step lookups
-        self._heading_list = self._frames_heading.tolist()
+            if hand_mode == "recorded":
+                raise ValueError("hand_mode='recorded' is for replayed receivers")
+            motion = scripted_motion(rng, kind, height, speed, walker_overrides)
+        self.t_depart = motion.t_depart
+        if stop_x is not None:
+            motion = stopped(motion, stop_x)
+        self.motion = motion
+        self.kind, self.hand_mode, self.source_id = kind, hand_mode, motion.source_id
+        self.walker = motion.walker
+        self.height = motion.dims.height
+        self.present_after_walk = stop_x is not None
+        apply_dims(self.model, self.body, motion.dims)
+        self._lag = weld_lag_times(self.model, self.body)
+        dims = motion.dims
+        self._shoulder_local = dims.local(J["RIGHT_SHOULDER"], SEG["torso"])
+        self._grip_local = dims.grip("r")
+        self._arm_reach = float(np.linalg.norm(dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"]))
+                                + np.linalg.norm(dims.grip("r") + dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])))
+        # Arm length as the recordings measure it (shoulder-elbow-wrist-hand joints) sets the
+        # comfortable distance; the trunk's turn adds to the straight arm's reach.
+        arm_length = sum(float(np.linalg.norm(dims.joints[j] - dims.joints[J[p]]))
+                         for j, p in ((J["RIGHT_ELBOW"], "RIGHT_SHOULDER"), (J["RIGHT_WRIST"], "RIGHT_ELBOW"),
+                                      (J["RIGHT_HAND"], "RIGHT_WRIST")))
+        self._comfort = self.config.comfort_fraction * arm_length
+        self._max_reach = (STRAIGHT_ARM * self._arm_reach
+                           + float(np.linalg.norm(self._shoulder_local)) * math.sin(TRUNK_MAX_TURN))
+        self._reset_state()
+
+    def _reset_state(self) -> None:
+        self.grip.active = False  # mj_resetData clears the grip's applied wrench
+        self.grip.force[:] = 0.0
         self.state = "walking"
-        self.reach = 0.0
+        self.tau = 0.0
+        self.rho = 1.0
         self.t_grasp = math.nan
+        self.t_reach = math.nan
         self.t_hand_raised = math.nan
-        self._reach_from = None
-        self._hand_carry = np.zeros(3)
-        self._hand_prev = None
-        self._raised_hand = None
-
-    def _departure_time(self, xy: np.ndarray) -> float:
-        """When the receiver leaves the start point: first frame whose pelvis speed (central
-        difference, 5-frame mean) exceeds ``depart_speed``; 0 for scripted walkers, which walk
-        from the first frame; the last frame if the track never moves."""
-        speed = np.linalg.norm(np.gradient(xy, axis=0), axis=1) * CAMERA_RATE
-        if speed.size >= 5:
-            speed = np.convolve(np.pad(speed, 2, mode="edge"), np.ones(5) / 5.0, "valid")
-        moving = np.nonzero(speed > self.config.depart_speed)[0]
-        k = int(moving[0]) if moving.size else xy.shape[0] - 1
-        return k / CAMERA_RATE
-
-    @property
-    def duration(self) -> float:
-        """Length of the base trajectory, s."""
-        return (self._frames_xy.shape[0] - 1) / CAMERA_RATE
-
-    def _scale_body(self, height: float) -> None:
-        """Size the legs, torso and head capsules for the body height (defaults are for 1.75 m)."""
-        s = height / 1.75
-        m = self.model
-        for gid, (size, pos, rbound) in self._geom_defaults.items():
-            m.geom_size[gid] = size * np.array([s, s, s])
-            m.geom_pos[gid] = pos * s
-            m.geom_rbound[gid] = rbound * s
+        self.grasp_pelvis_xy = None
+        self._hand: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._hand_goal_time = 0.0
+        self._key0: tuple[np.ndarray, np.ndarray] | None = None
+        self._key1: tuple[np.ndarray, np.ndarray] | None = None
+        self._ticks: list[float] = [0.0]
+        self._tick_i = 0
+        self.reach_distance = 0.0
+        self.arm_out_time = 0.0
+        self.min_rho = 1.0
+        self.path_deviation = 0.0
+        self._released = False
+        self._gripper: np.ndarray | None = None
+        self._gripper_axis: np.ndarray | None = None
 
     # ------------------------------------------------------------------ queries
-    def base_at(self, t: float) -> tuple[np.ndarray, float]:
-        """Base xy and heading at time t (linear interpolation; holds the last frame after the end)."""
-        x, y, heading = self._base_floats(t)
-        return np.array([x, y]), heading
+    @property
+    def duration(self) -> float:
+        """Length of the nominal motion, s (the playback may take longer when slowed)."""
+        return 0.0 if self.motion is None else self.motion.duration
 
-    def _base_floats(self, t: float) -> tuple[float, float, float]:
-        """:meth:`base_at` as plain floats (x, y, heading)."""
-        n = len(self._xy_list)
-        f = min(max(t * CAMERA_RATE, 0.0), n - 1.0)
+    @property
+    def finished(self) -> bool:
+        """True once the playback has reached the end of the nominal motion."""
+        return self.motion is not None and self.tau >= self.motion.frames - 1
+
+    @property
+    def time_lost(self) -> float:
+        """How far the person is behind their nominal walk, s."""
+        return max(0.0, self._t - self.tau / RATE)
+
+    def camera_xy(self) -> np.ndarray:
+        """The pelvis xy a camera sees now (raw recorded track at the playback position)."""
+        return self._interp(self.motion.camera_xy, self.tau)
+
+    def base(self) -> tuple[float, float, float]:
+        """Nominal pelvis x, y and walking heading at the playback position."""
+        x, y = self._interp(self.motion.origin[:, 0, :2], self.tau)
+        return float(x), float(y), float(self._interp(self.motion.heading, self.tau))
+
+    @staticmethod
+    def _interp(frames: np.ndarray, tau: float) -> np.ndarray:
+        n = frames.shape[0]
+        f = min(max(tau, 0.0), n - 1.0)
         i = min(int(f), n - 2)
         a = f - i
-        b = 1.0 - a
-        (x0, y0), (x1, y1) = self._xy_list[i], self._xy_list[i + 1]
-        h0, h1 = self._heading_list[i], self._heading_list[i + 1]
-        return x0 * b + x1 * a, y0 * b + y1 * a, h0 * b + h1 * a
-
-    def _at(self, frames: np.ndarray, t: float) -> np.ndarray:
-        """Per-frame array ``frames`` (T, k) at time t (linear; holds the last frame)."""
-        f = min(max(t * CAMERA_RATE, 0.0), frames.shape[0] - 1.0)
-        i = min(int(f), frames.shape[0] - 2)
-        a = f - i
-        if a < 1e-9:
-            return frames[i].copy()
         return frames[i] * (1.0 - a) + frames[i + 1] * a
 
-    def frames_until(self, t: float) -> np.ndarray:
-        """All 30 Hz base frames up to time t (what a camera has seen), (n, 2)."""
-        n = min(int(math.floor(t * CAMERA_RATE + 1e-9)) + 1, self._frames_xy.shape[0])
-        return self._frames_xy[:n]
-
-    def shoulder(self, xy: np.ndarray, heading: float) -> np.ndarray:
-        return np.asarray(rm.shoulder_position(xy, heading, self.height), dtype=np.float64)
-
     # ------------------------------------------------------------------ per env step
-    def plan_step(self, t0: float, t1: float, object_pos: np.ndarray, object_free: bool) -> None:
-        """Decide the mocap keyframes for the env step [t0, t1] (called once per 30 Hz step).
+    def start(self, data: mujoco.MjData) -> None:
+        """Put the body at the start of its motion (call at reset, before ``mj_forward``)."""
+        self._t = 0.0
+        pose = self._pose_at(0.0, None)
+        self._key0 = self._key1 = pose
+        b = self.body
+        data.qpos[b.root_qpos:b.root_qpos + 3] = pose[0][0]
+        data.qpos[b.root_qpos + 3:b.root_qpos + 7] = pose[1][0]
+        # Ball joints: the relative rotation of each segment to its parent.
+        for i in range(1, len(pose[1])):
+            parent = SEGMENTS[i].parent
+            rel = _quat_mul(pose[1][parent] * np.array([1, -1, -1, -1]), pose[1][i])
+            adr = int(self.model.jnt_qposadr[self.model.body_jntadr[b.bodies[i]]])
+            data.qpos[adr:adr + 4] = rel
+        data.qvel[b.dofs] = 0.0
+        data.mocap_pos[b.mocap] = pose[0]
+        data.mocap_quat[b.mocap] = pose[1]
+
+
+    def plan_step(self, t0: float, t1: float, data: mujoco.MjData, object_pos: np.ndarray,
+                  object_vel: np.ndarray, object_rot: np.ndarray, object_free: bool,
+                  released: bool, gripper_pos: np.ndarray | None = None,
+                  gripper_axis: np.ndarray | None = None) -> None:
+        """Decide the body targets at the end of the env step [t0, t1] (once per 30 Hz step).
 
         Args:
-            t0, t1: start and end of the env step, s.
-            object_pos: the object's position at t0.
-            object_free: whether the object can be reached for (not yet held by the receiver).
+            t0, t1: the env step.
+            data: the simulation (read only: the body's actual pose, for the effort measures).
+            object_pos, object_vel, object_rot: the object's position, velocity and rotation.
+            object_free: the person does not hold the object yet.
+            released: the gripper has opened.
+            gripper_pos: the gripper's TCP while it holds the object (the hand avoids it).
+            gripper_axis: the gripper's approach axis (toward its fingertips) while it holds.
         """
         cfg = self.config
         dt = t1 - t0
-        bx1, by1, h1 = self._base_floats(t1)
-        xy1 = np.array([bx1, by1])
-        if self._hand_prev is None:
-            xy0, h0 = self.base_at(t0)
-            self._hand_prev = self._hand_target(t0, xy0, h0, object_pos, 0.0)
-            self._base_prev = (float(xy0[0]), float(xy0[1]), h0)
-        if self.present_after_walk and self.state == "walking" and t1 >= self.duration:
-            self.state = "presenting"  # static handover: stop and raise the right hand
-            self.reach = 0.0
-        if self.state == "presenting":
-            self.reach = min(1.0, self.reach + dt / cfg.reach_time)
-            if self.reach >= 1.0 and math.isnan(self.t_hand_raised):
-                self.t_hand_raised = t1
-        if object_free and self.hand_mode == "reach":
-            if self.state == "walking" and not self.present_after_walk:
-                # Walking past: reach as soon as the object is within arm's reach of the shoulder.
-                sx, sy, sz = self._at(self._shoulder_frames, t1).tolist()
-                ox, oy, oz = object_pos.tolist()
-                dx, dy, dz = ox - sx, oy - sy, oz - sz
-                if math.sqrt(dx * dx + dy * dy + dz * dz) < self._arm_reach + cfg.reach_margin:
-                    self.state = "reaching"
-            elif self.state == "presenting" and self.reach >= 1.0:
-                # Static: the raised hand waits until the robot brings the object to it.
-                if np.linalg.norm(object_pos - self._hand_prev) < cfg.present_reach:
-                    self._reach_from = self._hand_prev.copy()
-                    self.reach = 0.0
-                    self.state = "reaching"
-        if self.state == "reaching":
-            self.reach = min(1.0, self.reach + dt / cfg.reach_time)
-        hand1 = self._hand_target(t1, xy1, h1, object_pos, dt)
-        self._hand_next = hand1
-        self._base_next = (bx1, by1, h1)
+        self._t = t0
+        self._released = released
+        self._gripper = None if gripper_pos is None else np.asarray(gripper_pos, dtype=np.float64)
+        self._gripper_axis = None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
+        grasp_point = object_pos + object_rot[:, 2] * cfg.grasp_offset
+        # ---- how fast to walk on
+        slow = False
+        if object_free and self.state in ("walking", "reaching"):
+            slow = self._should_slow(grasp_point, object_vel)
+        target_rho = cfg.min_speed_factor if slow else 1.0
+        step = cfg.slow_rate * dt
+        self.rho = min(max(target_rho, self.rho - step), self.rho + step)
+        self.min_rho = min(self.min_rho, self.rho)
+        self.tau = min(self.tau + self.rho * dt * RATE, self.motion.frames - 1.0)
+        # ---- what the hand does
+        if object_free:
+            self._decide(t1, grasp_point, object_vel)
+        key = self._pose_at(self.tau, (grasp_point, object_vel, dt))
+        self._key0, self._key1 = self._key1, key
+        self._t = t1
+        self._track_effort(data, dt)
 
-    def _hand_target(self, t: float, xy: np.ndarray, heading: float, object_pos: np.ndarray,
-                     dt: float) -> np.ndarray:
-        if self.state == "holding":
-            # Withdraw toward the carry pose at pull_speed, moving with the body.
-            c, s = math.cos(heading), math.sin(heading)
-            carry = self._at(self._rest_hand, t)
-            carry[:2] += self.config.carry_forward * np.array([c, s])
-            rel = self._hand_carry  # hand position relative to the pelvis (world axes)
-            goal = carry - np.array([xy[0], xy[1], 0.0])
-            step = goal - rel
-            dist = float(np.linalg.norm(step))
-            if dist > self.config.pull_speed * dt:
-                step *= self.config.pull_speed * dt / dist
-            self._hand_carry = rel + step
-            return np.array([xy[0], xy[1], 0.0]) + self._hand_carry
-        if self._frames_hand is not None:
-            return self._recorded_hand(xy)
-        if self.state == "presenting":
-            if self.reach >= 1.0 and self._raised_hand is not None:
-                return self._raised_hand.copy()  # standing still with the hand up
-            c, s = math.cos(heading), math.sin(heading)
-            sh = self.shoulder(xy, heading)
-            raised = sh + np.array([0.3 * c + 0.15 * s, 0.3 * s - 0.15 * c, -0.15])  # forward, to the right
-            hand = np.asarray(rm.hand_position(xy, heading, self.height, target_xyz=raised, reach=self.reach),
-                              dtype=np.float64)
-            if self.reach >= 1.0 and t >= self.duration:
-                self._raised_hand = hand.copy()
-            return hand
-        if self.state == "reaching" and self._reach_from is not None:
-            goal = self._reach_toward(t, object_pos, 1.0)
-            return self._reach_from + self.reach * (goal - self._reach_from)
-        if self.reach <= 0.0:
-            # Walking: the rest swing (within arm's reach, so the model's reach clip is inactive).
-            return self._at(self._rest_hand, t)
-        return self._reach_toward(t, object_pos, self.reach)
+    def _body_frame(self, tau: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """(right shoulder, walking direction (3,), walking speed) at playback position tau."""
+        m = self.motion
+        torso_q = self._interp(m.quat[:, SEG["torso"]], tau)
+        torso = _quat_to_mat(torso_q / np.linalg.norm(torso_q))
+        shoulder = self._interp(m.origin[:, SEG["torso"]], tau) + torso @ self._shoulder_local
+        h = float(self._interp(m.heading, tau))
+        u = np.array([math.cos(h), math.sin(h), 0.0])
+        return shoulder, u, float(self._interp(m.speed, tau)) * self.rho
 
-    def _reach_toward(self, t: float, target: np.ndarray, reach: float) -> np.ndarray:
-        """``rm.hand_position(base, heading, height, target_xyz=target, reach=reach)`` at time t.
+    def _meeting(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> tuple[float, float, float]:
+        """Where the object is along the person's walk and when they would meet it.
 
-        Uses that model's rest pose and shoulder precomputed at the camera frames (env steps end
-        on frame times) and applies its reach rule: the hand moves the fraction ``reach`` of the
-        straight line from the rest pose to the target and is kept within :func:`rm.arm_reach`
-        of the shoulder.
+        Returns:
+            (forward offset of the grasp point from the right shoulder; time until it is
+            ``meet_forward`` ahead of the pelvis if both keep their velocities along the walk;
+            its distance from the shoulder then, with its current offset across the walk
+            (sideways and up) and the meeting point's offset along it).
         """
-        rest = self._at(self._rest_hand, t)
-        shoulder = self._at(self._shoulder_frames, t)
-        r = min(max(float(reach), 0.0), 1.0)
-        offset = rest + r * (target - rest) - shoulder
-        ox, oy, oz = offset.tolist()
-        dist = math.sqrt(ox * ox + oy * oy + oz * oz)
+        shoulder, u, v = self._body_frame(self.tau)
+        pelvis = self._interp(self.motion.origin[:, 0], self.tau)
+        rel = grasp_point - shoulder
+        fwd = float(rel @ u)
+        across = float(np.linalg.norm(rel - fwd * u))
+        gap = float((grasp_point - pelvis) @ u) - self.config.meet_forward
+        if gap <= 0.0:
+            return fwd, 0.0, float(np.linalg.norm(rel))
+        closing = v - float(object_vel @ u)
+        if closing <= 1e-3:
+            return fwd, math.inf, math.inf
+        return fwd, gap / closing, math.hypot(across, fwd - gap)
+
+    def _left_behind(self, fwd: float, dist: float) -> bool:
+        """The person has walked past the object: it is ``give_up_behind`` behind the shoulder
+        and they are beside it (not just heading elsewhere far from it)."""
+        return fwd < -self.config.give_up_behind and dist < PASS_DISTANCE
+
+    def _should_slow(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> bool:
+        cfg = self.config
+        if self.present_after_walk:
+            return False
+        fwd, t_meet, dist = self._meeting(grasp_point, object_vel)
+        if self._left_behind(fwd, dist):
+            return False
+        return t_meet <= cfg.reach_lead_time and dist > self._comfort
+
+    def _decide(self, t: float, grasp_point: np.ndarray, object_vel: np.ndarray) -> None:
+        cfg = self.config
+        if self.state == "walking" and not self.present_after_walk and self.hand_mode == "reach":
+            fwd, t_meet, dist = self._meeting(grasp_point, object_vel)
+            if self._left_behind(fwd, dist):
+                self._pass(t)
+            elif t_meet <= cfg.reach_lead_time and dist <= self._max_reach:
+                self._begin_reach(t, cfg.reach_duration)
+        elif self.state == "walking" and self.hand_mode == "recorded" and not self.present_after_walk:
+            grip = self._recorded_grip(self.tau)
+            if np.linalg.norm(grip - grasp_point) <= cfg.close_radius:
+                self._begin_reach(t, cfg.close_time)
+        elif self.state == "walking" and self.present_after_walk and self.finished:
+            self.state = "presenting"
+            self._hand = self._swing_hand(self.tau)
+            self._hand_goal_time = t + cfg.present_time
+        elif self.state == "presenting" and t >= self._hand_goal_time:
+            self.state = "presented"
+            self.t_hand_raised = t
+        elif self.state == "presented" and np.linalg.norm(self._hand[0] - grasp_point) <= cfg.present_reach:
+            self._begin_reach(t, cfg.close_time)
+        elif self.state == "reaching" and self.hand_mode == "reach" and not self.present_after_walk:
+            fwd, _, dist = self._meeting(grasp_point, object_vel)
+            if self._left_behind(fwd, dist):
+                self._pass(t)
+
+    def _pass(self, t: float) -> None:
+        """The object is left behind: the person walks on (the arm returns to its swing)."""
+        self.state = "passed"
+        self._hand_goal_time = t + self.config.pull_time
+
+    def _begin_reach(self, t: float, duration: float) -> None:
+        if self._hand is None:  # start from where the arm is, at its current velocity
+            if self.hand_mode == "recorded":
+                p0, p1 = self._recorded_grip(self.tau), self._recorded_grip(self.tau + 1.0)
+                self._hand = (p0, (p1 - p0) * RATE * self.rho, np.zeros(3))
+            else:
+                self._hand = self._swing_hand(self.tau)
+        self.state = "reaching"
+        self.t_reach = t
+        self._hand_goal_time = t + duration
+
+    def _pelvis(self, tau: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nominal pelvis position, rotation and velocity at tau."""
+        m = self.motion
+        q = self._interp(m.quat[:, 0], tau)
+        i = min(int(tau), m.frames - 2)
+        vel = (m.origin[i + 1, 0] - m.origin[i, 0]) * RATE * self.rho
+        return self._interp(m.origin[:, 0], tau), _quat_to_mat(q / np.linalg.norm(q)), vel
+
+    def _swing_hand(self, tau: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Grip point of the walking swing at tau, with its velocity (zero acceleration)."""
+        p0 = self._grip_from_arm(tau, self.motion.arm_swing)
+        p1 = self._grip_from_arm(tau + 1.0, self.motion.arm_swing)
+        return p0, (p1 - p0) * RATE * self.rho, np.zeros(3)
+
+    def _arm_rotations(self, tau: float, arm: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        m = self.motion
+        torso_q = self._interp(m.quat[:, SEG["torso"]], tau)
+        torso = _quat_to_mat(torso_q / np.linalg.norm(torso_q))
+        rel = self._interp(arm, tau)
+        return torso, [torso @ rel[k] for k in range(3)]
+
+    def _grip_from_arm(self, tau: float, arm: np.ndarray) -> np.ndarray:
+        torso, rots = self._arm_rotations(tau, arm)
+        m, dims = self.motion, self.motion.dims
+        shoulder = self._interp(m.origin[:, SEG["torso"]], tau) + torso @ self._shoulder_local
+        elbow = shoulder + rots[0] @ dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"])
+        wrist = elbow + rots[1] @ dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])
+        return wrist + rots[2] @ self._grip_local
+
+    def _recorded_grip(self, tau: float) -> np.ndarray:
+        """Grip point of the recorded right arm at tau."""
+        m = self.motion
+        q = self._interp(m.quat[:, SEG["hand_r"]], tau)
+        rot = _quat_to_mat(q / np.linalg.norm(q))
+        return self._interp(m.origin[:, SEG["hand_r"]], tau) + rot @ self._grip_local
+
+    def _hand_target(self, tau: float, grasp: tuple[np.ndarray, np.ndarray, float] | None) -> np.ndarray | None:
+        """Advance the modelled hand one env step; None when the arm follows the nominal motion."""
+        cfg = self.config
+        state = self.state
+        if state == "walking" or (state == "passed" and self._hand is None):
+            return None
+        if grasp is None:
+            return self._hand[0] if self._hand is not None else None
+        grasp_point, object_vel, dt = grasp
+        shoulder, _, _ = self._body_frame(tau)
+        if state == "reaching":
+            # Approach the grasp point from the person's side and a little above: aim at a point
+            # ``approach_distance`` toward the shoulder (horizontally) and ``approach_height`` up,
+            # and close in over the last ``close_time``, so the hand does not sweep through the
+            # gripper holding the object.
+            away = shoulder - grasp_point
+            away[2] = 0.0
+            if self._gripper_axis is not None:
+                # From the fingertips' side of the gripper, if that side faces the person.
+                axis = self._gripper_axis.copy()
+                axis[2] = 0.0
+                if float(axis @ away) > 0.0:
+                    away = axis
+            norm = float(np.linalg.norm(away))
+            if float(np.linalg.norm(grasp_point - shoulder)) > self._max_reach:
+                # Out of reach: hold the hand ready in front of the object; close in only once
+                # it can be taken.
+                self._hand_goal_time = max(self._hand_goal_time, self._t + cfg.close_time)
+            remaining = self._hand_goal_time - self._t
+            w = min(max(remaining / cfg.close_time, 0.0), 1.0)
+            w = w * w * (3.0 - 2.0 * w)
+            offset = away * (cfg.approach_distance * w / norm) if norm > 1e-6 else np.zeros(3)
+            offset[2] = cfg.approach_height * w
+            goal, goal_v = grasp_point + offset, object_vel
+        elif state == "holding" and self._t < self.t_grasp + cfg.hold_time:
+            # The arm stays out, moving with the body (the shared hold of the recordings).
+            pelvis, rot, vel = self._pelvis(tau)
+            goal, goal_v = pelvis + rot @ self._hold_rel, vel
+        elif state == "holding":
+            swing = self._swing_hand(tau)
+            _, u, _ = self._body_frame(tau)
+            goal, goal_v = swing[0] + cfg.carry_forward * u, swing[1]
+        elif state in ("presenting", "presented"):
+            torso, _ = self._arm_rotations(tau, self.motion.arm_swing)
+            goal, goal_v = shoulder + torso @ np.asarray(PRESENT_OFFSET), np.zeros(3)
+        else:  # passed: the hand returns to the swing
+            goal, goal_v = self._swing_hand(tau)[:2]
+        if state == "holding" and self._t < self.t_grasp + cfg.hold_time:
+            remaining = HOLD_TRACKING
+        elif state == "passed":
+            remaining = max(self._hand_goal_time - self._t, cfg.pull_time)
+        else:
+            remaining = max(self._hand_goal_time - self._t, 0.1)
+        # Aim where the goal will be when the movement ends (it moves on at goal_v).
+        x, v, a = min_jerk_step(*self._hand, goal + goal_v * remaining, goal_v, remaining, dt)
+        off = x - shoulder
+        dist = float(np.linalg.norm(off))
         if dist > self._arm_reach:
-            offset *= self._arm_reach / max(dist, 1e-12)
-        return shoulder + offset
+            x = shoulder + off * (self._arm_reach / dist)
+        self._hand = (x, v, a)
+        return x
 
-    def _recorded_hand(self, xy: np.ndarray) -> np.ndarray:
-        assert self._frames_hand is not None
-        d = np.linalg.norm(self._frames_xy - xy, axis=1)
-        return self._frames_hand[int(np.argmin(d))]
+    def _pose_at(self, tau: float, grasp: tuple | None) -> tuple[np.ndarray, np.ndarray]:
+        """Segment origins (S, 3) and quaternions (S, 4) at playback position tau."""
+        m = self.motion
+        origin = self._interp(m.origin, tau)
+        quat = self._interp(m.quat, tau)
+        quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
+        hand = self._hand_target(tau, grasp)
+        arm = None
+        if hand is not None:
+            self._lean_toward(origin, quat, hand)
+            torso = _quat_to_mat(quat[SEG["torso"]])
+            shoulder = origin[SEG["torso"]] + torso @ self._shoulder_local
+            # A hand held out toward an object is level, pointing away from the shoulder.
+            level = hand - shoulder
+            level[2] = 0.0
+            n = float(np.linalg.norm(level))
+            arm = arm_pose(shoulder, torso, hand, m.dims, level / n if n > 0.05 else None)
+        elif self.hand_mode == "reach":
+            torso = _quat_to_mat(quat[SEG["torso"]])
+            rel = self._interp(m.arm_swing, tau)
+            arm = tuple(torso @ rel[k] for k in range(3))
+        if arm is not None:
+            dims = m.dims
+            rot_q = mat_to_quat(np.stack(arm))
+            prev = quat[list(RIGHT_ARM)]
+            rot_q *= np.where(np.sum(rot_q * prev, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+            quat[list(RIGHT_ARM)] = rot_q
+            torso = _quat_to_mat(quat[SEG["torso"]])
+            shoulder = origin[SEG["torso"]] + torso @ self._shoulder_local
+            elbow = shoulder + arm[0] @ dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"])
+            wrist = elbow + arm[1] @ dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])
+            origin[RIGHT_ARM[0]], origin[RIGHT_ARM[1]], origin[RIGHT_ARM[2]] = shoulder, elbow, wrist
+        return origin, quat
 
-    def _bind(self, data: mujoco.MjData) -> None:
-        """Keep views of the ``data`` rows written or read at every tick (MjData buffers never move)."""
-        ids = self.ids
-        self._bound = data
-        self._base_pos_v = data.mocap_pos[ids.base_mocap]
-        self._base_quat_v = data.mocap_quat[ids.base_mocap]
-        self._hand_pos_v = data.mocap_pos[ids.hand_mocap]
-        self._object_pos_v = data.xpos[ids.object_body]
+    def _lean_toward(self, origin: np.ndarray, quat: np.ndarray, hand: np.ndarray) -> None:
+        """Turn and lean the upper body toward a hand target beyond the straight arm's reach.
 
-    def apply(self, data: mujoco.MjData, alpha: float) -> None:
-        """Move the mocap bodies to the fraction ``alpha`` in [0, 1] of the current env step."""
-        self._set_mocap(data, alpha)
-        self._base_quat_v[1] = self._base_quat_v[2] = 0.0
+        People reaching far bring their shoulder toward the target by turning and leaning the
+        trunk. The torso (with the head and arms) rotates about its base toward the target by
+        the smallest rotation that brings the shoulder close enough, at most ``TRUNK_MAX_TURN``
+        (modifies ``origin`` and ``quat`` in place).
+        """
+        base = origin[SEG["torso"]]
+        torso = _quat_to_mat(quat[SEG["torso"]])
+        s = torso @ self._shoulder_local
+        need = float(np.linalg.norm(base + s - hand)) - STRAIGHT_ARM * self._arm_reach
+        if need <= 0.0:
+            return
+        h = hand - base
+        axis = np.cross(s, h)
+        n = float(np.linalg.norm(axis))
+        if n < 1e-9:
+            return
+        angle = min(need / float(np.linalg.norm(s)), TRUNK_MAX_TURN)
+        half = 0.5 * angle
+        dq = np.concatenate([[math.cos(half)], axis / n * math.sin(half)])
+        rot = _quat_to_mat(dq)
+        for i in _UPPER_BODY:
+            quat[i] = _quat_mul(dq, quat[i])
+            origin[i] = base + rot @ (origin[i] - base)
 
-    def plan_ticks(self, alphas: np.ndarray | list[float]) -> None:
-        """Set the fractions ``alphas`` of this env step at which the ticks fall (kept, not copied,
-        if given as a list of floats)."""
-        self._tick_alphas = alphas if isinstance(alphas, list) else np.asarray(alphas, dtype=np.float64).tolist()
+    # ------------------------------------------------------------------ per tick
+    def plan_ticks(self, alphas: list[float]) -> None:
+        """The fractions of this env step at which controller ticks fall."""
+        self._ticks = alphas
         self._tick_i = 0
+        dt = 1.0 / RATE
+        (o0, q0), (o1, q1) = self._key0, self._key1
+        vel = (o1 - o0) / dt
+        # Angular velocity from q0 -> q1 (world frame): 2 log(q1 q0^-1) / dt.
+        dq = _quat_mul(q1, q0 * np.array([1.0, -1.0, -1.0, -1.0]))
+        dq *= np.where(dq[:, :1] < 0, -1.0, 1.0)
+        omega = 2.0 * dq[:, 1:] / dt
+        # Velocity feed-forward: a weld with damping b and stiffness k lags a target moving at v
+        # by (b / k) v, so the target is placed that far ahead (the segment then sits on the
+        # nominal pose and its weld force is zero in free motion).
+        lag = self._lag[:, None]
+        self._ff_pos = vel * lag
+        half = 0.5 * omega * lag
+        self._ff_quat = np.concatenate([np.ones((len(lag), 1)), half], axis=1)
 
     def apply_tick(self, data: mujoco.MjData) -> None:
-        """Move the mocap bodies to their pose at the next tick (linear between the keyframes)."""
-        a = self._tick_alphas[self._tick_i]
+        """Move the targets to their pose at the next tick (linear between the step's keyframes)."""
+        a = self._ticks[self._tick_i] if self._tick_i < len(self._ticks) else 1.0
         self._tick_i += 1
-        self._set_mocap(data, a)
+        self._set_targets(data, a)
 
-    def _set_mocap(self, data: mujoco.MjData, a: float) -> None:
-        """Base xy and yaw and hand xyz at the fraction ``a`` between the keyframes (plain floats)."""
-        if data is not self._bound:
-            self._bind(data)
-        bx0, by0, bh0 = self._base_prev
-        bx1, by1, bh1 = self._base_next
-        yaw = bh0 + a * (bh1 - bh0)
-        bp = self._base_pos_v
-        bp[0] = bx0 + a * (bx1 - bx0)
-        bp[1] = by0 + a * (by1 - by0)
-        bq = self._base_quat_v
-        bq[0], bq[3] = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
-        hx0, hy0, hz0 = self._hand_prev.tolist()
-        hx1, hy1, hz1 = self._hand_next.tolist()
-        hp = self._hand_pos_v
-        hp[0] = hx0 + a * (hx1 - hx0)
-        hp[1] = hy0 + a * (hy1 - hy0)
-        hp[2] = hz0 + a * (hz1 - hz0)
+    def apply(self, data: mujoco.MjData, alpha: float) -> None:
+        self._set_targets(data, alpha)
+
+    def _set_targets(self, data: mujoco.MjData, a: float) -> None:
+        (o0, q0), (o1, q1) = self._key0, self._key1
+        q = q0 + a * (q1 - q0)
+        q = _quat_mul(self._ff_quat, q)
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        data.mocap_pos[self.body.mocap] = o0 + a * (o1 - o0) + self._ff_pos
+        data.mocap_quat[self.body.mocap] = q
 
     def end_step(self) -> None:
-        """The env step is over: its end keyframes become the next step's start."""
-        self._hand_prev = self._hand_next
-        self._base_prev = self._base_next
+        """Nothing to carry over: keyframes advance in :meth:`plan_step`."""
+
+    # ------------------------------------------------------------------ grasp
+    def grasp_point(self, data: mujoco.MjData) -> np.ndarray:
+        """Where the hand holds the object: on its axis, ``grasp_offset`` from its centre."""
+        ob = self.ids.object_body
+        return data.xpos[ob] + data.xmat[ob].reshape(3, 3)[:, 2] * self.config.grasp_offset
+
+    @property
+    def holding(self) -> bool:
+        """True while the person's hand holds the object."""
+        return self.grip.active
 
     def try_grasp(self, model: mujoco.MjModel, data: mujoco.MjData) -> bool:
-        """Grasp if the hand is at the object (switches the receiver weld on). Returns True on grasp."""
-        if self.state == "holding":
+        """Grasp if the grip point is at the object's grasp point and moves with it (within
+        ``grasp_radius`` and ``grasp_speed``). Returns True on grasp."""
+        if self.state != "reaching":
             return False
-        if self.hand_mode == "reach" and self.state != "reaching":
+        cfg = self.config
+        grip = data.site_xpos[self.body.grip_site]
+        if np.linalg.norm(grip - self.grasp_point(data)) > cfg.grasp_radius:
             return False
-        if data is not self._bound:
-            self._bind(data)
-        hx, hy, hz = self._hand_pos_v.tolist()
-        ox, oy, oz = self._object_pos_v.tolist()
-        dx, dy, dz = hx - ox, hy - oy, hz - oz
-        if math.sqrt(dx * dx + dy * dy + dz * dz) > self.config.grasp_radius:
+        v = self._v6
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_SITE, self.body.grip_site, v, 0)
+        v_grip = v[3:].copy()
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, self.ids.object_body, v, 0)
+        if np.linalg.norm(v_grip - v[3:]) > cfg.grasp_speed:
             return False
-        hand = self._hand_pos_v
-        activate_weld(model, data, self.ids.eq_receiver, torquescale=0.2, zero_force=True)
+        self.grip.close(data, np.array([0.0, 0.0, cfg.grasp_offset]))
         self.state = "holding"
         self.t_grasp = float(data.time)
-        base = data.mocap_pos[self.ids.base_mocap]
-        self._hand_carry = hand - np.array([base[0], base[1], 0.0])
-        self._hand_next = hand.copy()  # hold still for the rest of this env step
-        self._hand_prev = hand.copy()
+        self.grasp_pelvis_xy = data.xpos[self.body.bodies[0], :2].copy()
+        pelvis, rot, _ = self._pelvis(self.tau)
+        self._hold_rel = rot.T @ (self._hand[0] - pelvis) if self._hand is not None else rot.T @ (grip - pelvis)
+        self._hand_goal_time = self.t_grasp + self.config.hold_time + self.config.pull_time
         return True
 
-    def place(self, data: mujoco.MjData, t: float, object_pos: np.ndarray) -> None:
-        """Put the mocap bodies at their pose for time t (used at reset)."""
-        self._hand_prev = None
-        self.plan_step(t, t, object_pos, True)
-        self.plan_ticks(np.zeros(1))
-        self.apply_tick(data)
+    # ------------------------------------------------------------------ effort
+    def _track_effort(self, data: mujoco.MjData, dt: float) -> None:
+        b = self.body
+        if self.state in ("reaching", "presenting", "presented") or (self.state == "holding" and not self._released):
+            self.arm_out_time += dt
+            shoulder = data.xpos[b.bodies[RIGHT_ARM[0]]]
+            grip = data.site_xpos[b.grip_site]
+            self.reach_distance = max(self.reach_distance, float(np.linalg.norm(grip - shoulder)))
+        target = data.mocap_pos[b.mocap.start]
+        pelvis = data.xpos[b.bodies[0]]
+        self.path_deviation = max(self.path_deviation, float(np.hypot(*(pelvis[:2] - target[:2]))))
+
+    def effort(self) -> dict[str, float]:
+        """The person's effort so far (see the module docstring)."""
+        return {
+            "reach_distance": self.reach_distance,
+            "arm_extended_time": self.arm_out_time,
+            "time_lost": self.time_lost,
+            "min_speed_factor": self.min_rho,
+            "path_deviation": self.path_deviation,
+        }

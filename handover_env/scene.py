@@ -13,9 +13,9 @@
 * A wrist force/torque sensor: a site on the gripper's ``base_mount`` (the flange side of the
   gripper) with ``force``, ``torque`` and ``accelerometer`` sensors. MuJoCo reports the force the
   gripper subtree (plus whatever it holds) exerts on the flange, in the site frame.
-* The grasps are weld equalities, activated at runtime through ``data.eq_active``:
-  ``gripper_grasp`` (2F-85 pads <-> object) and ``receiver_grasp`` (receiver hand <-> object).
-  See :mod:`handover_env.receiver` for why.
+* The robot's grasp is a weld equality, ``gripper_grasp`` (2F-85 pads <-> object), switched at
+  runtime through ``data.eq_active`` (see :mod:`handover_env.envs.base_handover` for why). The
+  person holds the object through their compliant arm (:mod:`handover_env.grip`).
 
 Base yaw: the dataset's handovers happen at x 0..0.5, y -0.3..-0.8, z 1.0..1.36, i.e. beside the
 base toward -y (where the receiver walks past) and slightly +x (where the receiver comes from).
@@ -35,6 +35,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from handover_env.body_model import GEOM_NAMES, PREFIX as RECEIVER_PREFIX, BodyIds, add_receiver, body_ids
 from handover_env.menagerie import robotiq_2f85_xml, ur5e_xml
 
 ASSETS = Path(__file__).resolve().parent / "assets"
@@ -98,12 +99,8 @@ class SceneIds:
     object_qpos: int
     object_dof: int
     object_geom: int
-    hand_body: int
-    hand_mocap: int
-    base_body: int
-    base_mocap: int
+    body: BodyIds
     eq_gripper: int
-    eq_receiver: int
     robot_geoms: np.ndarray
     receiver_geoms: np.ndarray
     receiver_geom_names: tuple[str, ...]
@@ -159,15 +156,17 @@ def build_spec(config: SceneConfig | None = None) -> mujoco.MjSpec:
                 if geom.contype or geom.conaffinity:
                     geom.contype, geom.conaffinity = ROBOT_CONTYPE, ROBOT_CONAFFINITY
     world.body("object").first_geom().mass = config.object_mass
+    add_receiver(world)
+    # The grasping hand wraps around the object: no contact between them, nor with the
+    # forearm, whose capsule end overlaps a held bottle (a hand is not a capsule).
+    world.add_exclude(bodyname1=RECEIVER_PREFIX + "hand_r", bodyname2="object")
+    world.add_exclude(bodyname1=RECEIVER_PREFIX + "forearm_r", bodyname2="object")
 
     # Grasps as soft welds, switched at runtime (data.eq_active); relpose is set on activation.
     pad_body = f"{ARM_PREFIX}{GRIPPER_PREFIX}base"
     world.add_equality(name="gripper_grasp", type=mujoco.mjtEq.mjEQ_WELD, name1=pad_body,
                        name2="object", objtype=mujoco.mjtObj.mjOBJ_BODY, active=False,
                        solref=[0.01, 1.0], solimp=[0.95, 0.99, 0.001, 0.5, 2])
-    world.add_equality(name="receiver_grasp", type=mujoco.mjtEq.mjEQ_WELD, name1="receiver_hand",
-                       name2="object", objtype=mujoco.mjtObj.mjOBJ_BODY, active=False,
-                       solref=[0.06, 1.0], solimp=[0.9, 0.95, 0.001, 0.5, 2])
     return world
 
 
@@ -203,12 +202,11 @@ def scene_ids(model: mujoco.MjModel) -> SceneIds:
             ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")]
     obj = nid(B, "object")
     obj_joint = model.body_jntadr[obj]
-    hand, base = nid(B, "receiver_hand"), nid(B, "receiver_base")
     robot_geoms = np.array([g for g in range(model.ngeom)
                             if (model.geom_contype[g] or model.geom_conaffinity[g])
                             and model.body_rootid[model.geom_bodyid[g]] == model.body_rootid[
                                 nid(B, ARM_PREFIX + "base")]], dtype=np.int64)
-    rec_names = ("receiver_legs", "receiver_torso", "receiver_head")
+    body = body_ids(model)
     gripper_root = nid(B, ARM_PREFIX + GRIPPER_PREFIX + "base_mount")
     ids = SceneIds(
         arm_qpos=model.jnt_qposadr[joints].astype(np.int64),
@@ -226,15 +224,11 @@ def scene_ids(model: mujoco.MjModel) -> SceneIds:
         object_qpos=int(model.jnt_qposadr[obj_joint]),
         object_dof=int(model.jnt_dofadr[obj_joint]),
         object_geom=nid(G, "object_geom"),
-        hand_body=hand,
-        hand_mocap=int(model.body_mocapid[hand]),
-        base_body=base,
-        base_mocap=int(model.body_mocapid[base]),
+        body=body,
         eq_gripper=nid(E, "gripper_grasp"),
-        eq_receiver=nid(E, "receiver_grasp"),
         robot_geoms=robot_geoms,
-        receiver_geoms=np.array([nid(G, n) for n in rec_names], dtype=np.int64),
-        receiver_geom_names=rec_names,
+        receiver_geoms=body.geoms,
+        receiver_geom_names=GEOM_NAMES,
     )
     ids.payload_mass = float(model.body_subtreemass[gripper_root])
     return ids

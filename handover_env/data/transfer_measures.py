@@ -93,6 +93,7 @@ MEASURES: dict[str, tuple[str, str, str]] = {
     "hand_shoulder_transfer": ("reach extent", "hand-shoulder distance at transfer", "m"),
     "arm_length": ("reach extent", "arm length (12-13-14-15 bones)", "m"),
     "reach_fraction": ("reach extent", "hand-shoulder distance / arm length at transfer", ""),
+    "object_reach_fraction": ("reach extent", "object-shoulder distance / arm length at transfer", ""),
     "prereach_speed": ("slow-down", "walking speed before the reach (median, start to onset)", "m/s"),
     "min_rel_speed": ("slow-down", "min walking speed / pre-reach, transfer -1 s .. +0.5 s", ""),
     "mean_rel_speed": ("slow-down", "mean walking speed / pre-reach, same window", ""),
@@ -247,6 +248,7 @@ def analyse_recording(
     grasp = slice(max(0, k - before_k), k + after_k + 1)
     m["d15_min_window"] = float(d15[grasp].min())
     m["reach_fraction"] = m["hand_shoulder_transfer"] / m["arm_length"]
+    m["object_reach_fraction"] = m["object_shoulder_transfer"] / m["arm_length"]
     moved = o[k, :2] - o[0, :2]
     m["object_moved_before"] = float(np.linalg.norm(o[k] - o[0]))
     m["object_toward_receiver"] = float(-moved @ fwd[k])

@@ -26,15 +26,18 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 * ``success``: the robot released the object while the receiver held it, the fingers have let go
   (gripper weld off) and the receiver has taken the object clear of the gripper (object centre
   more than ``CLEAR_DISTANCE`` = 6 cm from the TCP) while still holding it.
+* ``premature_release``: the gripper opened (the wrist force exceeded f_r) before the person's
+  hand held the object, e.g. when the body bumped into the bottle. Never a success, even if the
+  hand catches the object afterwards: the episode ends at the release.
 * ``dropped``: nobody holds the object (gripper weld off, receiver not holding) and it has fallen
   0.15 m below where it was last held, or touches the floor.
-* ``unsafe_force``: the peak contact force on the receiver exceeded ``safety_force`` (default
-  140 N: ISO/TS 15066, Annex A, maximum permissible quasi-static force for the hand and fingers).
-  Contact forces counted: the external force at the wrist (what the receiver's pull puts on the
-  object) and every robot-receiver body contact.
-* ``missed``: the receiver walked past without taking the object: not holding it, and its pelvis
-  is more than ``miss_distance`` behind the object along its walking direction, or its scripted
-  walk ended (+1 s). The static receiver waits; there only the TimeLimit ends an episode.
+* ``unsafe_force``: the external force at the wrist (the person's pull) exceeded
+  ``safety_force`` (default 140 N: ISO/TS 15066, Annex A, maximum permissible quasi-static force
+  for the hand and fingers), or a robot/object contact on a body segment exceeded the
+  quasi-static limit of that body region (:mod:`handover_env.envs.contacts`).
+* ``missed``: the person walked past without taking the object (gave up on an object left
+  behind them, see :class:`handover_env.receiver.ReceiverConfig`), or their walk ended (+1 s)
+  without it. The static receiver waits; there only the TimeLimit ends an episode.
 """
 
 from __future__ import annotations
@@ -50,6 +53,7 @@ from gymnasium.utils import EzPickle
 
 from handover_env.config import HandoverParams
 from handover_env.controller import ControllerConfig, ImpedanceController, inverse_kinematics
+from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.observation import ObsLayout
 from handover_env.receiver import CAMERA_RATE, Receiver, ReceiverConfig
 from handover_env.scene import (
@@ -71,7 +75,9 @@ READY_YAW = -math.pi / 2
 HOME_Q = np.array([-2.3, -1.8, 2.1, -0.3, -3.9, 0.0])
 ACTION_LOW = np.array([-0.3, -1.1, 0.8, -math.pi], dtype=np.float32)
 ACTION_HIGH = np.array([0.9, 0.1, 1.6, math.pi], dtype=np.float32)
-OUTCOMES = ("running", "success", "dropped", "unsafe_force", "missed")
+OUTCOMES = ("running", "success", "premature_release", "dropped", "unsafe_force", "missed")
+#: reset() options the envs understand; anything else is warned about by name.
+RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode")
 
 
 class HandoverEnvBase(gym.Env, EzPickle):
@@ -94,7 +100,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         default_receiver: str = "id",
         stabilisation_delay: float = 2.0,
         object_mass: float = 0.4,
-        miss_distance: float = 0.8,
+        miss_distance: float = 0.35,
         force_filter_tau: float = 0.015,
         width: int = 640,
         height: int = 480,
@@ -116,6 +122,11 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
         if int(obs_latency) != obs_latency or obs_latency < 0:
             raise ValueError(f"obs_latency must be a whole number of frames >= 0, got {obs_latency!r}")
+        if isinstance(history, bool) or int(history) != history:
+            raise ValueError(f"history must be a whole number of frames, got {history!r}")
+        for name, v in (("width", width), ("height", height)):
+            if isinstance(v, bool) or int(v) != v or v <= 0:
+                raise ValueError(f"{name} must be a positive whole number of pixels, got {v!r}")
         self.params = HandoverParams(stiffness, damping, forecast_time, release_force)
         self.render_mode = render_mode
         self.safety_force = float(safety_force)
@@ -130,9 +141,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.model = build_model(SceneConfig(object_mass=object_mass))
         self.data = mujoco.MjData(self.model)
         self.ids = scene_ids(self.model)
-        self.layout = ObsLayout(history=history)
+        self.layout = ObsLayout(history=int(history))
         self.controller = ImpedanceController(self.model, self.ids, self.params, ControllerConfig())
-        self.receiver = Receiver(self.model, self.ids, ReceiverConfig())
+        self.receiver = Receiver(self.model, self.ids, ReceiverConfig(give_up_behind=self.miss_distance))
         self.dt = self.model.opt.timestep * FRAME_SKIP
         self._ticks = self.controller.config.ticks
         # Fractions of an env step at which ticks fall, by the global step phase at its start.
@@ -155,13 +166,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._slices = {k: v[0] for k, v in self.layout.slices().items()}
         self._obs = np.zeros(self.layout.size, dtype=np.float64)
 
-        # Geom classes for the contact scan: 1 robot, 2 receiver body.
-        self._geom_class = np.zeros(self.model.ngeom, dtype=np.int8)
-        self._geom_class[self.ids.robot_geoms] = 1
-        self._geom_class[self.ids.receiver_geoms] = 2
-        self._force6 = np.zeros(6)
+        self.contacts = ContactMonitor(self.model, self.ids)
         self._gripper_qpos = self.ids.gripper_driver_qpos
-        self._eq_receiver = self.ids.eq_receiver
         self._object_body = self.ids.object_body
         arm_act = np.asarray(self.ids.arm_act)
         contiguous = arm_act.size and np.all(np.diff(arm_act) == 1)
@@ -197,7 +203,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._object_pos_v = d.xpos[ids.object_body]
         self._tcp_pos_v = d.site_xpos[ids.tcp_site]
         self._tcp_xmat_v = d.site_xmat[ids.tcp_site]
-        self._hand_mocap_v = d.mocap_pos[ids.hand_mocap]
+        self._grip_v = d.site_xpos[ids.body.grip_site]
+        self._object_xmat_v = d.xmat[ids.object_body]
         self._arm_ctrl_v = d.ctrl[self._arm_act] if isinstance(self._arm_act, slice) else None
 
     # ------------------------------------------------------------------ start state
@@ -216,8 +223,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         mujoco.mj_forward(m, d)
         ctrl.reset(d)
         ctrl.set_target(READY_POS, READY_YAW)
-        d.mocap_pos[ids.base_mocap] = (5.0, -3.0, 0.0)
-        d.mocap_pos[ids.hand_mocap] = (5.0, -3.0, 1.0)
+        # The person stands well away while the arm settles (reset places them).
+        b = ids.body
+        d.qpos[b.root_qpos:b.root_qpos + 3] = (5.0, -3.0, float(m.body_pos[b.bodies[0], 2]))
+        mujoco.mj_kinematics(m, d)
+        d.mocap_pos[b.mocap] = d.xpos[b.bodies]
+        d.mocap_quat[b.mocap] = d.xquat[b.bodies]
         for _ in range(100):
             d.ctrl[ids.arm_act] = ctrl.compute(d)
             mujoco.mj_step(m, d, nstep=ctrl.config.ticks)
@@ -233,6 +244,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.t_release = math.nan
         self.release_force = math.nan
         self.peak_contact_force = 0.0
+        self.peak_wrist_force = 0.0
+        self.pull_force = 0.0
+        self.released_while_held = False
+        self.transfer_object_pos: np.ndarray | None = None
         self.f_ext = np.zeros(3)
         self._f_ext_f = (0.0, 0.0, 0.0)
         self.tau_ext = np.zeros(3)
@@ -240,40 +255,47 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._last_held_z = float(READY_POS[2])
         self.t_enabled = 0.0
         self.t_detect = math.nan
-        self._receiver_frames = np.zeros((1, 2))
+        self._receiver_frames: list[tuple[float, float]] = []
         self._hand_frames: list[np.ndarray] = []
         self._step_count = 0
+        self.contacts.reset()
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = dict(options or {})
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            gym.logger.warn(f"reset() ignores unknown option(s) {unknown}; known: {list(RESET_OPTIONS)}")
         kind = options.get("receiver", self.default_receiver)
         m, d, ids = self.model, self.data, self.ids
+        # The person is chosen (and every option validated) before any state changes.
+        self._configure_receiver(kind, options)
         mujoco.mj_resetData(m, d)
+        mujoco.mj_setConst(m, d)  # the person's masses and sizes changed (uses d as scratch)
         mujoco.mj_setState(m, d, self._init_state, mujoco.mjtState.mjSTATE_INTEGRATION)
         m.eq_data[ids.eq_gripper] = self._gripper_eq_data
         d.eq_active[ids.eq_gripper] = 1
-        d.eq_active[ids.eq_receiver] = 0
         d.ctrl[ids.gripper_act] = GRIPPER_CLOSED_CTRL
         self._reset_episode_state()
         self._global_step = 0  # the controller's tick clock restarts with the episode
-        self._configure_receiver(kind, options)
+        self.receiver.start(d)
         mujoco.mj_forward(m, d)
         self._last_held_z = float(d.xpos[ids.object_body, 2])
-        self.receiver.place(d, 0.0, d.xpos[ids.object_body].copy())
-        mujoco.mj_forward(m, d)
         self.controller.reset(d, rest_qpos=self._ready_q)
         self.controller.payload_mass = float(m.body_mass[ids.object_body])
         self._update_payload()
-        # Camera frames (with noise drawn once per frame from np_random).
-        frames = self.receiver._frames_xy
-        noise = self.np_random.normal(0.0, self.obs_noise, size=frames.shape) if self.obs_noise > 0 else 0.0
-        self._receiver_frames = frames + noise
-        self._hand_noise = (self.np_random.normal(0.0, self.obs_noise, size=(frames.shape[0] + 600, 3))
+        # Camera noise is drawn once per frame from np_random (frames are made as the person
+        # walks: a person who slows down is seen slowing down).
+        n_noise = int(self.spec.max_episode_steps if self.spec and self.spec.max_episode_steps else 900) + 2
+        self._camera_noise = (self.np_random.normal(0.0, self.obs_noise, size=(n_noise, 2))
+                              if self.obs_noise > 0 else None)
+        self._hand_noise = (self.np_random.normal(0.0, self.obs_noise, size=(n_noise, 3))
                             if self.obs_noise > 0 else None)
-        self._hand_frames = [d.mocap_pos[ids.hand_mocap].copy()]
+        self._record_camera_frame()
+        self._hand_frames = [self._grip_v.copy()]
         self.t_enabled = math.inf if self.static else 0.0
+        self._ready = True
         if self.render_mode == "human":
             self.render()
         return self._observation(), self._info()
@@ -284,13 +306,24 @@ class HandoverEnvBase(gym.Env, EzPickle):
             episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
         )
 
+    def _record_camera_frame(self) -> None:
+        x, y = self.receiver.camera_xy().tolist()
+        k = len(self._receiver_frames)
+        if self._camera_noise is not None:
+            nx, ny = self._camera_noise[min(k, self._camera_noise.shape[0] - 1)].tolist()
+            x, y = x + nx, y + ny
+        self._receiver_frames.append((x, y))
+
     def step(self, action: np.ndarray):
+        if not getattr(self, "_ready", False):
+            raise RuntimeError("step() called before reset() (a copied or unpickled env is a fresh, "
+                               "un-reset env); call reset() first")
         if self.outcome != "running":
             raise RuntimeError("step() called after the episode ended; call reset()")
-        a = np.asarray(action, dtype=np.float64).reshape(-1)
-        if a.shape != (4,):
-            raise ValueError(f"action must be 4 finite numbers (x, y, z, yaw), got {action!r}")
-        vals = a.tolist()
+        a = np.asarray(action)
+        if a.shape != (4,) or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+            raise ValueError(f"action must be 4 finite real numbers (x, y, z, yaw), got {action!r}")
+        vals = a.astype(np.float64).tolist()
         if not all(math.isfinite(v) for v in vals):
             raise ValueError(f"action must be 4 finite numbers (x, y, z, yaw), got {action!r}")
         lo, hi = self._act_low, self._act_high
@@ -302,7 +335,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         else:
             self.controller.set_target(READY_POS, READY_YAW)
         t1 = t0 + self.dt
-        self.receiver.plan_step(t0, t1, self._object_pos_v.copy(), object_free=not self._receiver_holds)
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, self._object_body, self._vel6, 0)
+        self.receiver.plan_step(t0, t1, d, self._object_pos_v.copy(), self._vel6[3:].copy(),
+                                self._object_xmat_v.reshape(3, 3).copy(),
+                                object_free=not self._receiver_holds, released=self.released,
+                                gripper_pos=self._tcp_pos_v.copy() if self._gripper_holds else None,
+                                gripper_axis=(self._tcp_xmat_v.reshape(3, 3)[:, 2].copy()
+                                              if self._gripper_holds else None))
         self.receiver.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
 
         # The controller ticks on the global step clock: the schedule of (tick?, physics steps)
@@ -315,9 +354,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
             mj_step(m, d, n)  # positional: pybind keyword parsing costs ~0.5 us a call
         self._global_step += FRAME_SKIP
         self.receiver.apply(d, 1.0)
-        self.receiver.end_step()
         self._step_count += 1
-        self._hand_frames.append(self._hand_mocap_v.copy())
+        self._record_camera_frame()
+        self._hand_frames.append(self._grip_v.copy())
         self._after_step()
         reward = self._reward()
         terminated = self.outcome != "running"
@@ -328,7 +367,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
     # ------------------------------------------------------------------ internals
     @property
     def _receiver_holds(self) -> bool:
-        return bool(self._eq_active_v[self._eq_receiver])
+        return self.receiver.grip.active
 
     def _update_payload(self) -> None:
         """Mass and centre of mass (in the F/T site frame) of what hangs below the sensor."""
@@ -380,10 +419,18 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._f_ext_f = (fx, fy, fz)
         self.f_ext[0], self.f_ext[1], self.f_ext[2] = fx, fy, fz
         f_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
-        if f_mag > self.peak_contact_force:
-            self.peak_contact_force = f_mag
+        if f_mag > self.peak_wrist_force:
+            self.peak_wrist_force = f_mag
+        rec = self.receiver
+        holds = rec.grip.active
+        if holds and self._gripper_holds:
+            pull = rec.grip.force
+            p = math.sqrt(float(pull[0] * pull[0] + pull[1] * pull[1] + pull[2] * pull[2]))
+            if p > self.pull_force:
+                self.pull_force = p  # what the person pulls with while both hold the object
         if not self.released and f_mag > self.params.release_force:
             self.released = True
+            self.released_while_held = bool(holds)
             self.t_release = float(d.time)
             self.release_force = f_mag
             d.ctrl[self.ids.gripper_act] = GRIPPER_OPEN_CTRL
@@ -392,13 +439,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._gripper_holds = False
             self.controller.payload_mass = 0.0
             self._update_payload()
-        rec = self.receiver
-        eq_active = self._eq_active_v
-        if rec.state == "reaching" or (rec.hand_mode == "recorded" and not eq_active[self._eq_receiver]):
-            rec.try_grasp(self.model, d)
-        if d.ncon:
-            self._scan_contacts()
-        if self._gripper_holds or eq_active[self._eq_receiver]:
+        if rec.state == "reaching" and rec.try_grasp(self.model, d):
+            self.transfer_object_pos = self._object_pos_v.copy()
+        rec.grip.apply(d)
+        if d.ncon or self.contacts.active:
+            self.contacts.scan(d)
+        if self._gripper_holds or rec.grip.active:
             self._last_held_z = float(self._object_pos_v[2])
         if self._arm_ctrl_v is not None:
             self._arm_ctrl_v[...] = self.controller.compute(d)
@@ -421,24 +467,16 @@ class HandoverEnvBase(gym.Env, EzPickle):
                                  r20 * t0 + r21 * t1 + r22 * t2])
         return self.tau_ext
 
-    def _scan_contacts(self) -> None:
-        m, d = self.model, self.data
-        cls = self._geom_class
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if cls[c.geom1] | cls[c.geom2] == 3:  # robot <-> receiver body
-                mujoco.mj_contactForce(m, d, i, self._force6)
-                f = abs(float(self._force6[0]))
-                if f > self.peak_contact_force:
-                    self.peak_contact_force = f
-
     def _after_step(self) -> None:
         t = float(self.data.time)
         obj = self._object_pos_v
         ox, oy, oz = obj.tolist()
         holds = self._receiver_holds
-        if self.peak_contact_force > self.safety_force:
+        self.peak_contact_force = max(self.peak_wrist_force, float(self.contacts.peak.max()))
+        if self.peak_wrist_force > self.safety_force or self.contacts.unsafe_segment >= 0:
             self.outcome = "unsafe_force"
+        elif self.released and not self.released_while_held:
+            self.outcome = "premature_release"
         elif self.released and holds and not self._gripper_holds and self._clear_of_gripper(ox, oy, oz):
             self.outcome = "success"
         elif not self._gripper_holds and not holds and (oz < self._last_held_z - 0.15 or oz < 0.1):
@@ -453,11 +491,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return math.sqrt(dx * dx + dy * dy + dz * dz) > self.clear_distance
 
     def _receiver_passed(self, obj: np.ndarray, t: float) -> bool:
+        """The person walked past: they left the object behind (a modelled hand gives up on an
+        unheld object behind them), or their walk ended over a second ago without it."""
         if self.static:
             return False
-        x, y, heading = self.receiver._base_floats(t)
-        behind = (float(obj[0]) - x) * math.cos(heading) + (float(obj[1]) - y) * math.sin(heading)
-        return behind < -self.miss_distance or t > self.receiver.duration + 1.0
+        rec = self.receiver
+        return rec.state == "passed" or (rec.finished and t > rec.duration + rec.time_lost + 1.0)
 
     def _reward(self) -> float:
         """-dt per step (time), -dt * excess force over 2 f_r / 10 N, +10 success, -10 failure."""
@@ -475,10 +514,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
     def _observation(self) -> np.ndarray:
         d, v = self.data, self._obs_views
         t = float(d.time)
-        n_true = min(int(math.floor(t * CAMERA_RATE + 1e-6)) + 1, self._receiver_frames.shape[0])
+        n_true = len(self._receiver_frames)
         n = max(1, n_true - self.obs_latency)
         w = self.layout.history
-        frames = self._receiver_frames[max(0, n - w):n]
+        frames = np.asarray(self._receiver_frames[max(0, n - w):n])
         hist = v["receiver_xy_history"].reshape(w, 2)
         hist[w - frames.shape[0]:] = frames
         hist[: w - frames.shape[0]] = frames[0]
@@ -507,25 +546,46 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return out.astype(np.float32)
 
     def _info(self) -> dict[str, Any]:
-        """Episode facts; values not yet defined (no release, no grasp) are ``None``."""
+        """Episode facts; values not yet defined (no release, no grasp) are ``None``.
+
+        Besides the outcome and the paper's handover time: when and where the object changed
+        hands (``transfer_time``: the person's grasp; ``transfer_pelvis_xy``, ``transfer_object_pos``),
+        the person's effort (``reach_distance``, ``arm_extended_time``, ``time_lost``,
+        ``min_speed_factor``, ``path_deviation``, ``pull_force``) and contact with the body
+        (``contact_force_<segment>``, ``body_contact_force``, ``penetration``,
+        ``body_contact_robot``, ``body_contact_object``).
+        """
         ok = self.outcome == "success"
+        rec = self.receiver
         delay = self.stabilisation_delay if self.static else 0.0
         # Paper Sec. V-C: from when the receiver leaves the start point to the gripper release;
         # the static baseline's stabilisation delay is subtracted ("handover_time") or not.
-        t_ho = self.t_release - self.receiver.t_depart
-        return {
+        t_ho = self.t_release - rec.t_depart
+        info: dict[str, Any] = {
             "is_success": ok,
             "outcome": self.outcome,
             "handover_time": (t_ho - delay) if ok else None,
             "handover_time_with_delay": t_ho if ok else None,
             "release_force": None if math.isnan(self.release_force) else self.release_force,
             "released": self.released,
+            "release_time": None if math.isnan(self.t_release) else self.t_release,
             "peak_contact_force": self.peak_contact_force,
-            "receiver_id": f"{self.receiver.kind}:{self.receiver.source_id}",
-            "receiver_state": self.receiver.state,
-            "receiver_grasp_time": None if math.isnan(self.receiver.t_grasp) else self.receiver.t_grasp,
+            "peak_wrist_force": self.peak_wrist_force,
+            "receiver_id": f"{rec.kind}:{rec.source_id}",
+            "receiver_state": rec.state,
+            "receiver_grasp_time": None if math.isnan(rec.t_grasp) else rec.t_grasp,
+            "transfer_time": None if math.isnan(rec.t_grasp) else rec.t_grasp,
+            "reach_onset_time": None if math.isnan(rec.t_reach) else rec.t_reach,
+            "transfer_pelvis_xy": None if rec.grasp_pelvis_xy is None else tuple(rec.grasp_pelvis_xy.tolist()),
+            "transfer_object_pos": (None if self.transfer_object_pos is None
+                                    else tuple(self.transfer_object_pos.tolist())),
+            "departure_time": rec.t_depart,
+            "pull_force": self.pull_force,
             "time": float(self.data.time),
         }
+        info.update(rec.effort())
+        info.update(self.contacts.info())
+        return info
 
     # ------------------------------------------------------------------ rendering
     def render(self):

@@ -1,0 +1,125 @@
+"""How the person holds the object: the arm as a spring-damper between the hand and the object.
+
+Once the hand has closed on the object, the person holds it through their arm, which is not rigid:
+a held hand yields like a spring around where the person means it to be. :class:`ArmGrip` applies
+that coupling explicitly, at every 200 Hz controller tick, as equal and opposite wrenches on the
+object (at its grasp point) and on the hand (at its grip point):
+
+    F = K_arm (p_grip - p_grasp) + B_arm (v_grip - v_grasp)
+    tau = K_rot e + B_rot (w_hand - w_object)
+
+with e the rotation vector taking the object's orientation to the one it had in the hand at the
+grasp. The translational stiffness and damping are the human hand's endpoint impedance in a
+relaxed posture (Mussa-Ivaldi, Hogan & Bizzi 1985: 300-800 N/m; Tsuji et al. 1995: viscosity
+5-15 N s/m); the rotational ones are the wrist's (Formica et al. 2012: about 1-10 N m/rad).
+So the pull on the robot builds up as the person walks on while the robot still holds the object:
+the wrist F/T sensor measures exactly this force, and the gripper opens when it exceeds f_r.
+
+The hand's own pose follows the person's motion (a stiff weld, see :mod:`handover_env.body_model`);
+the grip spring is the only coupling between the person and the object, so the force the person
+exerts (``pull``) is known exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+#: Hand endpoint stiffness (N/m) and viscosity (N s/m), wrist stiffness (N m/rad) and viscosity.
+K_ARM = 500.0
+B_ARM = 10.0
+K_ROT = 5.0
+B_ROT = 0.2
+
+
+@dataclass(frozen=True)
+class GripConfig:
+    """Impedance of the holding arm (see the module docstring for the sources)."""
+
+    stiffness: float = K_ARM
+    damping: float = B_ARM
+    rot_stiffness: float = K_ROT
+    rot_damping: float = B_ROT
+
+    def __post_init__(self) -> None:
+        for name, value in self.__dict__.items():
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"GripConfig.{name} must be finite and >= 0, got {value}")
+
+
+def _rotation_vector(rot: np.ndarray) -> np.ndarray:
+    """Axis * angle of a rotation matrix (3,)."""
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, rot.reshape(9))
+    if q[0] < 0:
+        q = -q
+    s = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    if s < 1e-12:
+        return np.zeros(3)
+    return q[1:] * (2.0 * math.atan2(s, q[0]) / s)
+
+
+class ArmGrip:
+    """The spring-damper grip between the person's hand and the object.
+
+    Args:
+        model: the compiled scene.
+        hand_body: the hand segment's body id.
+        grip_site: the hand's grip point (site id).
+        object_body: the object's body id.
+        config: the arm's impedance.
+    """
+
+    def __init__(self, model: mujoco.MjModel, hand_body: int, grip_site: int, object_body: int,
+                 config: GripConfig | None = None) -> None:
+        self.model = model
+        self.hand, self.site, self.obj = hand_body, grip_site, object_body
+        self.config = config or GripConfig()
+        self._qfrc = np.zeros(model.nv)
+        self._v_site = np.zeros(6)
+        self._v_obj = np.zeros(6)
+        self.active = False
+        self.force = np.zeros(3)
+        self.offset_local = np.zeros(3)
+        self._rel_rot = np.eye(3)
+
+    def close(self, data: mujoco.MjData, grasp_local: np.ndarray) -> None:
+        """Close the hand: hold the object at its point ``grasp_local`` (object frame), keeping
+        the object's current orientation relative to the hand."""
+        self.offset_local = np.asarray(grasp_local, dtype=np.float64).copy()
+        r_hand = data.xmat[self.hand].reshape(3, 3)
+        r_obj = data.xmat[self.obj].reshape(3, 3)
+        self._rel_rot = r_hand.T @ r_obj
+        self.active = True
+
+    def open(self, data: mujoco.MjData) -> None:
+        """Let go (removes the grip wrench)."""
+        self.active = False
+        self.force[:] = 0.0
+        data.qfrc_applied[:] = 0.0
+
+    def apply(self, data: mujoco.MjData) -> None:
+        """Write this tick's grip wrench into ``data.qfrc_applied`` (call at every tick)."""
+        if not self.active:
+            return
+        m, c = self.model, self.config
+        r_obj = data.xmat[self.obj].reshape(3, 3)
+        grasp = data.xpos[self.obj] + r_obj @ self.offset_local
+        grip = data.site_xpos[self.site]
+        mujoco.mj_objectVelocity(m, data, mujoco.mjtObj.mjOBJ_SITE, self.site, self._v_site, 0)
+        mujoco.mj_objectVelocity(m, data, mujoco.mjtObj.mjOBJ_BODY, self.obj, self._v_obj, 0)
+        # Velocity of the object's grasp point: v_origin + w x (grasp - origin).
+        w_obj = self._v_obj[:3]
+        v_grasp = self._v_obj[3:] + np.cross(w_obj, grasp - data.xpos[self.obj])
+        force = c.stiffness * (grip - grasp) + c.damping * (self._v_site[3:] - v_grasp)
+        r_goal = data.xmat[self.hand].reshape(3, 3) @ self._rel_rot
+        torque = c.rot_stiffness * _rotation_vector(r_goal @ r_obj.T) + c.rot_damping * (self._v_site[:3] - w_obj)
+        self.force[:] = force
+        q = self._qfrc
+        q[:] = 0.0
+        mujoco.mj_applyFT(m, data, force, torque, grasp, self.obj, q)
+        mujoco.mj_applyFT(m, data, -force, -torque, grip, self.hand, q)
+        data.qfrc_applied[:] = q

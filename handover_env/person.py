@@ -1,0 +1,271 @@
+"""Where the simulated person's body would be if nothing interfered: the nominal motion.
+
+A :class:`PersonMotion` is the receiver's whole-body motion at 30 Hz before any interaction:
+every segment's pose (:class:`handover_env.skeleton.BodyPose`), the pelvis track a camera sees,
+the walking direction and the right arm's walking swing. :mod:`handover_env.receiver` plays it
+back (possibly slower, when the person waits for the object) and replaces the right arm when
+the person reaches.
+
+Sources:
+
+* :func:`scripted_motion`: a walker from :func:`handover_env.receiver_motion.sample_walker`
+  (ID, or OOD wandering / pausing), its pelvis track from ``base_trajectory`` and the rest of the
+  body from :func:`handover_env.gait.walking_pose`;
+* :func:`recorded_motion`: a public recording. With the receiver's BODY_34 skeleton
+  (:class:`handover_env.data.recording.Recording`, or a dict with ``receiver_pose``), the body
+  is the recorded person, filtered once (:func:`handover_env.data.smoothing.smooth_track`) and
+  retargeted onto the rigid segments (:func:`handover_env.skeleton.retarget`). With the pelvis
+  track only (an :class:`~handover_env.data.dataset.Episode`, e.g. synthetic data), the scripted
+  gait walks along the filtered track. The camera always sees the *raw* recorded pelvis track.
+* :func:`stopped`: the static handover's variant of any motion: it follows the motion until the
+  pelvis reaches the stop line, decelerates to rest there and stands.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from handover_env import receiver_motion as rm
+from handover_env.data.filtering import smooth_track
+from handover_env.gait import walking_pose
+from handover_env.skeleton import (
+    RIGHT_ARM,
+    SEG,
+    BodyDims,
+    BodyPose,
+    mat_to_quat,
+    measure_dims,
+    retarget,
+)
+
+RATE = 30.0
+DEPART_SPEED = 0.25  # m/s: the person "leaves the start point" when the pelvis first moves faster
+STAND_TIME = 30.0  # s of standing appended to a stopped motion
+
+
+@dataclass
+class PersonMotion:
+    """A receiver's nominal whole-body motion at 30 Hz (T frames).
+
+    Attributes:
+        dims: the body's rest geometry.
+        origin: (T, S, 3) segment origins, m.
+        quat: (T, S, 4) segment orientations (w, x, y, z), sign-continuous over time.
+        camera_xy: (T, 2) pelvis xy as the camera sees it (raw for recordings).
+        heading: (T,) walking direction (yaw, rad; pi = toward -x), defined when standing.
+        arm_swing: (T, 3, 3, 3) the right upper arm, forearm and hand rotations relative to the
+            torso while walking (used when the person's arm is modelled, not replayed).
+        speed: (T,) walking speed of the (filtered) pelvis, m/s (central difference averaged
+            over 0.3 s).
+        kind: "id", "ood" or "replay".
+        source_id: where the motion came from.
+        walker: the scripted walker's parameters (None for recordings).
+        has_skeleton: True when the body is a recorded skeleton (else the scripted gait).
+    """
+
+    dims: BodyDims
+    origin: np.ndarray
+    quat: np.ndarray
+    camera_xy: np.ndarray
+    heading: np.ndarray
+    arm_swing: np.ndarray
+    speed: np.ndarray
+    kind: str
+    source_id: str
+    walker: rm.WalkerParams | None = None
+    has_skeleton: bool = False
+
+    def __post_init__(self) -> None:
+        n = self.origin.shape[0]
+        if n < 2:
+            raise ValueError("a motion needs at least 2 frames")
+        for name in ("quat", "camera_xy", "heading", "arm_swing", "speed"):
+            if getattr(self, name).shape[0] != n:
+                raise ValueError(f"PersonMotion.{name} has {getattr(self, name).shape[0]} frames, expected {n}")
+
+    @property
+    def frames(self) -> int:
+        return int(self.origin.shape[0])
+
+    @property
+    def duration(self) -> float:
+        """Length, s."""
+        return (self.frames - 1) / RATE
+
+    @property
+    def t_depart(self) -> float:
+        """When the pelvis first moves faster than ``DEPART_SPEED`` (5-frame mean), s; the start
+        of the paper's handover time (Sec. V-C)."""
+        speed = np.linalg.norm(np.gradient(self.camera_xy, axis=0), axis=1) * RATE
+        if speed.size >= 5:
+            speed = np.convolve(np.pad(speed, 2, mode="edge"), np.ones(5) / 5.0, "valid")
+        moving = np.nonzero(speed > DEPART_SPEED)[0]
+        return (int(moving[0]) if moving.size else self.frames - 1) / RATE
+
+
+def _sign_continuous(q: np.ndarray) -> np.ndarray:
+    """Flip quaternions along axis 0 so that consecutive ones have a positive dot product."""
+    q = q.copy()
+    for k in range(1, q.shape[0]):
+        flip = np.sum(q[k] * q[k - 1], axis=-1) < 0
+        q[k][flip] *= -1.0
+    return q
+
+
+def _heading(xy: np.ndarray) -> np.ndarray:
+    """Walking direction of a (filtered) pelvis track; held while standing, -x before moving."""
+    vel = np.gradient(xy, axis=0) * RATE
+    heading = np.empty(len(xy))
+    last = math.pi
+    moving = np.linalg.norm(vel, axis=1) > 0.15
+    if moving.any():
+        first = int(np.argmax(moving))
+        last = math.atan2(vel[first, 1], vel[first, 0])
+    for k in range(len(xy)):
+        if moving[k]:
+            last = math.atan2(vel[k, 1], vel[k, 0])
+        heading[k] = last
+    return np.unwrap(heading)
+
+
+def _gait_track(xy: np.ndarray, heading: np.ndarray, height: float) -> rm.BaseTrajectory:
+    """A BaseTrajectory along a given pelvis track, stride phase from the distance walked."""
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    dist = np.concatenate([[0.0], np.cumsum(step)])
+    phase = 2 * math.pi * dist / (2 * 0.28 * height)
+    t = np.arange(len(xy)) / RATE
+    return rm.BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=np.mod(phase, 2 * math.pi))
+
+
+def _arm_swing(pose: BodyPose) -> np.ndarray:
+    """(T, 3, 3, 3) right-arm rotations relative to the torso."""
+    torso = pose.rot[:, SEG["torso"]]
+    return np.stack([np.swapaxes(torso, -1, -2) @ pose.rot[:, i] for i in RIGHT_ARM], axis=1)
+
+
+def _speed(xy: np.ndarray) -> np.ndarray:
+    """Walking speed of a pelvis track (central difference, 9-frame moving average), m/s."""
+    v = np.linalg.norm(np.gradient(xy, axis=0), axis=1) * RATE
+    return np.convolve(np.pad(v, 4, mode="edge"), np.ones(9) / 9.0, "valid")
+
+
+def _from_pose(pose: BodyPose, dims: BodyDims, camera_xy: np.ndarray, heading: np.ndarray,
+               arm_swing: np.ndarray, **kw: Any) -> PersonMotion:
+    return PersonMotion(dims=dims, origin=pose.origin, quat=_sign_continuous(mat_to_quat(pose.rot)),
+                        camera_xy=np.asarray(camera_xy, dtype=np.float64), heading=heading,
+                        arm_swing=arm_swing, speed=_speed(pose.origin[:, 0, :2]), **kw)
+
+
+def scripted_motion(rng: np.random.Generator, kind: str = "id", height: float | None = None,
+                    speed: float | None = None, overrides: dict | None = None) -> PersonMotion:
+    """A scripted ID/OOD walker drawn from ``rng`` (see :func:`receiver_motion.sample_walker`)."""
+    fixed = dict(overrides or {})
+    if height is not None:
+        fixed["height"] = float(height)
+    if speed is not None:
+        fixed["speed"] = float(speed)
+    walker = rm.sample_walker(rng, kind, **fixed)
+    traj = rm.base_trajectory(walker, rate_hz=RATE)
+    dims = BodyDims.from_height(walker.height)
+    pose = walking_pose(traj, dims)
+    heading = np.unwrap(np.asarray(traj.heading, dtype=np.float64))
+    return _from_pose(pose, dims, traj.xy, heading, _arm_swing(pose), kind=kind,
+                      source_id=f"scripted_{kind}", walker=walker)
+
+
+def _get(source: Any, key: str) -> Any:
+    if isinstance(source, dict):
+        return source.get(key)
+    if key == "receiver_pose":
+        return getattr(source, "receiver_pose", None)
+    episode = getattr(source, "episode", source)
+    return getattr(episode, key, None)
+
+
+def _as_track(value: Any, width: int, name: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != width or arr.shape[0] < 2:
+        raise ValueError(f"replay {name} must have shape (T>=2, {width}), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"replay {name} contains NaN or inf")
+    return arr
+
+
+def recorded_motion(source: Any, height: float | None = None) -> PersonMotion:
+    """The nominal motion of a recorded receiver.
+
+    Args:
+        source: a :class:`~handover_env.data.recording.Recording` (skeleton and episode), an
+            :class:`~handover_env.data.dataset.Episode`, or a dict with ``receiver_xy`` (T, 2) and
+            optionally ``receiver_pose`` (T, 34, 3) and ``source_id``; 30 Hz.
+        height: body height, m (default: measured from the skeleton, else 1.725).
+    """
+    raw_xy = _get(source, "receiver_xy")
+    if raw_xy is None:
+        raise ValueError("a replayed receiver needs 'receiver_xy' (T, 2)")
+    raw_xy = _as_track(raw_xy, 2, "receiver_xy")
+    skeleton = _get(source, "receiver_pose")
+    source_id = str(_get(source, "source_id") or "replay")
+    if skeleton is not None:
+        joints = np.asarray(skeleton, dtype=np.float64)
+        if joints.shape != (raw_xy.shape[0], 34, 3):
+            raise ValueError(f"replay receiver_pose must have shape ({raw_xy.shape[0]}, 34, 3), got {joints.shape}")
+        if not np.all(np.isfinite(joints)):
+            raise ValueError("replay receiver_pose contains NaN or inf")
+        joints = smooth_track(joints, RATE)
+        dims = measure_dims(joints, height)
+        pose = retarget(joints, dims)
+        xy = joints[:, 0, :2]
+        heading = _heading(xy)
+        gait = walking_pose(_gait_track(xy, heading, dims.height), dims)
+        return _from_pose(pose, dims, raw_xy, heading, _arm_swing(gait), kind="replay",
+                          source_id=source_id, has_skeleton=True)
+    dims = BodyDims.from_height(float(height) if height is not None else 1.725)
+    xy = smooth_track(raw_xy, RATE)
+    heading = _heading(xy)
+    pose = walking_pose(_gait_track(xy, heading, dims.height), dims)
+    return _from_pose(pose, dims, raw_xy, heading, _arm_swing(pose), kind="replay", source_id=source_id)
+
+
+def resample(motion: PersonMotion, tau: np.ndarray) -> PersonMotion:
+    """The motion played at fractional frame indices ``tau`` (one output frame per entry)."""
+    tau = np.clip(np.asarray(tau, dtype=np.float64), 0.0, motion.frames - 1.0)
+    i = np.minimum(np.floor(tau).astype(np.int64), motion.frames - 2)
+    a = tau - i
+
+    def lerp(x: np.ndarray) -> np.ndarray:
+        w = a.reshape((-1,) + (1,) * (x.ndim - 1))
+        return x[i] * (1.0 - w) + x[i + 1] * w
+
+    quat = lerp(motion.quat)
+    quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
+    swing = lerp(motion.arm_swing)
+    u, _, vt = np.linalg.svd(swing)  # re-orthonormalise the interpolated rotations
+    dtau = np.gradient(tau) if tau.size > 1 else np.zeros_like(tau)
+    return replace(motion, origin=lerp(motion.origin), quat=quat, camera_xy=lerp(motion.camera_xy),
+                   heading=lerp(motion.heading), arm_swing=u @ vt, speed=lerp(motion.speed) * dtau)
+
+
+def stopped(motion: PersonMotion, stop_x: float, decel_time: float = 0.8) -> PersonMotion:
+    """The static-handover variant: follow ``motion`` until the pelvis reaches ``x <= stop_x``,
+    decelerate smoothly (half-cosine speed ramp of ``decel_time`` s) to rest there and stand.
+
+    The ramp starts ``decel_time / 2`` s of walking before the stop line, so the person comes to
+    rest about on it. A motion that never reaches the line stops at its end.
+    """
+    xy = motion.camera_xy if not motion.has_skeleton else motion.origin[:, 0, :2]
+    reach = np.nonzero(xy[:, 0] <= stop_x)[0]
+    k_stop = int(reach[0]) if reach.size else motion.frames - 1
+    ramp = decel_time * RATE
+    k0 = max(k_stop - 0.5 * ramp, 0.0)
+    n_out = int(math.ceil(k0 + ramp + STAND_TIME * RATE)) + 1
+    t = np.arange(n_out, dtype=np.float64)
+    # Playback speed 1 until k0, then 0.5 (1 + cos(pi s)) down to 0 over the ramp: tau advances
+    # by ramp / 2 frames during it, so it comes to rest at k0 + ramp / 2 = k_stop.
+    s = np.clip((t - k0) / ramp, 0.0, 1.0)
+    tau = np.where(t <= k0, t, k0 + ramp * (s + np.sin(math.pi * s) / math.pi) / 2.0)
+    return resample(motion, np.minimum(tau, motion.frames - 1.0))
