@@ -64,6 +64,7 @@ TRUNK_MAX_TURN = math.radians(20.0)
 #: The torso and the segments it carries (head, both arms), which turn with it.
 _UPPER_BODY = tuple(i for i in range(len(SEGMENTS)) if i == SEG["torso"] or SEGMENTS[i].parent in (
     SEG["torso"], SEG["upper_arm_r"], SEG["forearm_r"], SEG["upper_arm_l"], SEG["forearm_l"]))
+_CONJ = np.array([1.0, -1.0, -1.0, -1.0])
 #: An object behind the person counts as walked past only if it is within this distance, m.
 PASS_DISTANCE = 1.2
 #: Where the static receiver holds the raised right hand: forward, right and up from the
@@ -104,8 +105,10 @@ class ReceiverConfig:
         grasp_radius: the hand grasps when its grip point is this close to the grasp point, m,
         grasp_speed: and moves relative to it slower than this, m/s (a hand closes on an object
             it has caught up with; the grip is then :mod:`handover_env.grip`'s spring).
-        grasp_offset: the grasp point's offset from the object's centre along its axis, m (the
-            top of the bottle, above the gripper's pads).
+        grasp_offset: the grasp point's offset from the object's centre along its axis, m: the
+            top of the bottle, above the gripper's pads (a modelled reach, which lifts the hand
+            above the object), or its bottom, below the pads (a recorded hand that closes in
+            from below).
         approach_distance, approach_height: the hand approaches the grasp point from this far
             toward the person and this far above it, closing in over the last ``close_time``, m.
         close_radius: recorded hand: the hand closes onto the object once the recorded grip point
@@ -187,6 +190,7 @@ class Receiver:
         self.motion: PersonMotion | None = None
         self.kind, self.source_id, self.hand_mode = "id", "", "reach"
         self.present_after_walk = False
+        self._bound: mujoco.MjData | None = None
         self._reset_state()
 
     # ------------------------------------------------------------------ setup
@@ -251,6 +255,8 @@ class Receiver:
         self._reset_state()
 
     def _reset_state(self) -> None:
+        self._grasp_side = 1.0  # +1: the hand takes the object's top part; -1: its bottom part
+        self._object_axis = np.array([0.0, 0.0, 1.0])
         self.grip.active = False  # mj_resetData clears the grip's applied wrench
         self.grip.force[:] = 0.0
         self.state = "walking"
@@ -348,7 +354,8 @@ class Receiver:
         self._released = released
         self._gripper = None if gripper_pos is None else np.asarray(gripper_pos, dtype=np.float64)
         self._gripper_axis = None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
-        grasp_point = object_pos + object_rot[:, 2] * cfg.grasp_offset
+        self._object_axis = object_rot[:, 2].copy()
+        grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
         # ---- how fast to walk on
         slow = False
         if object_free and self.state in ("walking", "reaching"):
@@ -422,7 +429,10 @@ class Receiver:
                 self._begin_reach(t, cfg.reach_duration)
         elif self.state == "walking" and self.hand_mode == "recorded" and not self.present_after_walk:
             grip = self._recorded_grip(self.tau)
-            if np.linalg.norm(grip - grasp_point) <= cfg.close_radius:
+            centre = grasp_point - self._object_axis * (self._grasp_side * cfg.grasp_offset)
+            if np.linalg.norm(grip - centre) <= cfg.close_radius:
+                # Close on the part of the object the hand comes from (its top or its bottom).
+                self._grasp_side = 1.0 if float((grip - centre) @ self._object_axis) >= 0.0 else -1.0
                 self._begin_reach(t, cfg.close_time)
         elif self.state == "walking" and self.present_after_walk and self.finished:
             self.state = "presenting"
@@ -522,7 +532,7 @@ class Receiver:
             w = min(max(remaining / cfg.close_time, 0.0), 1.0)
             w = w * w * (3.0 - 2.0 * w)
             offset = away * (cfg.approach_distance * w / norm) if norm > 1e-6 else np.zeros(3)
-            offset[2] = cfg.approach_height * w
+            offset[2] = self._grasp_side * cfg.approach_height * w
             goal, goal_v = grasp_point + offset, object_vel
         elif state == "holding" and self._t < self.t_grasp + cfg.hold_time:
             # The arm stays out, moving with the body (the shared hold of the recordings).
@@ -615,23 +625,25 @@ class Receiver:
 
     # ------------------------------------------------------------------ per tick
     def plan_ticks(self, alphas: list[float]) -> None:
-        """The fractions of this env step at which controller ticks fall."""
+        """The fractions of this env step at which controller ticks fall; prepares the step's
+        target interpolation (start pose and increment, velocity feed-forward included)."""
         self._ticks = alphas
         self._tick_i = 0
         dt = 1.0 / RATE
         (o0, q0), (o1, q1) = self._key0, self._key1
-        vel = (o1 - o0) / dt
         # Angular velocity from q0 -> q1 (world frame): 2 log(q1 q0^-1) / dt.
-        dq = _quat_mul(q1, q0 * np.array([1.0, -1.0, -1.0, -1.0]))
+        dq = _quat_mul(q1, q0 * _CONJ)
         dq *= np.where(dq[:, :1] < 0, -1.0, 1.0)
-        omega = 2.0 * dq[:, 1:] / dt
         # Velocity feed-forward: a weld with damping b and stiffness k lags a target moving at v
         # by (b / k) v, so the target is placed that far ahead (the segment then sits on the
-        # nominal pose and its weld force is zero in free motion).
+        # nominal pose and its weld force is zero in free motion). The feed-forward rotation is
+        # constant over the step, so it is applied to both keyframes once here.
         lag = self._lag[:, None]
-        self._ff_pos = vel * lag
-        half = 0.5 * omega * lag
-        self._ff_quat = np.concatenate([np.ones((len(lag), 1)), half], axis=1)
+        ff_q = np.concatenate([np.ones((len(lag), 1)), dq[:, 1:] * (lag / dt)], axis=1)
+        self._pos0 = o0 + (o1 - o0) * (lag / dt)
+        self._dpos = o1 - o0
+        self._quat0 = _quat_mul(ff_q, q0)
+        self._dquat = _quat_mul(ff_q, q1) - self._quat0
 
     def apply_tick(self, data: mujoco.MjData) -> None:
         """Move the targets to their pose at the next tick (linear between the step's keyframes)."""
@@ -643,12 +655,15 @@ class Receiver:
         self._set_targets(data, alpha)
 
     def _set_targets(self, data: mujoco.MjData, a: float) -> None:
-        (o0, q0), (o1, q1) = self._key0, self._key1
-        q = q0 + a * (q1 - q0)
-        q = _quat_mul(self._ff_quat, q)
-        q /= np.linalg.norm(q, axis=1, keepdims=True)
-        data.mocap_pos[self.body.mocap] = o0 + a * (o1 - o0) + self._ff_pos
-        data.mocap_quat[self.body.mocap] = q
+        """Targets at the fraction ``a`` of the step (MuJoCo normalises mocap quaternions)."""
+        if data is not self._bound:
+            self._bound = data
+            self._mocap_pos = data.mocap_pos[self.body.mocap]
+            self._mocap_quat = data.mocap_quat[self.body.mocap]
+        np.multiply(self._dpos, a, out=self._mocap_pos)
+        self._mocap_pos += self._pos0
+        np.multiply(self._dquat, a, out=self._mocap_quat)
+        self._mocap_quat += self._quat0
 
     def end_step(self) -> None:
         """Nothing to carry over: keyframes advance in :meth:`plan_step`."""
@@ -657,7 +672,7 @@ class Receiver:
     def grasp_point(self, data: mujoco.MjData) -> np.ndarray:
         """Where the hand holds the object: on its axis, ``grasp_offset`` from its centre."""
         ob = self.ids.object_body
-        return data.xpos[ob] + data.xmat[ob].reshape(3, 3)[:, 2] * self.config.grasp_offset
+        return data.xpos[ob] + data.xmat[ob].reshape(3, 3)[:, 2] * (self._grasp_side * self.config.grasp_offset)
 
     @property
     def holding(self) -> bool:
@@ -679,7 +694,7 @@ class Receiver:
         mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, self.ids.object_body, v, 0)
         if np.linalg.norm(v_grip - v[3:]) > cfg.grasp_speed:
             return False
-        self.grip.close(data, np.array([0.0, 0.0, cfg.grasp_offset]))
+        self.grip.close(data, np.array([0.0, 0.0, self._grasp_side * cfg.grasp_offset]))
         self.state = "holding"
         self.t_grasp = float(data.time)
         self.grasp_pelvis_xy = data.xpos[self.body.bodies[0], :2].copy()

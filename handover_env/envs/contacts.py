@@ -51,6 +51,8 @@ class ContactMonitor:
         self.peak = np.zeros(len(SEGMENTS))
         self._over_since = np.full(len(SEGMENTS), np.nan)  # when the force went over the limit
         self._over_now = np.zeros(len(SEGMENTS), dtype=bool)
+        #: True while some segment is over its quasi-static limit (keep scanning at every tick).
+        self.active = False
         self.penetration = 0.0
         self.touched_robot = False
         self.touched_object = False
@@ -90,11 +92,7 @@ class ContactMonitor:
         long = np.nonzero(t - self._over_since > TRANSIENT_TIME)[0]
         if long.size and self.unsafe_segment < 0:
             self.unsafe_segment = int(long[0])
-
-    @property
-    def active(self) -> bool:
-        """True while some segment is over its quasi-static limit (keep scanning)."""
-        return bool(np.any(~np.isnan(self._over_since)))
+        self.active = bool(over.any())
 
     def info(self) -> dict[str, float | bool]:
         """Flat info entries: ``contact_force_<segment>`` for every segment, the body's peak,
