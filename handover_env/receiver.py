@@ -277,6 +277,7 @@ class Receiver:
         self.min_rho = 1.0
         self.path_deviation = 0.0
         self._released = False
+        self._dt = 1.0 / RATE
         self._gripper: np.ndarray | None = None
         self._gripper_axis: np.ndarray | None = None
 
@@ -371,7 +372,7 @@ class Receiver:
         key = self._pose_at(self.tau, (grasp_point, object_vel, dt))
         self._key0, self._key1 = self._key1, key
         self._t = t1
-        self._track_effort(data, dt)
+        self._dt = dt
 
     def _body_frame(self, tau: float) -> tuple[np.ndarray, np.ndarray, float]:
         """(right shoulder, walking direction (3,), walking speed) at playback position tau."""
@@ -665,8 +666,9 @@ class Receiver:
         np.multiply(self._dquat, a, out=self._mocap_quat)
         self._mocap_quat += self._quat0
 
-    def end_step(self) -> None:
-        """Nothing to carry over: keyframes advance in :meth:`plan_step`."""
+    def end_step(self, data: mujoco.MjData) -> None:
+        """The env step's physics is done: record the person's effort over it."""
+        self._track_effort(data, self._dt)
 
     # ------------------------------------------------------------------ grasp
     def grasp_point(self, data: mujoco.MjData) -> np.ndarray:
@@ -711,7 +713,7 @@ class Receiver:
             shoulder = data.xpos[b.bodies[RIGHT_ARM[0]]]
             grip = data.site_xpos[b.grip_site]
             self.reach_distance = max(self.reach_distance, float(np.linalg.norm(grip - shoulder)))
-        target = data.mocap_pos[b.mocap.start]
+        target = self._key1[0][0]  # the nominal pelvis at the end of this step
         pelvis = data.xpos[b.bodies[0]]
         self.path_deviation = max(self.path_deviation, float(np.hypot(*(pelvis[:2] - target[:2]))))
 

@@ -259,6 +259,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._hand_frames: list[np.ndarray] = []
         self._step_count = 0
         self.contacts.reset()
+        self._tcp_hist: list[list[float]] = []
+        self._jerk_sq = 0.0
+        self._jerk_peak_sq = 0.0
+        self._jerk_n = 0
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -294,6 +298,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
                             if self.obs_noise > 0 else None)
         self._record_camera_frame()
         self._hand_frames = [self._grip_v.copy()]
+        self._tcp_hist.append(self._tcp_pos_v.tolist())
         self.t_enabled = math.inf if self.static else 0.0
         self._ready = True
         if self.render_mode == "human":
@@ -354,9 +359,11 @@ class HandoverEnvBase(gym.Env, EzPickle):
             mj_step(m, d, n)  # positional: pybind keyword parsing costs ~0.5 us a call
         self._global_step += FRAME_SKIP
         self.receiver.apply(d, 1.0)
+        self.receiver.end_step(d)
         self._step_count += 1
         self._record_camera_frame()
         self._hand_frames.append(self._grip_v.copy())
+        self._track_jerk()
         self._after_step()
         reward = self._reward()
         terminated = self.outcome != "running"
@@ -466,6 +473,22 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.tau_ext = np.array([r00 * t0 + r01 * t1 + r02 * t2, r10 * t0 + r11 * t1 + r12 * t2,
                                  r20 * t0 + r21 * t1 + r22 * t2])
         return self.tau_ext
+
+    def _track_jerk(self) -> None:
+        """Robot TCP jerk from the third difference of its 30 Hz positions (RMS and peak)."""
+        tcp = self._tcp_pos_v.tolist()
+        hist = self._tcp_hist
+        hist.append(tcp)
+        if len(hist) < 4:
+            return
+        r = CAMERA_RATE**3
+        p0, p1, p2, p3 = hist[-1], hist[-2], hist[-3], hist[-4]
+        j2 = sum(((a - 3.0 * b + 3.0 * c - e) * r) ** 2 for a, b, c, e in zip(p0, p1, p2, p3))
+        self._jerk_sq += j2
+        self._jerk_n += 1
+        if j2 > self._jerk_peak_sq:
+            self._jerk_peak_sq = j2
+        del hist[0]
 
     def _after_step(self) -> None:
         t = float(self.data.time)
@@ -581,6 +604,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
                                     else tuple(self.transfer_object_pos.tolist())),
             "departure_time": rec.t_depart,
             "pull_force": self.pull_force,
+            "robot_jerk_rms": math.sqrt(self._jerk_sq / self._jerk_n) if self._jerk_n else 0.0,
+            "robot_jerk_peak": math.sqrt(self._jerk_peak_sq),
             "time": float(self.data.time),
         }
         info.update(rec.effort())
