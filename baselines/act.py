@@ -77,6 +77,7 @@ from safetensors.torch import save_file  # noqa: E402
 from agents.predictive import ClosedLoopConfig  # noqa: E402
 from baselines import act_files  # noqa: E402
 from baselines.checkpoint_io import (  # noqa: E402
+    check_training_state,
     config_from_dict,
     expected_of,
     load_optimizer,
@@ -835,8 +836,8 @@ class ACTAgent(GiverConditionedAgent):
         agent = cls.__new__(cls)
         GiverConditionedAgent.__init__(agent, **closed_loop_kwargs)
         agent.config, agent.horizon, agent._giver_now = cfg, cfg.horizon, None
-        torch.manual_seed(cfg.seed)
-        policy = ACTPolicy(cfg.policy_config())
+        with torch.random.fork_rng(devices=[]):  # the initial weights are overwritten: leave the caller's RNG be
+            policy = ACTPolicy(cfg.policy_config())
         policy.load_state_dict(load_tensors(path / "model.safetensors", expected_of(policy.state_dict())))
         agent.policy = policy.to(device)
         agent.preprocessor, agent.postprocessor = make_act_pre_post_processors(policy.config, None)
@@ -851,40 +852,9 @@ class ACTAgent(GiverConditionedAgent):
         return agent
 
 
-_STATE_KEYS = {"step": int, "best_val": float, "best_step": int, "train_loss": list, "val_loss": list,
-               "wall_time_s": float, "split": dict}
-
-
 def _check_state(state: object, source: Path) -> dict:
     """An ACT ``state.json`` whose fields have their types and agree with each other, or CheckpointError."""
-    if not isinstance(state, dict) or set(state) != set(_STATE_KEYS):
-        got = sorted(state) if isinstance(state, dict) else type(state).__name__
-        raise CheckpointError(f"{source}: expected the fields {sorted(_STATE_KEYS)}, got {got}")
-    for key, kind in _STATE_KEYS.items():
-        value = state[key]
-        number = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if not (number if kind is float else isinstance(value, kind) and not isinstance(value, bool)):
-            raise CheckpointError(f"{source}: {key} = {value!r} is not a {kind.__name__}")
-    step, losses = state["step"], state["val_loss"]
-    problems = []
-    if step < 0:
-        problems.append(f"step {step} is negative")
-    if len(state["train_loss"]) != len(losses) or len(losses) > step:
-        problems.append(f"{len(state['train_loss'])}/{len(losses)} loss values at step {step}")
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-               for v in state["train_loss"] + losses):
-        problems.append("a loss value is not a finite number")
-    elif losses and state["best_val"] != min(losses):
-        problems.append("best_val disagrees with val_loss")
-    if not -1 <= state["best_step"] <= step or state["wall_time_s"] < 0:
-        problems.append("best_step or wall_time_s out of range")
-    split = state["split"]
-    if set(split) != {"train", "val"} or not all(
-            isinstance(v, list) and all(isinstance(s, str) for s in v) for v in split.values()):
-        problems.append("split must hold 'train' and 'val' lists of episode ids")
-    if problems:
-        raise CheckpointError(f"{source}: inconsistent training state: {'; '.join(problems)}")
-    return state
+    return check_training_state(state, source, "step", "best_step", {})
 
 
 def _read_handover_json(path: Path) -> dict:

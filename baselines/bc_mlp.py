@@ -41,6 +41,7 @@ from torch import nn
 
 from agents.predictive import ClosedLoopConfig
 from baselines.checkpoint_io import (
+    check_training_state,
     config_from_dict,
     expected_of,
     load_optimizer,
@@ -460,42 +461,10 @@ def _check_scales(tensors: dict[str, torch.Tensor], source: Path) -> None:
             raise CheckpointError(f"{source}: {key} has a zero or negative entry")
 
 
-_STATE_KEYS = {"epoch": int, "best_val": float, "best_epoch": int, "bad_epochs": int, "train_loss": list,
-               "val_loss": list, "stopped_early": bool, "wall_time_s": float, "split": dict}
-
-
 def _check_state(state: object, source: Path) -> dict:
     """A ``state.json`` whose fields have their types and agree with each other, or CheckpointError."""
-    if not isinstance(state, dict) or set(state) != set(_STATE_KEYS):
-        got = sorted(state) if isinstance(state, dict) else type(state).__name__
-        raise CheckpointError(f"{source}: expected the fields {sorted(_STATE_KEYS)}, got {got}")
-    for key, kind in _STATE_KEYS.items():
-        value = state[key]
-        ok = (isinstance(value, (int, float)) and not isinstance(value, bool)) if kind is float else (
-            isinstance(value, kind) and (kind is bool or not isinstance(value, bool)))
-        if not ok:
-            raise CheckpointError(f"{source}: {key} = {value!r} is not a {kind.__name__}")
-    epoch, losses = state["epoch"], state["val_loss"]
-    problems = []
-    if epoch < 0:
-        problems.append(f"epoch {epoch} is negative")
-    if len(state["train_loss"]) != epoch or len(losses) != epoch:
-        problems.append(f"{len(state['train_loss'])}/{len(losses)} loss values for {epoch} epochs")
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-               for v in state["train_loss"] + losses):
-        problems.append("a loss value is not a finite number")
-    elif epoch > 0 and losses and (state["best_val"] != min(losses)
-                                   or state["best_epoch"] != losses.index(min(losses)) + 1):
-        problems.append("best_val/best_epoch disagree with val_loss")
-    if not 0 <= state["bad_epochs"] <= max(epoch, 0) or state["wall_time_s"] < 0:
-        problems.append("bad_epochs or wall_time_s out of range")
-    split = state["split"]
-    if set(split) != {"train", "val"} or not all(
-            isinstance(v, list) and all(isinstance(s, str) for s in v) for v in split.values()):
-        problems.append("split must hold 'train' and 'val' lists of episode ids")
-    if problems:
-        raise CheckpointError(f"{source}: inconsistent training state: {'; '.join(problems)}")
-    return state
+    return check_training_state(state, source, "epoch", "best_epoch",
+                                {"bad_epochs": int, "stopped_early": bool})
 
 
 def _read_config(path: Path) -> dict:

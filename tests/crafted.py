@@ -7,7 +7,6 @@ that they say exactly what the attack needs and nothing else.
 from __future__ import annotations
 
 import io
-import os
 import pickle
 import struct
 import zipfile
@@ -169,4 +168,3 @@ def make_folder(folder: Path, builder, name: str = "motion_normal_0.pkl") -> Pat
     return folder
 
 
-__all__ = [name for name in dir() if not name.startswith("_") and name not in ("io", "os", "np")]

@@ -24,8 +24,8 @@ from baselines.act import ACTAgent, ACTAgentConfig  # noqa: E402
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig  # noqa: E402
 from baselines.features import CheckpointError  # noqa: E402
 
-ACT_TINY = dict(dim_model=16, n_heads=2, dim_feedforward=32, n_encoder_layers=1, latent_dim=4,
-                batch_size=8, steps=2, eval_every=1)
+ACT_TINY = {"dim_model": 16, "n_heads": 2, "dim_feedforward": 32, "n_encoder_layers": 1, "latent_dim": 4,
+            "batch_size": 8, "steps": 2, "eval_every": 1}
 PRE, POST = "policy_preprocessor.json", "policy_postprocessor.json"
 PRE_STATS = "policy_preprocessor_step_3_normalizer_processor.safetensors"
 POST_STATS = "policy_postprocessor_step_0_unnormalizer_processor.safetensors"
@@ -94,15 +94,20 @@ def test_processor_json_is_allow_listed_before_lerobot_sees_it(act_dir, tmp_path
 
 def test_evaluate_does_not_run_a_tampered_cached_checkpoint(data, tmp_path, monkeypatch):
     """evaluate.py reuses checkpoints from <out>/checkpoints: a tampered one is retrained, not run."""
-    from handover_env.evaluation.methods import MethodOptions, build_agent, checkpoint_slot, fit_agent
+    from handover_env.evaluation.methods import (
+        MethodOptions,
+        build_agent,
+        checkpoint_slot,
+        fit_agent,
+    )
 
     options = MethodOptions(seed=0, quick=True, act_steps=2, workers=1)
-    agent, reused = fit_agent("act", build_agent("act", options), data, tmp_path / "cache")
+    _, reused = fit_agent("act", build_agent("act", options), data, tmp_path / "cache")
     assert not reused
     folder, _ = checkpoint_slot("act", build_agent("act", options), data, tmp_path / "cache")
     _edit_json(folder / PRE, lambda d: d["steps"].insert(0, POPEN))
     monkeypatch.chdir(tmp_path)
-    agent, reused = fit_agent("act", build_agent("act", options), data, tmp_path / "cache")
+    _, reused = fit_agent("act", build_agent("act", options), data, tmp_path / "cache")
     assert not reused and not (tmp_path / "MARKER").exists()
     assert ACTAgent.load(folder).fitted  # the retrained checkpoint is clean again
 

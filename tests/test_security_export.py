@@ -23,8 +23,8 @@ from handover_env.data.__main__ import main  # noqa: E402
 from handover_env.data.lerobot_export import export_lerobot, read_sidecar  # noqa: E402
 from handover_env.paths import UnsafePathError  # noqa: E402
 
-TINY = dict(dim_model=16, n_heads=2, dim_feedforward=32, n_encoder_layers=1, latent_dim=4,
-            batch_size=8, steps=2, eval_every=1)
+TINY = {"dim_model": 16, "n_heads": 2, "dim_feedforward": 32, "n_encoder_layers": 1, "latent_dim": 4,
+        "batch_size": 8, "steps": 2, "eval_every": 1}
 
 
 @pytest.fixture(scope="module")

@@ -63,7 +63,7 @@ def test_crafted_files_end_with_named_errors_under_2gb(tmp_path: Path) -> None:
 
     child = subprocess.run(
         [sys.executable, "-c", CHILD.format(limit=LIMIT), json.dumps(commands)],
-        cwd=REPO, capture_output=True, text=True, timeout=300,
+        cwd=REPO, capture_output=True, text=True, timeout=300, check=False,
         env={**os.environ, "PYTHONPATH": str(REPO), "OMP_NUM_THREADS": "1"},
     )
     assert child.returncode == 0, f"child died with {child.returncode}: {child.stderr[-3000:]}"

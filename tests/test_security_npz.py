@@ -9,8 +9,7 @@ import pytest
 from baselines_toy import toy_dataset
 from crafted import lying_header_npy, many_members_npz, npz_members, write_npz
 
-import handover_env.data.npz_io as npz_io
-from handover_env.data import DatasetError, HandoverDataset
+from handover_env.data import DatasetError, HandoverDataset, npz_io
 from handover_env.data.__main__ import main
 from handover_env.data.limits import MAX_ABS_COORD_M
 

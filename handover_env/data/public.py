@@ -17,6 +17,11 @@ key                shape       meaning
 A pickle can run arbitrary code when it is loaded, so :class:`SafeUnpickler` resolves only the
 globals numpy needs to rebuild arrays (``_reconstruct``, ``ndarray``, ``dtype``, ``scalar``) and
 refuses every other one *before* anything is called, with an error naming the file and the global.
+A pickle can also crash or exhaust the loader without naming any global (a deeply nested key, a
+declared 2 GiB array, a huge memo index), so before unpickling, a file is read only if it is a
+regular file within :data:`~handover_env.data.limits.MAX_PICKLE_BYTES` (links must stay inside the
+dataset folder) and its opcode stream passes :func:`~handover_env.data.pickle_scan.scan_pickle`.
+Every problem with one file is a :class:`DatasetError` naming it, so ``skip_bad`` can skip it.
 
 Mapping to :class:`~handover_env.data.dataset.Episode`:
 
