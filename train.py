@@ -250,6 +250,20 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _check_device(name: str) -> None:
+    """A torch device that exists here, or a ValueError naming it."""
+    import torch
+
+    try:
+        device = torch.device(name)
+    except (RuntimeError, ValueError) as exc:
+        raise ValueError(f"--device {name!r}: not a torch device ({exc})") from None
+    available = {"cpu": True, "cuda": torch.cuda.is_available(),
+                 "mps": getattr(torch.backends, "mps", None) is not None and torch.backends.mps.is_available()}
+    if not available.get(device.type, False):
+        raise ValueError(f"--device {name!r}: not available on this machine")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit status (2 for bad input, 130 when interrupted)."""
     args = build_parser().parse_args(argv)
@@ -257,6 +271,7 @@ def main(argv: list[str] | None = None) -> int:
 
     torch.set_num_threads(max(1, args.threads))
     try:
+        _check_device(args.device)
         args.func(args)
     except (ValueError, OSError, FloatingPointError) as exc:  # DatasetError, CheckpointError, ...
         print(f"train.py: error: {exc}", file=sys.stderr)

@@ -46,6 +46,13 @@ def check_replaceable_root(path: str | os.PathLike) -> Path:
     return p
 
 
+def new_file_mode() -> int:
+    """The mode ``open()`` would give a new file under the current umask (temporary files get 0600)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def sibling(path: Path, kind: str) -> Path:
     """A fresh hidden sibling of ``path`` for a temporary (``partial``) or outgoing (``old``) folder."""
     return path.with_name(f".{path.name}.{kind}-{os.getpid()}-{os.urandom(4).hex()}")

@@ -166,6 +166,13 @@ def test_zero_or_negative_options_are_errors_not_defaults(data_path, tmp_path, c
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("device", ["bogus", "cuda:7"] if not torch.cuda.is_available() else ["bogus"])
+def test_an_unusable_device_is_a_one_line_error(data_path, tmp_path, capsys, device):
+    assert train.main(bc(data_path, tmp_path / "run", "--device", device)) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"train.py: error: --device {device!r}: not") and "\n" not in err, err
+
+
 def test_a_tampered_state_json_is_refused(data_path, tmp_path, capsys):
     out = tmp_path / "run"
     assert train.main(bc(data_path, out)) == 0

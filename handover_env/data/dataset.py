@@ -26,6 +26,7 @@ from handover_env.data.limits import (
     MAX_TOTAL_FRAMES,
     MIN_QUAT_NORM,
 )
+from handover_env.paths import new_file_mode
 
 FORMAT_VERSION = 1
 DEFAULT_RATE_HZ = 30.0
@@ -269,7 +270,7 @@ class HandoverDataset:
                 )
                 f.flush()
                 os.fsync(f.fileno())
-            os.chmod(tmp, 0o644)
+            os.chmod(tmp, new_file_mode())
             os.replace(tmp, path)  # never leave a half-written file under the real name
         finally:
             if tmp.exists():

@@ -10,6 +10,7 @@ import numpy as np
 
 from handover_env.data.dataset import HandoverDataset
 from handover_env.data.stats import transfer_index
+from handover_env.paths import new_file_mode
 
 ID_COLOUR = "tab:blue"
 OOD_COLOUR = "tab:red"
@@ -111,7 +112,7 @@ def plot_paths(
     os.close(fd)
     try:
         fig.savefig(tmp_name, dpi=110, format=out.suffix[1:].lower())
-        os.chmod(tmp_name, 0o644)
+        os.chmod(tmp_name, new_file_mode())
         os.replace(tmp_name, out)  # the reported path is the written one, written whole
     finally:
         plt.close(fig)
