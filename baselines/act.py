@@ -590,8 +590,20 @@ class ACTAgent(GiverConditionedAgent):
             return self._train(train, val, stats, sidecar, train_ep, val_ep, total_steps, out_dir, resume,
                                progress, log)
 
-    def _train(self, train, val, stats, sidecar, train_ep, val_ep, total_steps, out_dir, resume, progress,
-               log) -> ACTAgent:
+    def _train(
+        self,
+        train: dict[str, torch.Tensor],
+        val: dict[str, torch.Tensor],
+        stats: dict,
+        sidecar: dict,
+        train_ep: np.ndarray,
+        val_ep: np.ndarray,
+        total_steps: int,
+        out_dir: str | os.PathLike | None,
+        resume: bool,
+        progress: bool,
+        log: Callable[[str], None] | None,
+    ) -> ACTAgent:
         """The optimisation loop of :meth:`fit_lerobot` (runs under :func:`reproducible`)."""
         from lerobot.policies.act.modeling_act import ACTPolicy
         from lerobot.policies.act.processor_act import make_act_pre_post_processors
