@@ -134,12 +134,14 @@ def main(argv: list[str] | None = None) -> int:
                                 act_steps=args.act_steps, bc_epochs=args.bc_epochs, horizon=args.horizon,
                                 giver_state=args.giver_state,
                                 workers=default_workers() if args.workers is None else args.workers)
+        out = Path(args.out) if args.out else Path("results") / (args.command + ("-quick" if args.quick else ""))
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out {out}: exists and is not a folder")
         dataset = load_dataset(args.data, args.quick, args.seed)
-    except (ValueError, FileNotFoundError) as exc:
+        out.mkdir(parents=True, exist_ok=True)
+    except (ValueError, OSError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
-    out = Path(args.out) if args.out else Path("results") / (args.command + ("-quick" if args.quick else ""))
-    out.mkdir(parents=True, exist_ok=True)
     progress = not args.no_progress
     n_ood = int(dataset.ood_mask.sum())
     print(f"{args.command}: {len(dataset) - n_ood} ID + {n_ood} OOD episodes ({dataset.name}), {folds} folds, "

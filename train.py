@@ -8,7 +8,10 @@
 PATH is a canonical ``.npz`` (``python -m handover_env.data convert``/``synth``), a folder of the
 public dataset's pickles, or omitted for the embedded synthetic default. The checkpoint folder
 (``--out``) holds safetensors weights plus JSON config and is loaded by ``BCMLPAgent.load(dir)`` /
-``ACTAgent.load(dir)``; ``--resume`` continues an interrupted run from it. ``--test-fold K``
+``ACTAgent.load(dir)``; ``--resume`` continues an interrupted or finished run from it (with more
+``--epochs`` / ``--steps`` to extend it). A folder that already holds a run is never silently
+overwritten: pass ``--resume`` or ``--overwrite``; a folder of other files is refused. Bad input
+gives a one-line error naming the file or option (exit status 2). ``--test-fold K``
 holds out fold K of a stratified ``--folds``-fold split (by ID/OOD) from training and reports the
 open-loop RMS on it at the end. Features: see ``baselines/features.py``.
 """
@@ -69,7 +72,7 @@ def split_test(data: HandoverDataset, folds: int, test_fold: int | None, seed: i
     if test_fold is None:
         return data, None
     if not 0 <= test_fold < folds:
-        raise SystemExit(f"--test-fold must be in [0, {folds - 1}], got {test_fold}")
+        raise ValueError(f"--test-fold must be in [0, {folds - 1}], got {test_fold}")
     train_idx, test_idx = data.stratified_kfold(folds, seed=seed)[test_fold]
     return data.subset(train_idx), data.subset(test_idx)
 
@@ -100,17 +103,24 @@ def report(name: str, agent, test: HandoverDataset | None, out: Path, t0: float,
 
 
 # ---------------------------------------------------------------------------- commands
+def _default(value, default):
+    """``value`` unless the option was not given (None); 0 is a value, not "unset"."""
+    return default if value is None else value
+
+
 def train_bc_mlp(args: argparse.Namespace) -> None:
     from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
+    from baselines.checkpoint_io import check_out_dir
 
     cfg = BCMLPConfig(
-        history=args.history, horizon=args.horizon, hidden=tuple(args.hidden), lr=args.lr or 1e-3,
-        batch_size=args.batch_size or 256, max_epochs=(3 if args.smoke else args.epochs), patience=args.patience,
+        history=args.history, horizon=args.horizon,
+        hidden=tuple(_default(args.hidden, [64, 64] if args.smoke else [256, 256, 256])),
+        lr=_default(args.lr, 1e-3), batch_size=_default(args.batch_size, 256),
+        max_epochs=_default(args.epochs, 3 if args.smoke else 50), patience=args.patience,
         val_fraction=args.val_fraction, seed=args.seed, device=args.device,
         use_giver_state=not args.no_giver_state,
     )
-    if args.smoke:
-        cfg.hidden = (64, 64)
+    check_out_dir(args.out, "bc_mlp", args.resume, args.overwrite)
     data = load_data(args.data, args.smoke, args.seed)
     train, test = split_test(data, args.folds, args.test_fold, args.seed)
     print(f"[bc-mlp] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
@@ -122,6 +132,7 @@ def train_bc_mlp(args: argparse.Namespace) -> None:
 
 def train_act(args: argparse.Namespace) -> None:
     from baselines.act import ACTAgent, ACTAgentConfig
+    from baselines.checkpoint_io import check_out_dir
 
     size = dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4) if args.smoke else {}
     for key in ("dim_model", "n_heads", "dim_feedforward", "n_encoder_layers", "n_decoder_layers"):
@@ -129,19 +140,43 @@ def train_act(args: argparse.Namespace) -> None:
             size[key] = getattr(args, key)
     cfg = ACTAgentConfig(
         history=args.history, horizon=args.horizon, paper_scale=args.paper_scale, use_vae=not args.no_vae,
-        lr=args.lr or 1e-4, batch_size=args.batch_size or (16 if args.smoke else 64),
-        steps=(20 if args.smoke else args.steps), eval_every=(10 if args.smoke else args.eval_every),
+        lr=_default(args.lr, 1e-4), batch_size=_default(args.batch_size, 16 if args.smoke else 64),
+        steps=_default(args.steps, 20 if args.smoke else 8_000),
+        eval_every=_default(args.eval_every, 10 if args.smoke else 1_000),
         val_fraction=args.val_fraction, seed=args.seed, device=args.device,
         use_giver_state=not args.no_giver_state, **size,
     )
+    check_out_dir(args.out, "act", args.resume, args.overwrite)
     data = load_data(args.data, args.smoke, args.seed)
     train, test = split_test(data, args.folds, args.test_fold, args.seed)
     print(f"[act] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
     t0 = time.perf_counter()
     export_root = Path(args.export_root) if args.export_root else Path(args.out) / "lerobot_dataset"
     agent = ACTAgent(cfg).fit(train, out_dir=args.out, export_root=export_root, resume=args.resume,
-                              progress=not args.no_progress, log=print)
+                              progress=not args.no_progress, log=print,
+                              rebuild_export=args.overwrite or args.export_root is None)
     report("act", agent, test, Path(args.out), t0, agent.train_log["best_val"])
+
+
+def _positive(kind):
+    """argparse type: a ``kind`` (int or float) > 0, with the option's value in the error."""
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a {kind.__name__}, got {text!r}") from None
+        if not value > 0 or (kind is float and value == float("inf")):
+            raise argparse.ArgumentTypeError(f"must be a positive {kind.__name__}, got {text}")
+        return value
+    parse.__name__ = f"positive {kind.__name__}"
+    return parse
+
+
+def _fraction(text: str) -> float:
+    value = _positive(float)(text)
+    if not value < 1:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -152,21 +187,29 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--data", default=None, help="a canonical .npz, a public-dataset folder, or omit for "
                         "the embedded synthetic default (1000 episodes, 10%% OOD)")
         sp.add_argument("--out", required=True, help="checkpoint folder (created; safetensors + JSON config)")
-        sp.add_argument("--resume", action="store_true", help="continue training from the state saved in --out")
+        sp.add_argument("--resume", action="store_true", help="continue training from the state saved in --out "
+                        "(a finished run is extended by a larger --epochs / --steps)")
+        sp.add_argument("--overwrite", action="store_true", help="replace the run already in --out (its "
+                        "checkpoint files only; a folder of other files is always refused), and rebuild an "
+                        "--export-root that holds other data")
         sp.add_argument("--smoke", action="store_true", help=f"tiny fast configuration for tests: "
                         f"{SMOKE_EPISODES} episodes, a few epochs/steps, a small network")
         sp.add_argument("--seed", type=int, default=0, help="seed of initialisation, sampling and splits")
         sp.add_argument("--device", default="cpu", help="torch device (default cpu)")
-        sp.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1: on a shared "
-                        "2-core machine 2 threads oversubscribe and run ~10x slower)")
-        sp.add_argument("--batch-size", type=int, default=None, help="samples per step "
+        sp.add_argument("--threads", type=_positive(int), default=1, help="torch CPU threads (default 1: on a "
+                        "shared 2-core machine 2 threads oversubscribe and run ~10x slower; ACT always trains "
+                        "on one, so that a seed gives the same weights)")
+        sp.add_argument("--batch-size", type=_positive(int), default=None, help="samples per step "
                         "(default 256 for bc-mlp, 64 for act)")
-        sp.add_argument("--lr", type=float, default=None, help="learning rate (default 1e-3 bc-mlp, 1e-4 act)")
-        sp.add_argument("--history", type=int, default=10, help="W, frames of receiver xy history (default 10)")
-        sp.add_argument("--horizon", type=int, default=30, help="H, frames of predicted giver xyz (default 30)")
-        sp.add_argument("--val-fraction", type=float, default=0.1,
+        sp.add_argument("--lr", type=_positive(float), default=None,
+                        help="learning rate (default 1e-3 bc-mlp, 1e-4 act)")
+        sp.add_argument("--history", type=_positive(int), default=10,
+                        help="W, frames of receiver xy history (default 10)")
+        sp.add_argument("--horizon", type=_positive(int), default=30,
+                        help="H, frames of predicted giver xyz (default 30)")
+        sp.add_argument("--val-fraction", type=_fraction, default=0.1,
                         help="fraction of training episodes held out for validation (default 0.1)")
-        sp.add_argument("--folds", type=int, default=10, help="number of stratified folds for --test-fold")
+        sp.add_argument("--folds", type=_positive(int), default=10, help="number of stratified folds for --test-fold")
         sp.add_argument("--test-fold", type=int, default=None, help="hold out this fold entirely and report "
                         "the open-loop RMS (mm) on it after training (default: train on all episodes)")
         sp.add_argument("--no-progress", action="store_true", help="no tqdm bars")
@@ -174,9 +217,10 @@ def build_parser() -> argparse.ArgumentParser:
     bc = sub.add_parser("bc-mlp", help="BC-MLP: torch MLP, receiver history -> 30-frame giver chunk",
                         description="Train BC-MLP with early stopping on a validation split.")
     common(bc)
-    bc.add_argument("--epochs", type=int, default=50, help="maximum epochs (default 50)")
-    bc.add_argument("--patience", type=int, default=5, help="early-stopping patience in epochs (default 5)")
-    bc.add_argument("--hidden", type=int, nargs="+", default=[256, 256, 256], help="hidden widths")
+    bc.add_argument("--epochs", type=_positive(int), default=None, help="maximum epochs (default 50; 3 with --smoke)")
+    bc.add_argument("--patience", type=_positive(int), default=5, help="early-stopping patience in epochs (default 5)")
+    bc.add_argument("--hidden", type=_positive(int), nargs="+", default=None,
+                    help="hidden widths (default 256 256 256; 64 64 with --smoke)")
     bc.add_argument("--no-giver-state", action="store_true", help="do not condition on the current giver/robot "
                     "xyz: the receiver history alone, exactly what the planner sees")
     bc.set_defaults(func=train_bc_mlp)
@@ -184,31 +228,59 @@ def build_parser() -> argparse.ArgumentParser:
     act = sub.add_parser("act", help="ACT: LeRobot's ACTPolicy, state-only, trained on a LeRobot export",
                          description="Train LeRobot's ACTPolicy on a LeRobotDataset export of the data.")
     common(act)
-    act.add_argument("--steps", type=int, default=8_000, help="optimisation steps (default 8000)")
-    act.add_argument("--eval-every", type=int, default=1_000, help="steps between validation/checkpoints")
+    act.add_argument("--steps", type=_positive(int), default=None,
+                     help="optimisation steps (default 8000; 20 with --smoke)")
+    act.add_argument("--eval-every", type=_positive(int), default=None,
+                     help="steps between validation/checkpoints (default 1000; 10 with --smoke)")
     act.add_argument("--paper-scale", action="store_true", help="ACT's default size (dim 512, 8 heads, "
                      "ffn 3200, 4 enc layers, VAE 4 layers, latent 32) instead of the CPU default "
                      "(dim 128, 4 heads, ffn 512, 2 enc / 1 dec layers, VAE 1 layer, latent 16)")
     act.add_argument("--no-vae", action="store_true", help="train without ACT's CVAE objective")
     act.add_argument("--no-giver-state", action="store_true", help="no observation.state input feature: the "
                      "receiver history alone, exactly what the planner sees")
-    act.add_argument("--dim-model", type=int, default=None, help="override the transformer width")
-    act.add_argument("--n-heads", type=int, default=None, help="override the attention heads")
-    act.add_argument("--dim-feedforward", type=int, default=None, help="override the feed-forward width")
-    act.add_argument("--n-encoder-layers", type=int, default=None, help="override the encoder depth")
-    act.add_argument("--n-decoder-layers", type=int, default=None, help="override the decoder depth")
+    act.add_argument("--dim-model", type=_positive(int), default=None, help="override the transformer width")
+    act.add_argument("--n-heads", type=_positive(int), default=None, help="override the attention heads")
+    act.add_argument("--dim-feedforward", type=_positive(int), default=None, help="override the feed-forward width")
+    act.add_argument("--n-encoder-layers", type=_positive(int), default=None, help="override the encoder depth")
+    act.add_argument("--n-decoder-layers", type=_positive(int), default=None, help="override the decoder depth")
     act.add_argument("--export-root", default=None, help="LeRobot export folder (default OUT/lerobot_dataset; "
-                     "reused if it already holds an export)")
+                     "reused only if it holds exactly this training set, else rebuilt (the default folder) "
+                     "or refused without --overwrite)")
     act.set_defaults(func=train_act)
     return p
 
 
-def main(argv: list[str] | None = None) -> None:
+def _check_device(name: str) -> None:
+    """A torch device that exists here, or a ValueError naming it."""
+    import torch
+
+    try:
+        device = torch.device(name)
+    except (RuntimeError, ValueError) as exc:
+        raise ValueError(f"--device {name!r}: not a torch device ({exc})") from None
+    available = {"cpu": True, "cuda": torch.cuda.is_available(),
+                 "mps": getattr(torch.backends, "mps", None) is not None and torch.backends.mps.is_available()}
+    if not available.get(device.type, False):
+        raise ValueError(f"--device {name!r}: not available on this machine")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI; returns the exit status (2 for bad input, 130 when interrupted)."""
     args = build_parser().parse_args(argv)
     import torch
 
     torch.set_num_threads(max(1, args.threads))
-    args.func(args)
+    try:
+        _check_device(args.device)
+        args.func(args)
+    except (ValueError, OSError, FloatingPointError) as exc:  # DatasetError, CheckpointError, ...
+        print(f"train.py: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"train.py: interrupted; the last checkpoint in {args.out} is intact (continue with --resume)",
+              file=sys.stderr)
+        return 130
+    return 0
 
 
 if __name__ == "__main__":

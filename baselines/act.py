@@ -43,20 +43,28 @@ Model sizes:
 Checkpoint folder: ``config.json`` + ``model.safetensors`` (``ACTPolicy.save_pretrained``),
 ``policy_preprocessor*.json/.safetensors`` and ``policy_postprocessor*`` (the normalisation
 statistics), ``handover_act.json`` (our config, features and training summary) and
-``training_state/`` (last weights, optimizer, RNG and step) for ``--resume``.
+``training_state/`` (last weights, optimizer, RNG and step) for ``--resume``. Each checkpoint is
+written as one unit (:func:`baselines.checkpoint_io.staged_write`). Loading validates every file
+first (:mod:`baselines.act_files`: LeRobot's processor JSON can name any importable class, so it is
+checked against an allow-list and never handed to LeRobot) and builds the policy and processors
+from our own validated config.
+
+Reproducibility: training runs under :func:`reproducible` (seeded Python, numpy and torch RNGs,
+one torch thread, ``torch.use_deterministic_algorithms``), with data order and dropout masks drawn
+from the seed and the step, so a seed gives bit-identical weights in any process
+(``tests/test_act_determinism.py``), whatever torch thread count the caller set.
 """
 
 from __future__ import annotations
 
 import contextlib
-import io
-import json
 import math
 import os
+import random
 import tempfile
 import time
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -64,9 +72,22 @@ os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from safetensors.torch import load_file, save_file  # noqa: E402
+from safetensors.torch import save_file  # noqa: E402
 
 from agents.predictive import ClosedLoopConfig  # noqa: E402
+from baselines import act_files  # noqa: E402
+from baselines.checkpoint_io import (  # noqa: E402
+    check_training_state,
+    config_from_dict,
+    expected_of,
+    load_optimizer,
+    load_tensors,
+    read_json,
+    recover,
+    save_optimizer,
+    staged_write,
+    write_json,
+)
 from baselines.features import (  # noqa: E402
     ACTION,
     ACTION_DIM,
@@ -91,6 +112,33 @@ PAPER_SCALE = dict(
     dim_model=512, n_heads=8, dim_feedforward=3200, n_encoder_layers=4, n_decoder_layers=1,
     n_vae_encoder_layers=4, latent_dim=32,
 )
+#: torch intra-op threads while ACT trains. Summation order, hence the last bits of every step,
+#: depends on the thread count; one thread makes a seed reproducible in any process (and is also
+#: the fast setting on the project's shared 2-core machine; parallelism comes from processes).
+TRAIN_THREADS = 1
+#: Config fields a resumed run may change (a longer run, another validation cadence or device).
+RESUMABLE_CHANGES = frozenset({"steps", "eval_every", "device"})
+
+
+@contextlib.contextmanager
+def reproducible(seed: int) -> Iterator[None]:
+    """Seed Python, numpy and torch, use :data:`TRAIN_THREADS` threads and deterministic algorithms.
+
+    The caller's thread count and deterministic-algorithms setting are restored on exit.
+    """
+    threads = torch.get_num_threads()
+    deterministic = torch.are_deterministic_algorithms_enabled()
+    warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+    torch.set_num_threads(TRAIN_THREADS)
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+        torch.use_deterministic_algorithms(deterministic, warn_only=warn_only)
 
 
 @dataclass
@@ -218,11 +266,9 @@ class ACTAgentConfig:
         )
 
     @classmethod
-    def from_dict(cls, d: dict) -> ACTAgentConfig:
-        unknown = sorted(set(d) - {f.name for f in fields(cls)})
-        if unknown:
-            raise CheckpointError(f"unknown ACTAgentConfig fields {unknown}")
-        return cls(**d)
+    def from_dict(cls, d: dict, source: str = "config") -> ACTAgentConfig:
+        """From a checkpoint's JSON: every field present and of its type (see ``config_from_dict``)."""
+        return config_from_dict(cls, d, source)
 
 
 # ---------------------------------------------------------------------- LeRobot data
@@ -478,16 +524,31 @@ class ACTAgent(GiverConditionedAgent):
         progress: bool = False,
         steps: int | None = None,
         log: Callable[[str], None] | None = None,
+        rebuild_export: bool = True,
     ) -> ACTAgent:
-        """Export ``dataset`` to a LeRobotDataset (``export_root`` or a temp folder) and train on it."""
-        from handover_env.data.lerobot_export import export_lerobot
+        """Export ``dataset`` to a LeRobotDataset (``export_root`` or a temp folder) and train on it.
+
+        An existing export at ``export_root`` is reused only if it holds exactly ``dataset`` (its
+        fingerprint, frames and the windows W, H). Otherwise it is rebuilt when ``rebuild_export``
+        (only a folder that is an export of ours is replaced), or a CheckpointError says why not.
+        """
+        from handover_env.data.lerobot_export import export_lerobot, export_matches
 
         spec = self.config.spec
         with contextlib.ExitStack() as stack:
             if export_root is None:
                 export_root = Path(stack.enter_context(tempfile.TemporaryDirectory())) / "lerobot"
             export_root = Path(export_root)
-            if not (export_root / "meta" / "handover.json").is_file():
+            if export_root.exists() or export_root.is_symlink():
+                why = export_matches(export_root, dataset, spec.history, spec.horizon)
+                if why is not None:
+                    if not rebuild_export:
+                        raise CheckpointError(f"{why}; pass --overwrite to rebuild it, or another --export-root")
+                    if log is not None:
+                        log(f"rebuilding the LeRobot export: {why}")
+                    export_lerobot(dataset, export_root, history=spec.history, horizon=spec.horizon,
+                                   overwrite=True, progress=progress)
+            else:
                 export_lerobot(dataset, export_root, history=spec.history, horizon=spec.horizon, progress=progress)
             return self.fit_lerobot(export_root, out_dir=out_dir, resume=resume, progress=progress,
                                     steps=steps, log=log)
@@ -518,9 +579,6 @@ class ACTAgent(GiverConditionedAgent):
                 exactly as if only they had been exported (the evaluation exports the whole dataset
                 once and trains each fold on its training episodes).
         """
-        from lerobot.policies.act.modeling_act import ACTPolicy
-        from lerobot.policies.act.processor_act import make_act_pre_post_processors
-
         cfg = self.config
         total_steps = cfg.steps if steps is None else int(steps)
         ds, sidecar = open_export(root, repo_id, cfg.spec)
@@ -528,8 +586,29 @@ class ACTAgent(GiverConditionedAgent):
         train = lerobot_samples(ds, train_ep)
         val = lerobot_samples(ds, val_ep)
         stats = feature_stats(train)
+        with reproducible(cfg.seed):
+            return self._train(train, val, stats, sidecar, train_ep, val_ep, total_steps, out_dir, resume,
+                               progress, log)
 
-        torch.manual_seed(cfg.seed)
+    def _train(
+        self,
+        train: dict[str, torch.Tensor],
+        val: dict[str, torch.Tensor],
+        stats: dict,
+        sidecar: dict,
+        train_ep: np.ndarray,
+        val_ep: np.ndarray,
+        total_steps: int,
+        out_dir: str | os.PathLike | None,
+        resume: bool,
+        progress: bool,
+        log: Callable[[str], None] | None,
+    ) -> ACTAgent:
+        """The optimisation loop of :meth:`fit_lerobot` (runs under :func:`reproducible`)."""
+        from lerobot.policies.act.modeling_act import ACTPolicy
+        from lerobot.policies.act.processor_act import make_act_pre_post_processors
+
+        cfg = self.config
         self.policy = ACTPolicy(cfg.policy_config())
         self.preprocessor, self.postprocessor = make_act_pre_post_processors(self.policy.config, stats)
         train = normalise_samples(self.preprocessor, train)  # once, not per batch: same tensors
@@ -570,6 +649,11 @@ class ACTAgent(GiverConditionedAgent):
                 self.policy.train()
                 masks.reseed(step)
                 loss, _ = self.policy.forward({k: v[idx] for k, v in train.items()})
+                if not torch.isfinite(loss):
+                    raise FloatingPointError(
+                        f"ACT training diverged at step {step + 1} (loss {float(loss)}); check the data's "
+                        f"coordinates and the learning rate"
+                    )
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 torch.nn.utils.clip_grad_norm_(self.policy.parameters(), cfg.grad_clip_norm)
@@ -673,7 +757,7 @@ class ACTAgent(GiverConditionedAgent):
         return d
 
     def _write_model(self, out: Path, weights: dict | None, state: dict | None) -> None:
-        out.mkdir(parents=True, exist_ok=True)
+        """The policy, its processors and ``handover_act.json`` into the (staging) folder ``out``."""
         current = None
         if weights is not None:
             current = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
@@ -683,103 +767,125 @@ class ACTAgent(GiverConditionedAgent):
             self.policy.load_state_dict(current)
         self.preprocessor.save_pretrained(out)
         self.postprocessor.save_pretrained(out)
-        (out / HANDOVER_JSON).write_text(json.dumps(self._handover_json(state), indent=1))
+        write_json(out / HANDOVER_JSON, self._handover_json(state))
 
     def _save_checkpoint(self, out: Path, best: dict, opt: torch.optim.Optimizer, state: dict) -> None:
-        from lerobot.optim.optimizers import save_optimizer_state
-
-        self._write_model(out, best, state)
-        ts = out / "training_state"
-        ts.mkdir(exist_ok=True)
-        save_file({k: v.contiguous() for k, v in self.policy.state_dict().items()}, ts / "last.safetensors")
-        save_file({"torch_rng": torch.get_rng_state()}, ts / "rng.safetensors")
-        save_optimizer_state(opt, ts)
-        (ts / "state.json").write_text(json.dumps(state, indent=1))
+        """One training checkpoint (best model, last weights, optimizer, RNG, state), as a unit."""
+        with staged_write(out) as stage:
+            self._write_model(stage, best, state)
+            ts = stage / "training_state"
+            ts.mkdir()
+            save_file({k: v.contiguous() for k, v in self.policy.state_dict().items()}, ts / "last.safetensors")
+            save_file({"torch_rng": torch.get_rng_state()}, ts / "rng.safetensors")
+            save_optimizer(opt, ts)
+            write_json(ts / "state.json", state)
 
     def _load_training_state(self, out: Path, opt: torch.optim.Optimizer, split: dict) -> tuple[dict, dict]:
-        from lerobot.optim.optimizers import load_optimizer_state
-
+        """Validated (state, best weights) of ``out``; loads the last weights, optimizer and RNG."""
+        recover(out)
         ts = out / "training_state"
         if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
             raise CheckpointError(f"cannot resume: no training state in {ts}")
         saved = _read_handover_json(out)["config"]
         mine = asdict(self.config)
-        diff = sorted(k for k in mine if k not in ("steps", "eval_every", "device") and saved.get(k) != mine[k])
+        diff = sorted(k for k in mine if k not in RESUMABLE_CHANGES and saved.get(k) != mine[k])
         if diff:
             raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
-        state = json.loads((ts / "state.json").read_text())
+        state = _check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
         if state["split"] != split:
             raise CheckpointError(f"cannot resume from {out}: it was trained on a different dataset/split")
-        self.policy.load_state_dict(load_file(ts / "last.safetensors"))
-        load_optimizer_state(opt, ts)
-        torch.set_rng_state(load_file(ts / "rng.safetensors")["torch_rng"])
-        best = load_file(out / "model.safetensors")
-        return state, {k: best.get(k, v) for k, v in self.policy.state_dict().items()}
+        expected = expected_of(self.policy.state_dict())
+        self.policy.load_state_dict(load_tensors(ts / "last.safetensors", expected))
+        load_optimizer(opt, ts)
+        rng = load_tensors(ts / "rng.safetensors", {"torch_rng": (tuple(torch.get_rng_state().shape), torch.uint8)})
+        try:
+            torch.set_rng_state(rng["torch_rng"])
+        except (RuntimeError, ValueError) as exc:
+            raise CheckpointError(f"{ts / 'rng.safetensors'}: not a torch RNG state ({exc})") from None
+        best = load_tensors(out / "model.safetensors", expected)
+        return state, best
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the policy (``config.json``, ``model.safetensors``), processors and ``handover_act.json``."""
+        """Write the policy (``config.json``, ``model.safetensors``), processors and ``handover_act.json``, as a unit."""
         self._require_fitted()
-        self._write_model(Path(path), None, self.train_log)
+        with staged_write(path) as stage:
+            self._write_model(stage, None, self.train_log)
         return Path(path)
 
     @classmethod
     def load(cls, path: str | os.PathLike, device: str = "cpu", **closed_loop_kwargs) -> ACTAgent:
         """Load a checkpoint written by :meth:`save` or ``train.py act`` (local files only).
 
+        Every file is validated before it is used (:mod:`baselines.act_files`); LeRobot never
+        parses the checkpoint's JSON: the policy and the processors are built from our validated
+        config and only their tensors are loaded. Any problem raises
+        :class:`~baselines.features.CheckpointError` naming the file (and the processor step).
         ``closed_loop_kwargs`` (params, closed_loop, layout) go to ``PredictiveAgent``.
         """
         from lerobot.policies.act.modeling_act import ACTPolicy
-        from lerobot.processor import PolicyProcessorPipeline
-        from lerobot.processor.converters import (
-            batch_to_transition,
-            policy_action_to_transition,
-            transition_to_batch,
-            transition_to_policy_action,
-        )
+        from lerobot.policies.act.processor_act import make_act_pre_post_processors
 
         path = Path(path)
+        try:
+            recover(path)
+        except OSError as exc:
+            raise CheckpointError(f"{path}: cannot finish an interrupted checkpoint write ({exc})") from None
         saved = _read_handover_json(path)
-        cfg = ACTAgentConfig.from_dict({**saved["config"], "device": device})
-        for name in ("config.json", "model.safetensors", "policy_preprocessor.json", "policy_postprocessor.json"):
+        trained = ACTAgentConfig.from_dict(saved["config"], str(path / HANDOVER_JSON))
+        cfg = ACTAgentConfig.from_dict({**saved["config"], "device": device}, str(path / HANDOVER_JSON))
+        for name in ("config.json", "model.safetensors", act_files.PREPROCESSOR_JSON, act_files.POSTPROCESSOR_JSON):
             if not (path / name).is_file():
                 raise CheckpointError(f"{path}: missing {name} (incomplete ACT checkpoint)")
+        act_files.validate_config_json(path, trained.policy_config())
+        saved_pre, saved_post = make_act_pre_post_processors(trained.policy_config(), None)
+        pre_state = act_files.validate_processor_json(
+            path, act_files.PREPROCESSOR_JSON, saved_pre, act_files.PREPROCESSOR_STEPS)
+        post_state = act_files.validate_processor_json(
+            path, act_files.POSTPROCESSOR_JSON, saved_post, act_files.POSTPROCESSOR_STEPS)
+        shapes = {OBS_ENV_STATE: (cfg.spec.env_dim,), OBS_STATE: (STATE_DIM,), ACTION: (ACTION_DIM,)}
+        stats = {i: act_files.load_stats(f, shapes) for i, f in {**pre_state, **post_state}.items()}
+        pre_stats, post_stats = stats[3], stats[0]  # the normaliser and unnormaliser steps
         agent = cls.__new__(cls)
         GiverConditionedAgent.__init__(agent, **closed_loop_kwargs)
         agent.config, agent.horizon, agent._giver_now = cfg, cfg.horizon, None
+        with torch.random.fork_rng(devices=[]):  # the initial weights are overwritten: leave the caller's RNG be
+            policy = ACTPolicy(cfg.policy_config())
+        policy.load_state_dict(load_tensors(path / "model.safetensors", expected_of(policy.state_dict())))
+        agent.policy = policy.to(device)
+        agent.preprocessor, agent.postprocessor = make_act_pre_post_processors(policy.config, None)
         try:
-            with contextlib.redirect_stdout(io.StringIO()):
-                agent.policy = ACTPolicy.from_pretrained(path, local_files_only=True, strict=True)
-            agent.preprocessor = PolicyProcessorPipeline.from_pretrained(
-                path, config_filename="policy_preprocessor.json",
-                to_transition=batch_to_transition, to_output=transition_to_batch,
-            )
-            agent.postprocessor = PolicyProcessorPipeline.from_pretrained(
-                path, config_filename="policy_postprocessor.json",
-                to_transition=policy_action_to_transition, to_output=transition_to_policy_action,
-            )
-        except Exception as exc:  # draccus / safetensors / shape mismatch
-            raise CheckpointError(f"{path}: cannot load the ACT policy ({type(exc).__name__}: {exc})") from exc
-        pc = agent.policy.config
-        if pc.chunk_size != cfg.horizon or pc.env_state_feature.shape != (cfg.spec.env_dim,):
-            raise CheckpointError(f"{path}: config.json (chunk {pc.chunk_size}) disagrees with {HANDOVER_JSON}")
+            agent.preprocessor.steps[3].load_state_dict(pre_stats)
+            agent.postprocessor.steps[0].load_state_dict(post_stats)
+        except (KeyError, RuntimeError, ValueError, TypeError) as exc:
+            raise CheckpointError(f"{path}: normalisation statistics do not fit ({exc})") from None
         agent.policy.eval()
         agent.fitted = True
         agent.train_log = saved.get("training", {})
         return agent
 
 
+def _check_state(state: object, source: Path) -> dict:
+    """An ACT ``state.json`` whose fields have their types and agree with each other, or CheckpointError."""
+    return check_training_state(state, source, "step", "best_step", {})
+
+
 def _read_handover_json(path: Path) -> dict:
+    """``handover_act.json``, validated: type, format, a complete config and matching features."""
     if not path.is_dir():
         raise CheckpointError(f"no ACT checkpoint folder at {path}")
     f = path / HANDOVER_JSON
     if not f.is_file():
         raise CheckpointError(f"{path}: missing {HANDOVER_JSON} (not an ACT checkpoint of this project)")
-    try:
-        saved = json.loads(f.read_text())
-    except json.JSONDecodeError as exc:
-        raise CheckpointError(f"{f}: not valid JSON ({exc})") from exc
+    saved = read_json(f, HANDOVER_JSON)
+    if not isinstance(saved, dict):
+        raise CheckpointError(f"{f}: expected a JSON object")
     if saved.get("type") != CHECKPOINT_TYPE:
         raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {CHECKPOINT_TYPE!r}")
     if saved.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(f"{path}: checkpoint format {saved.get('format')}, this code reads {CHECKPOINT_FORMAT}")
+    cfg = config_from_dict(ACTAgentConfig, saved.get("config"), str(f))
+    if saved.get("features") != cfg.spec.to_dict():
+        raise CheckpointError(f"{f}: features {saved.get('features')!r} disagree with its config")
+    if not isinstance(saved.get("training", {}), dict):
+        raise CheckpointError(f"{f}: training must be a JSON object")
     return saved

@@ -15,6 +15,11 @@ Checkpoint folder (``save``/``load``):
 * ``training_state/``    -- last weights, optimizer state (LeRobot's safetensors format) and
   ``state.json`` (epoch, best validation loss, patience counter, loss curves, split) for resuming
 
+Every checkpoint is written as one unit (:func:`baselines.checkpoint_io.staged_write`), and
+:meth:`BCMLPAgent.load` / ``--resume`` validate every file before using it: all config fields
+present and of their JSON type, weights of the model's shapes and dtypes, finite, positive
+normalisation scales, a ``state.json`` consistent with its loss curves.
+
 In an env (``reset``/``act``) it is a :class:`agents.predictive.PredictiveAgent`, exactly like the
 planner: one chunk per new camera frame, ACT-style temporal ensembling, the target at t_f of Theta,
 the same ready pose and yaw rule. The giver state it conditions on is the robot's ``ee_pos``.
@@ -22,20 +27,31 @@ the same ready pose and yaw rule. The giver state it conditions on is the robot'
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import save_file
 from torch import nn
 
 from agents.predictive import ClosedLoopConfig
+from baselines.checkpoint_io import (
+    check_training_state,
+    config_from_dict,
+    expected_of,
+    load_optimizer,
+    load_tensors,
+    read_json,
+    recover,
+    save_optimizer,
+    staged_write,
+    write_json,
+)
 from baselines.features import (
     CheckpointError,
     FeatureSpec,
@@ -50,6 +66,9 @@ from handover_env.envs.observation import ObsLayout
 
 CHECKPOINT_TYPE = "bc_mlp"
 CHECKPOINT_FORMAT = 1
+#: Config fields a resumed run may change: it can be extended (more epochs, more patience) or
+#: moved to another device; everything else must match the checkpoint.
+RESUMABLE_CHANGES = frozenset({"max_epochs", "patience", "device"})
 
 
 @dataclass
@@ -108,12 +127,9 @@ class BCMLPConfig:
         return FeatureSpec(history=self.history, horizon=self.horizon)
 
     @classmethod
-    def from_dict(cls, d: dict) -> BCMLPConfig:
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise CheckpointError(f"unknown BCMLPConfig fields {unknown}")
-        return cls(**d)
+    def from_dict(cls, d: dict, source: str = "config") -> BCMLPConfig:
+        """From a checkpoint's JSON: every field present and of its type (see ``config_from_dict``)."""
+        return config_from_dict(cls, d, source)
 
 
 class BCMLPNet(nn.Module):
@@ -304,6 +320,11 @@ class BCMLPAgent(GiverConditionedAgent):
                 bar.close()
             train_loss = running / max(1, math.ceil(n / cfg.batch_size))
             val_loss = _eval_loss(self.net, va)
+            if not (math.isfinite(train_loss) and math.isfinite(val_loss)):
+                raise FloatingPointError(
+                    f"BC-MLP training diverged at epoch {epoch + 1} (train loss {train_loss}, validation "
+                    f"loss {val_loss}); check the data's coordinates and the learning rate"
+                )
             state["epoch"] = epoch + 1
             state["train_loss"].append(train_loss)
             state["val_loss"].append(val_loss)
@@ -354,16 +375,15 @@ class BCMLPAgent(GiverConditionedAgent):
 
     # ------------------------------------------------------------------ checkpoints
     def _save(self, out: Path, best: dict, opt: torch.optim.Optimizer, state: dict) -> None:
-        from lerobot.optim.optimizers import save_optimizer_state
-
-        out.mkdir(parents=True, exist_ok=True)
-        ts = out / "training_state"
-        ts.mkdir(exist_ok=True)
-        save_file({k: v.contiguous().cpu() for k, v in best.items()}, out / "model.safetensors")
-        save_file({k: v.contiguous().cpu() for k, v in self.net.state_dict().items()}, ts / "last.safetensors")
-        save_optimizer_state(opt, ts)
-        (ts / "state.json").write_text(json.dumps(state, indent=1))
-        (out / "config.json").write_text(json.dumps(self._config_json(state), indent=1))
+        """One training checkpoint, written as a unit (best weights, last weights, optimizer, state)."""
+        with staged_write(out) as stage:
+            ts = stage / "training_state"
+            ts.mkdir()
+            save_file({k: v.contiguous().cpu() for k, v in best.items()}, stage / "model.safetensors")
+            save_file({k: v.contiguous().cpu() for k, v in self.net.state_dict().items()}, ts / "last.safetensors")
+            save_optimizer(opt, ts)
+            write_json(ts / "state.json", state)
+            write_json(stage / "config.json", self._config_json(state))
 
     def _config_json(self, state: dict | None = None) -> dict:
         d = {
@@ -377,52 +397,74 @@ class BCMLPAgent(GiverConditionedAgent):
         return d
 
     def _load_training_state(self, out: Path, opt: torch.optim.Optimizer, split: dict) -> tuple[dict, dict]:
-        from lerobot.optim.optimizers import load_optimizer_state
-
+        """Validated (state, best weights) of ``out``; loads the last weights and the optimizer."""
+        recover(out)
         ts = out / "training_state"
         if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
             raise CheckpointError(f"cannot resume: no training state in {ts}")
         saved = _read_config(out)
-        if saved["config"] != {**asdict(self.config), "hidden": list(self.config.hidden)}:
-            diff = sorted(k for k, v in saved["config"].items() if asdict(self.config).get(k) != v and k != "hidden")
-            raise CheckpointError(f"cannot resume from {out}: its config differs in {diff or ['hidden']}")
-        state = json.loads((ts / "state.json").read_text())
+        mine = {**asdict(self.config), "hidden": list(self.config.hidden)}
+        theirs = saved["config"]
+        diff = sorted(k for k in mine if k not in RESUMABLE_CHANGES and theirs.get(k) != mine[k])
+        if diff:
+            raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
+        state = _check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
         if state["split"] != split:
             raise CheckpointError(f"cannot resume from {out}: it was trained on a different dataset/split")
-        self.net.load_state_dict(load_file(ts / "last.safetensors"))
-        load_optimizer_state(opt, ts)
-        return state, load_file(out / "model.safetensors")
+        expected = expected_of(self.net.state_dict())
+        self.net.load_state_dict(load_tensors(ts / "last.safetensors", expected))
+        best = load_tensors(out / "model.safetensors", expected)
+        _check_scales(best, out / "model.safetensors")
+        load_optimizer(opt, ts)
+        return state, best
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write ``config.json`` + ``model.safetensors`` (weights and normalisation) to ``path``."""
+        """Write ``config.json`` + ``model.safetensors`` (weights and normalisation) to ``path``, as a unit."""
         self._require_fitted()
         out = Path(path)
-        out.mkdir(parents=True, exist_ok=True)
-        save_file({k: v.contiguous().cpu() for k, v in self.net.state_dict().items()}, out / "model.safetensors")
-        (out / "config.json").write_text(json.dumps(self._config_json(self.train_log), indent=1))
+        with staged_write(out) as stage:
+            save_file({k: v.contiguous().cpu() for k, v in self.net.state_dict().items()},
+                      stage / "model.safetensors")
+            write_json(stage / "config.json", self._config_json(self.train_log))
         return out
 
     @classmethod
     def load(cls, path: str | os.PathLike, device: str = "cpu", **closed_loop_kwargs) -> BCMLPAgent:
         """Load a checkpoint written by :meth:`save` or by ``train.py bc-mlp``.
 
-        ``closed_loop_kwargs`` (params, closed_loop, layout) go to the constructor.
+        Every file is validated first (see the module docstring); any problem raises
+        :class:`~baselines.features.CheckpointError` naming the file. ``closed_loop_kwargs``
+        (params, closed_loop, layout) go to the constructor.
         """
         path = Path(path)
+        try:
+            recover(path)
+        except OSError as exc:
+            raise CheckpointError(f"{path}: cannot finish an interrupted checkpoint write ({exc})") from None
         saved = _read_config(path)
-        cfg = BCMLPConfig.from_dict({**saved["config"], "device": device})
+        cfg = BCMLPConfig.from_dict({**saved["config"], "device": device}, str(path / "config.json"))
         agent = cls(cfg, **closed_loop_kwargs)
         weights = path / "model.safetensors"
-        if not weights.is_file():
-            raise CheckpointError(f"{path}: missing model.safetensors")
-        try:
-            agent.net.load_state_dict(load_file(weights))
-        except RuntimeError as exc:
-            raise CheckpointError(f"{weights} does not match its config.json: {exc}") from exc
+        tensors = load_tensors(weights, expected_of(agent.net.state_dict()))
+        _check_scales(tensors, weights)
+        agent.net.load_state_dict(tensors)
         agent.net.to(device).eval()
         agent.fitted = True
         agent.train_log = saved.get("training", {})
         return agent
+
+
+def _check_scales(tensors: dict[str, torch.Tensor], source: Path) -> None:
+    """The normalisation scales must be positive (a zero std turns every prediction into NaN)."""
+    for key in ("in_std", "out_std"):
+        if key in tensors and not bool((tensors[key] > 0).all()):
+            raise CheckpointError(f"{source}: {key} has a zero or negative entry")
+
+
+def _check_state(state: object, source: Path) -> dict:
+    """A ``state.json`` whose fields have their types and agree with each other, or CheckpointError."""
+    return check_training_state(state, source, "epoch", "best_epoch",
+                                {"bad_epochs": int, "stopped_early": bool})
 
 
 def _read_config(path: Path) -> dict:
@@ -431,14 +473,20 @@ def _read_config(path: Path) -> dict:
     cfg_file = path / "config.json"
     if not cfg_file.is_file():
         raise CheckpointError(f"{path}: missing config.json (not a BC-MLP checkpoint)")
-    try:
-        saved = json.loads(cfg_file.read_text())
-    except json.JSONDecodeError as exc:
-        raise CheckpointError(f"{cfg_file}: not valid JSON ({exc})") from exc
+    saved = read_json(cfg_file, "config.json")
+    if not isinstance(saved, dict):
+        raise CheckpointError(f"{cfg_file}: expected a JSON object")
     if saved.get("type") != CHECKPOINT_TYPE:
         raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {CHECKPOINT_TYPE!r}")
     if saved.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(f"{path}: checkpoint format {saved.get('format')}, this code reads {CHECKPOINT_FORMAT}")
+    if not isinstance(saved.get("config"), dict):
+        raise CheckpointError(f"{cfg_file}: no config object")
+    cfg = config_from_dict(BCMLPConfig, saved["config"], str(cfg_file))
+    if saved.get("features") != cfg.spec.to_dict():
+        raise CheckpointError(f"{cfg_file}: features {saved.get('features')!r} disagree with its config")
+    if not isinstance(saved.get("training", {}), dict):
+        raise CheckpointError(f"{cfg_file}: training must be a JSON object")
     return saved
 
 

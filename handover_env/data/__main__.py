@@ -67,9 +67,19 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_npz_output(out: str) -> None:
+    """Refuse an output that cannot become a dataset file, before any work is done."""
+    path = Path(out)
+    if path.suffix != ".npz":
+        raise ValueError(f"{out}: dataset files end in .npz")
+    if path.is_dir() or (path.exists() and not path.is_file()):
+        raise DatasetError(f"{out}: exists and is not a file (a folder?); choose a file name")
+
+
 def cmd_convert(args: argparse.Namespace) -> int:
     from handover_env.data.public import LoadReport, load_public_dataset
 
+    _check_npz_output(args.out)
     start = time.perf_counter()
     report = LoadReport()
     dataset = load_public_dataset(
@@ -89,6 +99,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 def cmd_synth(args: argparse.Namespace) -> int:
     from handover_env.data.synthetic import generate_synthetic
 
+    _check_npz_output(args.out)
     start = time.perf_counter()
     dataset = generate_synthetic(args.n, args.ood_fraction, args.seed, progress=True)
     out = dataset.save(args.out)
@@ -103,14 +114,32 @@ def cmd_compare(args: argparse.Namespace) -> int:
     a, b = _load(args.a), _load(args.b)
     sa, sb = episode_statistics(a), episode_statistics(b)
     print(f"A: {_header(a)}\n\nB: {_header(b)}\n")
+    compared = 0
     for subset in args.subset:
         print(f"[{subset} episodes]")
+        empty = [label for label, s in (("A", sa), ("B", sb)) if not _count(s, subset)]
+        if empty:
+            print(f"nothing to compare: {' and '.join(empty)} {'has' if len(empty) == 1 else 'have'} "
+                  f"no {subset.upper()} episodes\n")
+            continue
         print(format_comparison(compare_statistics(sa, sb, subset), "A", "B"))
         print()
+        compared += 1
+    if not compared:
+        raise DatasetError(f"no subset of {args.subset} has episodes on both sides")
     return 0
 
 
+def _count(stats: dict, subset: str) -> int:
+    """Episodes of ``subset`` ("all", "id" or "ood") in per-episode statistics."""
+    ood = stats["is_ood"]
+    return int(ood.size if subset == "all" else (ood.sum() if subset == "ood" else (~ood).sum()))
+
+
 def cmd_export_lerobot(args: argparse.Namespace) -> int:
+    from handover_env.paths import check_replaceable_root
+
+    check_replaceable_root(args.root)  # before loading anything: "", ".", "/", home are refused
     try:
         from handover_env.data.lerobot_export import export_lerobot
     except ImportError as exc:
@@ -136,8 +165,9 @@ def cmd_export_lerobot(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from handover_env.data.plot import plot_paths
+    from handover_env.data.plot import check_figure_path, plot_paths
 
+    check_figure_path(args.out)
     dataset = _load(args.dataset)
     out = plot_paths(dataset, args.out, max_episodes=args.max_episodes, seed=args.seed)
     print(f"wrote {out}")
@@ -270,7 +300,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=30,
         help="frames of future giver positions (default 30)",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace an existing ROOT")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing ROOT, only if it holds an "
+                   "earlier export (its meta/handover.json); any other folder is refused")
     p.set_defaults(func=cmd_export_lerobot)
 
     p = sub.add_parser(
@@ -280,7 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
         "seen from above, ID blue and OOD red, and the object height over time.",
     )
     p.add_argument("dataset", help=dataset_help)
-    p.add_argument("out", help="output .png")
+    p.add_argument("out", help="output image (.png, .pdf or .svg), not a folder")
     p.add_argument(
         "--max-episodes",
         type=_positive_int,
@@ -332,8 +363,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args))
-    except (DatasetError, FileNotFoundError, FileExistsError, ValueError) as exc:
+    except (DatasetError, OSError, ValueError) as exc:  # one line, naming the file
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except MemoryError as exc:  # the loaders bound every allocation; this is a last resort
+        print(f"error: out of memory ({exc or 'MemoryError'}) running {args.command}", file=sys.stderr)
         return 2
 
 

@@ -9,12 +9,24 @@ that is read back with ``allow_pickle=False`` (nothing in the file can execute).
 
 from __future__ import annotations
 
+import hashlib
 import os
+import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from handover_env.data.limits import (
+    MAX_ABS_COORD_M,
+    MAX_EPISODES,
+    MAX_FRAMES,
+    MAX_ID_CHARS,
+    MAX_TOTAL_FRAMES,
+    MIN_QUAT_NORM,
+)
+from handover_env.paths import new_file_mode
 
 FORMAT_VERSION = 1
 DEFAULT_RATE_HZ = 30.0
@@ -25,6 +37,8 @@ _ARRAY_FIELDS: dict[str, int] = {
     "giver_xyz": 3,
     "object_quat": 4,
 }
+#: The position fields, bounded to +-MAX_ABS_COORD_M (metres).
+_POSITION_FIELDS = ("receiver_xy", "receiver_hand_xyz", "giver_xyz")
 
 
 class DatasetError(ValueError):
@@ -61,6 +75,19 @@ class Episode:
                 )
             if not np.all(np.isfinite(arr)):
                 raise DatasetError(f"episode {self.source_id!r}: {name} contains NaN or inf")
+            if name in _POSITION_FIELDS and arr.size and np.abs(arr).max() > MAX_ABS_COORD_M:
+                raise DatasetError(
+                    f"episode {self.source_id!r}: {name} reaches {np.abs(arr).max():.3g} m, outside "
+                    f"the +-{MAX_ABS_COORD_M:g} m a recorded position may have"
+                )
+            if name == "object_quat" and arr.size:
+                norms = np.linalg.norm(arr, axis=1)
+                if norms.min() < MIN_QUAT_NORM or norms.max() > 1.0 / MIN_QUAT_NORM:
+                    frame = int(np.argmin(norms) if norms.min() < MIN_QUAT_NORM else np.argmax(norms))
+                    raise DatasetError(
+                        f"episode {self.source_id!r}: object_quat has a zero-norm (or huge) "
+                        f"quaternion at frame {frame}"
+                    )
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
             lengths.add(arr.shape[0])
@@ -68,6 +95,12 @@ class Episode:
             raise DatasetError(f"episode {self.source_id!r}: arrays disagree in length: {sorted(lengths)}")
         if next(iter(lengths)) < 2:
             raise DatasetError(f"episode {self.source_id!r}: needs at least 2 frames")
+        if next(iter(lengths)) > MAX_FRAMES:
+            raise DatasetError(f"episode {self.source_id!r}: more than {MAX_FRAMES:,} frames")
+        if not isinstance(self.is_ood, (bool, np.bool_)):
+            raise DatasetError(
+                f"episode {self.source_id!r}: is_ood must be a bool, got {type(self.is_ood).__name__}"
+            )
         object.__setattr__(self, "is_ood", bool(self.is_ood))
         object.__setattr__(self, "source_id", str(self.source_id))
 
@@ -130,6 +163,23 @@ class HandoverDataset:
         """Seconds between frames."""
         return 1.0 / self.rate_hz
 
+    def fingerprint(self) -> str:
+        """A hash of everything the episodes hold (ids, flags, every array) and the rate.
+
+        Two datasets with the same fingerprint hold the same demonstrations in the same order;
+        the LeRobot export records it to tell whether an existing export matches.
+        """
+        h = hashlib.sha256()
+        h.update(repr(float(self.rate_hz)).encode())
+        for ep in self.episodes:
+            h.update(ep.source_id.encode("utf-8", "surrogatepass") + b"\0")
+            h.update(b"\1" if ep.is_ood else b"\0")
+            for name in _ARRAY_FIELDS:
+                arr = np.ascontiguousarray(getattr(ep, name), dtype=np.float64)
+                h.update(str(arr.shape).encode())
+                h.update(arr.tobytes())
+        return h.hexdigest()[:32]
+
     def subset(self, indices: Sequence[int] | np.ndarray) -> HandoverDataset:
         """A new dataset holding the episodes at ``indices`` (in that order)."""
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
@@ -169,62 +219,119 @@ class HandoverDataset:
 
     # ----------------------------------------------------------------- persistence
     def save(self, path: str | os.PathLike) -> Path:
-        """Write one compressed ``.npz`` (format version :data:`FORMAT_VERSION`); returns the path."""
+        """Write one compressed ``.npz`` (format version :data:`FORMAT_VERSION`); returns the path.
+
+        The file is written under a temporary name beside ``path`` and renamed into place, so
+        ``path`` is either the old file or the complete new one; the temporary file is removed
+        on any error.
+
+        Raises:
+            ValueError: ``path`` does not end in ``.npz``.
+            DatasetError: the dataset is empty, or ``path`` exists and is not a regular file.
+        """
         path = Path(path)
         if path.suffix != ".npz":
             raise ValueError(f"dataset files end in .npz, got {path}")
         if not self.episodes:
             raise DatasetError("refusing to save an empty dataset")
+        if path.is_dir() or (path.exists() and not path.is_file()):
+            raise DatasetError(f"{path}: exists and is not a file (a folder?); choose a file name")
         lengths = self.lengths
         arrays = {name: np.concatenate([getattr(ep, name) for ep in self.episodes]) for name in _ARRAY_FIELDS}
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(
-            tmp,
-            format_version=np.array(FORMAT_VERSION, dtype=np.int64),
-            rate_hz=np.array(self.rate_hz, dtype=np.float64),
-            name=np.array(self.name),
-            lengths=lengths,
-            is_ood=self.ood_mask,
-            source_id=np.array([ep.source_id for ep in self.episodes]),
-            **arrays,
-        )
-        os.replace(tmp, path)  # never leave a half-written file under the real name
+        fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        tmp = Path(tmp_name)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.savez_compressed(
+                    f,
+                    format_version=np.array(FORMAT_VERSION, dtype=np.int64),
+                    rate_hz=np.array(self.rate_hz, dtype=np.float64),
+                    name=np.array(self.name),
+                    lengths=lengths,
+                    is_ood=self.ood_mask,
+                    source_id=np.array([ep.source_id for ep in self.episodes]),
+                    **arrays,
+                )
+                f.flush()
+                os.fsync(f.fileno())
+            os.chmod(tmp, new_file_mode())
+            os.replace(tmp, path)  # never leave a half-written file under the real name
+        finally:
+            if tmp.exists():
+                tmp.unlink()
         return path
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> HandoverDataset:
         """Read a file written by :meth:`save`, validating every array.
 
+        Only the members :meth:`save` writes are read, each bounded before it is decompressed
+        (:mod:`handover_env.data.npz_io`); every scalar must have its exact dtype and shape
+        (``format_version`` an integer equal to :data:`FORMAT_VERSION`, ``rate_hz`` a float,
+        ``is_ood`` booleans, ``source_id`` strings), and every episode passes :class:`Episode`'s
+        checks (finite, positions within +-:data:`~handover_env.data.limits.MAX_ABS_COORD_M` m,
+        non-zero quaternions).
+
         Raises:
             FileNotFoundError: the path does not exist.
             DatasetError: the file is not a valid dataset; the message names the file and the problem.
         """
+        from handover_env.data.npz_io import read_npz_members
+
         path = Path(path)
-        if not path.is_file():
+        if not path.exists():
             raise FileNotFoundError(f"no dataset file at {path}")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                content = {key: z[key] for key in z.files}
-        except Exception as exc:  # zipfile/ValueError/EOFError on a corrupt or non-npz file
-            raise DatasetError(f"{path}: not a readable .npz dataset ({exc})") from exc
         required = {"format_version", "rate_hz", "lengths", "is_ood", "source_id", *_ARRAY_FIELDS}
-        missing = sorted(required - content.keys())
-        if missing:
-            raise DatasetError(f"{path}: missing keys {missing}")
-        version = int(content["format_version"])
-        if version != FORMAT_VERSION:
-            raise DatasetError(f"{path}: format version {version}, this code reads {FORMAT_VERSION}")
-        lengths = content["lengths"].astype(np.int64)
+        content = read_npz_members(path, required, optional={"name"})
+
+        def scalar(key: str, kinds: str) -> np.ndarray:
+            value = content[key]
+            if value.shape != () or value.dtype.kind not in kinds:
+                raise DatasetError(
+                    f"{path}: {key} must be a single {'integer' if kinds == 'iu' else 'number'}, "
+                    f"got dtype {value.dtype} shape {value.shape}"
+                )
+            return value
+
+        version = scalar("format_version", "iu")
+        if int(version) != FORMAT_VERSION:
+            raise DatasetError(f"{path}: format version {int(version)}, this code reads {FORMAT_VERSION}")
+        rate = float(scalar("rate_hz", "iuf"))
+        lengths = content["lengths"]
+        if lengths.ndim != 1 or lengths.dtype.kind not in "iu":
+            raise DatasetError(f"{path}: lengths must be a 1-D integer array, got {lengths.dtype} {lengths.shape}")
         n = lengths.size
-        if lengths.ndim != 1 or np.any(lengths < 2):
-            raise DatasetError(f"{path}: invalid episode lengths")
-        if content["is_ood"].shape != (n,) or content["source_id"].shape != (n,):
-            raise DatasetError(f"{path}: is_ood/source_id do not match {n} episodes")
+        if n == 0:
+            raise DatasetError(f"{path}: holds no episodes")
+        if n > MAX_EPISODES:
+            raise DatasetError(f"{path}: {n:,} episodes (at most {MAX_EPISODES:,})")
+        lengths = lengths.astype(np.int64)
+        if lengths.min() < 2 or lengths.max() > MAX_FRAMES:
+            raise DatasetError(f"{path}: invalid episode lengths (each must be 2 .. {MAX_FRAMES:,} frames)")
         total = int(lengths.sum())
+        if total > MAX_TOTAL_FRAMES:
+            raise DatasetError(f"{path}: {total:,} frames (at most {MAX_TOTAL_FRAMES:,})")
+        is_ood, source_id = content["is_ood"], content["source_id"]
+        if is_ood.shape != (n,) or is_ood.dtype != np.bool_:
+            raise DatasetError(f"{path}: is_ood must be {n} booleans, got dtype {is_ood.dtype} shape {is_ood.shape}")
+        if source_id.shape != (n,) or source_id.dtype.kind != "U" or source_id.dtype.itemsize > 4 * MAX_ID_CHARS:
+            raise DatasetError(
+                f"{path}: source_id must be {n} strings of at most {MAX_ID_CHARS} characters, "
+                f"got dtype {source_id.dtype} shape {source_id.shape}"
+            )
         for name, width in _ARRAY_FIELDS.items():
-            if content[name].shape != (total, width):
-                raise DatasetError(f"{path}: {name} has shape {content[name].shape}, expected {(total, width)}")
+            arr = content[name]
+            if arr.shape != (total, width) or arr.dtype.kind != "f":
+                raise DatasetError(
+                    f"{path}: {name} has dtype {arr.dtype} shape {arr.shape}, expected floats {(total, width)}"
+                )
+        name = ""
+        if "name" in content:
+            value = content["name"]
+            if value.shape != () or value.dtype.kind != "U":
+                raise DatasetError(f"{path}: name must be one string, got dtype {value.dtype} shape {value.shape}")
+            name = str(value)
         bounds = np.concatenate([[0], np.cumsum(lengths)])
         episodes = []
         for i in range(n):
@@ -232,15 +339,17 @@ class HandoverDataset:
             try:
                 episodes.append(
                     Episode(
-                        **{name: content[name][sl] for name in _ARRAY_FIELDS},
-                        is_ood=bool(content["is_ood"][i]),
-                        source_id=str(content["source_id"][i]),
+                        **{field_: content[field_][sl] for field_ in _ARRAY_FIELDS},
+                        is_ood=bool(is_ood[i]),
+                        source_id=str(source_id[i]),
                     )
                 )
             except DatasetError as exc:
                 raise DatasetError(f"{path}: {exc}") from exc
-        name = str(content["name"]) if "name" in content else ""
-        return cls(episodes, rate_hz=float(content["rate_hz"]), name=name)
+        try:
+            return cls(episodes, rate_hz=rate, name=name)
+        except DatasetError as exc:
+            raise DatasetError(f"{path}: {exc}") from exc
 
 
 def stratified_fold_ids(ood_mask: np.ndarray, k: int, seed: int = 0) -> np.ndarray:

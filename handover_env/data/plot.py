@@ -3,15 +3,33 @@
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from handover_env.data.dataset import HandoverDataset
 from handover_env.data.stats import transfer_index
+from handover_env.paths import new_file_mode
 
 ID_COLOUR = "tab:blue"
 OOD_COLOUR = "tab:red"
+#: Image formats ``plot`` writes, chosen by the output's suffix.
+FORMATS = (".png", ".pdf", ".svg")
+
+
+def check_figure_path(out: str | os.PathLike) -> Path:
+    """``out`` as a Path, or a ValueError naming it: it must end in a known image suffix and
+    must not be a folder (matplotlib would otherwise write ``<out>.png`` beside it)."""
+    text = os.fspath(out)
+    path = Path(text)
+    if not text or path.is_dir() or text.endswith(os.sep):
+        raise ValueError(f"{text!r}: is a folder; give the output image's file name, e.g. paths.png")
+    if path.suffix.lower() not in FORMATS:
+        raise ValueError(f"{path}: the output must end in one of {', '.join(FORMATS)}")
+    if path.exists() and not path.is_file():
+        raise ValueError(f"{path}: exists and is not a regular file")
+    return path
 
 
 def plot_paths(
@@ -28,7 +46,7 @@ def plot_paths(
 
     Args:
         dataset: the episodes.
-        out: the PNG path.
+        out: the image path (``.png``, ``.pdf`` or ``.svg``; not a folder).
         max_episodes: at most this many episodes per kind are drawn (a seeded random choice).
         seed: seed of that choice.
         title: figure title; by default the dataset's name and counts.
@@ -38,6 +56,7 @@ def plot_paths(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    out = check_figure_path(out)
     if len(dataset) == 0:
         raise ValueError("nothing to plot: the dataset is empty")
     rng = np.random.default_rng(seed)
@@ -88,8 +107,15 @@ def plot_paths(
         title or f"{dataset.name or 'dataset'}: {len(dataset) - n_ood} ID, {n_ood} OOD episodes"
     )
     fig.tight_layout()
-    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    fd, tmp_name = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=out.suffix)
+    os.close(fd)
+    try:
+        fig.savefig(tmp_name, dpi=110, format=out.suffix[1:].lower())
+        os.chmod(tmp_name, new_file_mode())
+        os.replace(tmp_name, out)  # the reported path is the written one, written whole
+    finally:
+        plt.close(fig)
+        if os.path.exists(tmp_name):
+            os.unlink(tmp_name)
     return out

@@ -17,6 +17,11 @@ key                shape       meaning
 A pickle can run arbitrary code when it is loaded, so :class:`SafeUnpickler` resolves only the
 globals numpy needs to rebuild arrays (``_reconstruct``, ``ndarray``, ``dtype``, ``scalar``) and
 refuses every other one *before* anything is called, with an error naming the file and the global.
+A pickle can also crash or exhaust the loader without naming any global (a deeply nested key, a
+declared 2 GiB array, a huge memo index), so before unpickling, a file is read only if it is a
+regular file within :data:`~handover_env.data.limits.MAX_PICKLE_BYTES` (links must stay inside the
+dataset folder) and its opcode stream passes :func:`~handover_env.data.pickle_scan.scan_pickle`.
+Every problem with one file is a :class:`DatasetError` naming it, so ``skip_bad`` can skip it.
 
 Mapping to :class:`~handover_env.data.dataset.Episode`:
 
@@ -37,6 +42,7 @@ import io
 import os
 import pickle
 import re
+import stat
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +52,8 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from handover_env.data.dataset import DEFAULT_RATE_HZ, DatasetError, Episode, HandoverDataset
+from handover_env.data.limits import MAX_FRAMES, MAX_PICKLE_BYTES
+from handover_env.data.pickle_scan import UnsafePickleError, scan_pickle
 
 try:  # numpy >= 2
     from numpy._core import multiarray as _multiarray
@@ -75,11 +83,8 @@ PELVIS_JOINT = 0
 RIGHT_HAND_JOINT = 15
 ID_PREFIX = "motion_normal_"
 OOD_PREFIX = "motion_variation_"
-_NAME_RE = re.compile(r"^(motion_normal|motion_variation)_(\d+)\.pkl$")
-
-
-class UnsafePickleError(DatasetError):
-    """A pickle referenced a global outside :data:`ALLOWED_GLOBALS`; nothing in it was run."""
+#: Canonical file names: ASCII digits, no leading zeros, nothing after ``.pkl`` (``fullmatch``).
+_NAME_RE = re.compile(r"(motion_normal|motion_variation)_(0|[1-9][0-9]{0,8})\.pkl", re.ASCII)
 
 
 class SafeUnpickler(pickle.Unpickler):
@@ -87,7 +92,9 @@ class SafeUnpickler(pickle.Unpickler):
 
     ``find_class`` is the single place a pickle can name a callable; every name outside
     :data:`ALLOWED_GLOBALS` is refused before it is imported, let alone called. Persistent ids
-    are refused too.
+    are refused too. :func:`safe_load_pickle` runs it only on a stream that
+    :func:`~handover_env.data.pickle_scan.scan_pickle` has checked (opcodes, calls, sizes, depth,
+    memo), so this is the second line of defence, not the only one.
 
     Args:
         file: a binary file object.
@@ -112,25 +119,84 @@ class SafeUnpickler(pickle.Unpickler):
         raise UnsafePickleError(f"{self.source}: refused to load: the pickle uses persistent ids")
 
 
-def safe_load_pickle(path: str | os.PathLike) -> Any:
-    """Unpickle ``path`` with :class:`SafeUnpickler`.
+def _show(path: Path | str) -> str:
+    """A path for a one-line message: as is, or quoted when it holds control characters."""
+    text = str(path)
+    return text if text.isprintable() else repr(text)
+
+
+def read_regular_file(path: str | os.PathLike, limit: int, root: Path | None = None) -> bytes:
+    """The bytes of ``path``, refusing anything but a regular file of at most ``limit`` bytes.
+
+    Args:
+        path: the file.
+        limit: the largest size accepted, checked on the size the file system reports before
+            reading and again on what is read (a sparse or growing file cannot slip through).
+        root: when given, a symbolic link must resolve to a file inside this folder.
+
+    Raises:
+        DatasetError: a folder, FIFO, device or socket, a dangling or looping link, a link out
+            of ``root``, or a file over the limit; the message names the path.
+    """
+    path = Path(path)
+    try:
+        st = os.lstat(path)
+        target = path
+        if stat.S_ISLNK(st.st_mode):
+            try:
+                target = path.resolve(strict=True)
+            except RuntimeError:
+                raise DatasetError(f"{_show(path)}: symbolic link loop") from None
+            except FileNotFoundError:
+                raise DatasetError(f"{_show(path)}: dangling symbolic link") from None
+            if root is not None and not target.is_relative_to(root.resolve()):
+                raise DatasetError(
+                    f"{_show(path)}: symbolic link to {_show(target)}, outside the dataset folder"
+                )
+            st = os.stat(target)
+        if stat.S_ISDIR(st.st_mode):
+            raise DatasetError(f"{_show(path)}: a folder, not a file")
+        if not stat.S_ISREG(st.st_mode):
+            raise DatasetError(f"{_show(path)}: not a regular file (a FIFO, socket or device)")
+        if st.st_size > limit:
+            raise DatasetError(
+                f"{_show(path)}: {st.st_size:,} bytes, more than the {limit:,} a recording may have"
+            )
+        fd = os.open(target, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0))
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise DatasetError(f"{_show(path)}: not a regular file")
+            data = f.read(limit + 1)
+    except OSError as exc:
+        raise DatasetError(f"{_show(path)}: cannot read ({exc.strerror or exc})") from None
+    if len(data) > limit:
+        raise DatasetError(f"{_show(path)}: more than the {limit:,} bytes a recording may have")
+    return data
+
+
+def safe_load_pickle(path: str | os.PathLike, root: Path | None = None) -> Any:
+    """Unpickle ``path`` safely: bounded read, static scan, then :class:`SafeUnpickler`.
 
     Raises:
         UnsafePickleError: the file references a forbidden global.
-        DatasetError: the file is empty, truncated or not a pickle.
+        DatasetError: the file is not a regular file, is too large, empty, truncated, not a
+            pickle, or declares more than :mod:`handover_env.data.limits` allows.
     """
     path = Path(path)
-    data = path.read_bytes()
+    data = read_regular_file(path, MAX_PICKLE_BYTES, root)
     if not data:
-        raise DatasetError(f"{path}: empty file (0 bytes)")
+        raise DatasetError(f"{_show(path)}: empty file (0 bytes)")
+    scan_pickle(data, _show(path))
     try:
-        return SafeUnpickler(io.BytesIO(data), str(path)).load()
+        return SafeUnpickler(io.BytesIO(data), _show(path)).load()
     except UnsafePickleError:
         raise
     except EOFError as exc:
-        raise DatasetError(f"{path}: truncated pickle ({len(data)} bytes; ended early)") from exc
-    except Exception as exc:  # UnpicklingError, ValueError, TypeError from a corrupt stream
-        raise DatasetError(f"{path}: not a readable pickle ({type(exc).__name__}: {exc})") from exc
+        raise DatasetError(f"{_show(path)}: truncated pickle ({len(data)} bytes; ended early)") from exc
+    except Exception as exc:  # UnpicklingError, ValueError, TypeError, MemoryError from a corrupt stream
+        raise DatasetError(
+            f"{_show(path)}: not a readable pickle ({type(exc).__name__}: {exc})"
+        ) from exc
 
 
 def _validate_record(record: Any, source: str) -> dict[str, np.ndarray]:
@@ -164,6 +230,10 @@ def _validate_record(record: Any, source: str) -> dict[str, np.ndarray]:
         lengths[key] = value.shape[0]
     if len(set(lengths.values())) != 1:
         raise DatasetError(f"{source}: arrays disagree in length (frames): {lengths}")
+    if next(iter(lengths.values())) > MAX_FRAMES:
+        raise DatasetError(
+            f"{source}: {lengths['pose_object']:,} frames, more than the {MAX_FRAMES:,} a recording may have"
+        )
     if next(iter(lengths.values())) < 2:
         raise DatasetError(f"{source}: needs at least 2 frames, got {lengths['pose_object']}")
     norms = np.linalg.norm(arrays["quat_object"], axis=1)
@@ -194,47 +264,68 @@ def episode_from_record(record: dict[str, np.ndarray], source_id: str, is_ood: b
     )
 
 
-def load_public_file(path: str | os.PathLike) -> Episode:
+def load_public_file(path: str | os.PathLike, root: str | os.PathLike | None = None) -> Episode:
     """Load and validate one ``motion_normal_<i>.pkl`` / ``motion_variation_<i>.pkl``.
+
+    Args:
+        path: the file.
+        root: the dataset folder; a symbolic link must resolve inside it.
 
     Raises:
         UnsafePickleError: the file references a global outside numpy's array rebuilding.
-        DatasetError: the file is empty, truncated, not a pickle, or has bad keys, dtypes,
-            shapes, NaN/inf or lengths; the message names the file and the problem.
+        DatasetError: the file is not a regular file, is empty, truncated, not a pickle, too
+            large, or has bad keys, dtypes, shapes, NaN/inf, lengths or coordinates; the message
+            names the file and the problem. Nothing else escapes (a ``MemoryError`` or a numpy
+            error on a crafted file becomes a DatasetError naming it).
     """
     path = Path(path)
-    match = _NAME_RE.match(path.name)
+    match = _NAME_RE.fullmatch(path.name)
     if match is None:
         raise DatasetError(
-            f"{path}: not a public-dataset file name (expected {ID_PREFIX}<i>.pkl or {OOD_PREFIX}<i>.pkl)"
+            f"{_show(path)}: not a public-dataset file name (expected {ID_PREFIX}<i>.pkl or "
+            f"{OOD_PREFIX}<i>.pkl, <i> in ASCII digits without leading zeros)"
         )
-    record = _validate_record(safe_load_pickle(path), str(path))
-    return episode_from_record(record, path.stem, is_ood=match.group(1) == "motion_variation")
+    try:
+        record = _validate_record(safe_load_pickle(path, Path(root) if root else None), _show(path))
+        return episode_from_record(record, path.stem, is_ood=match.group(1) == "motion_variation")
+    except DatasetError as exc:
+        message = str(exc)
+        if not message.startswith(_show(path)):  # Episode's own checks name the episode only
+            raise DatasetError(f"{_show(path)}: {message}") from exc
+        raise
+    except Exception as exc:  # outside the contract: still one error naming the file
+        raise DatasetError(f"{_show(path)}: cannot load ({type(exc).__name__}: {exc})") from exc
 
 
 def list_public_files(folder: str | os.PathLike) -> list[Path]:
-    """The dataset files in ``folder``: ID first, then OOD, each in natural index order.
+    """The entries of ``folder`` named like dataset files: ID first, then OOD, in index order.
+
+    Every entry whose name starts with ``motion_normal_`` or ``motion_variation_`` is listed,
+    whatever it is: folders, FIFOs, dangling or looping links and non-canonical names (a trailing
+    newline, non-ASCII digits, leading zeros) come last, so that :func:`load_public_file` refuses
+    each one by name (and ``skip_bad`` reports it) instead of passing over it in silence.
 
     Raises:
         FileNotFoundError: ``folder`` does not exist or is not a directory.
-        DatasetError: it holds no ``motion_normal_*.pkl`` / ``motion_variation_*.pkl`` files.
+        DatasetError: it holds no entry named like a dataset file.
     """
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"no public-dataset folder at {folder}")
-    files = [p for p in folder.iterdir() if p.is_file() and _NAME_RE.match(p.name)]
-    if not files:
+    entries = [p for p in folder.iterdir() if p.name.startswith((ID_PREFIX, OOD_PREFIX))]
+    if not entries:
         raise DatasetError(
             f"{folder}: no {ID_PREFIX}<i>.pkl or {OOD_PREFIX}<i>.pkl files; point at the "
             f"dataset's data/whole_motions folder"
         )
 
-    def key(p: Path) -> tuple[int, int]:
-        m = _NAME_RE.match(p.name)
-        assert m is not None
-        return (0 if m.group(1) == "motion_normal" else 1, int(m.group(2)))
+    def key(p: Path) -> tuple[int, int, str]:
+        m = _NAME_RE.fullmatch(p.name)
+        if m is None:
+            return (2, 0, p.name)
+        return (0 if m.group(1) == "motion_normal" else 1, int(m.group(2)), p.name)
 
-    return sorted(files, key=key)
+    return sorted(entries, key=key)
 
 
 @dataclass
@@ -285,18 +376,18 @@ def load_public_dataset(
     episodes: list[Episode] = []
     for path in tqdm(files, desc=f"loading {Path(folder).name}", unit="file", disable=not progress):
         try:
-            episodes.append(load_public_file(path))
+            episodes.append(load_public_file(path, root=folder))
         except (DatasetError, OSError) as exc:
             if not skip_bad:
                 raise
-            reason = str(exc).removeprefix(f"{path}: ")
-            report.skipped.append((path.name, reason))
+            reason = str(exc).removeprefix(f"{_show(path)}: ")
+            report.skipped.append((_show(path.name), reason))
             if on_skip is not None:
-                on_skip(path.name, reason)
+                on_skip(_show(path.name), reason)
             else:
                 import warnings
 
-                warnings.warn(f"skipping {path}: {reason}", stacklevel=2)
+                warnings.warn(f"skipping {_show(path)}: {reason}", stacklevel=2)
     report.loaded = len(episodes)
     if not episodes:
         raise DatasetError(f"{folder}: none of the {len(files)} dataset file(s) could be loaded")

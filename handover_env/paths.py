@@ -1,0 +1,101 @@
+"""Path safety for the tools that replace folders: nothing outside our own outputs is ever deleted.
+
+* :func:`check_replaceable_root` refuses the paths an ``--overwrite`` must never touch: the empty
+  string (an unset shell variable), ``.``, the file-system root, the home folder, and any folder
+  that holds the current one or the home folder.
+* :func:`replace_dir` moves a finished temporary folder into place: the old folder (if any) is
+  renamed aside, the new one renamed in, and only then is the old one deleted. An interrupt leaves
+  either the old or the new folder under the final name, never a mix, plus at most one hidden
+  sibling that the next run removes (:func:`remove_stale_siblings`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+from pathlib import Path
+
+#: Hidden siblings written while a folder is being replaced: ``.<name>.partial-<pid>-<n>``
+#: (being written) and ``.<name>.old-<pid>-<n>`` (about to be deleted).
+_SIBLING = re.compile(r"\.(?P<name>.+)\.(?P<kind>partial|old)-(?P<pid>[0-9]+)-[0-9a-f]+", re.ASCII)
+
+
+class UnsafePathError(ValueError):
+    """An output path that a tool must not replace; the message names it."""
+
+
+def check_replaceable_root(path: str | os.PathLike) -> Path:
+    """``path`` as a Path, or :class:`UnsafePathError` if replacing it could delete a user's files.
+
+    Refused: ``""`` (and whitespace), ``.``, ``/``, the home folder, the current folder and every
+    folder above the current or the home folder.
+    """
+    text = os.fspath(path)
+    if not text.strip():
+        raise UnsafePathError("refusing an empty output path (an unset shell variable?)")
+    p = Path(text)
+    resolved = p.expanduser().resolve()
+    home = Path.home().resolve()
+    cwd = Path.cwd().resolve()
+    if text.strip() in (".", "./", "~") or resolved == Path(resolved.anchor):
+        raise UnsafePathError(f"refusing to replace {text!r}: it is {resolved}")
+    for protected, what in ((home, "the home folder"), (cwd, "the current folder")):
+        if resolved == protected or protected.is_relative_to(resolved):
+            raise UnsafePathError(f"refusing to replace {text!r}: it is or holds {what} ({protected})")
+    return p
+
+
+def new_file_mode() -> int:
+    """The mode ``open()`` would give a new file under the current umask (temporary files get 0600)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def sibling(path: Path, kind: str) -> Path:
+    """A fresh hidden sibling of ``path`` for a temporary (``partial``) or outgoing (``old``) folder."""
+    return path.with_name(f".{path.name}.{kind}-{os.getpid()}-{os.urandom(4).hex()}")
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_siblings(path: Path) -> list[Path]:
+    """Delete the hidden ``partial``/``old`` siblings of ``path`` left by processes that died."""
+    removed = []
+    parent = path.parent
+    if not parent.is_dir():
+        return removed
+    for entry in parent.iterdir():
+        m = _SIBLING.fullmatch(entry.name)
+        if (m and m.group("name") == path.name and entry.is_dir() and not entry.is_symlink()
+                and not _alive(int(m.group("pid")))):
+            shutil.rmtree(entry, ignore_errors=True)
+            removed.append(entry)
+    return removed
+
+
+def replace_dir(new: Path, final: Path) -> None:
+    """Move the finished folder ``new`` to ``final``, replacing (then deleting) the old one."""
+    old = None
+    if final.exists() or final.is_symlink():
+        old = sibling(final, "old")
+        final.rename(old)
+    try:
+        new.rename(final)
+    except BaseException:
+        if old is not None and not final.exists():
+            old.rename(final)  # put the old folder back
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
