@@ -65,6 +65,8 @@ class PersonMotion:
         source_id: where the motion came from.
         walker: the scripted walker's parameters (None for recordings).
         has_skeleton: True when the body is a recorded skeleton (else the scripted gait).
+        rest_frame: for a stopped motion (:func:`stopped`), the frame from which the person
+            stands still; None for a walk.
     """
 
     dims: BodyDims
@@ -78,6 +80,7 @@ class PersonMotion:
     source_id: str
     walker: rm.WalkerParams | None = None
     has_skeleton: bool = False
+    rest_frame: float | None = None
 
     def __post_init__(self) -> None:
         n = self.origin.shape[0]
@@ -268,4 +271,4 @@ def stopped(motion: PersonMotion, stop_x: float, decel_time: float = 0.8) -> Per
     # by ramp / 2 frames during it, so it comes to rest at k0 + ramp / 2 = k_stop.
     s = np.clip((t - k0) / ramp, 0.0, 1.0)
     tau = np.where(t <= k0, t, k0 + ramp * (s + np.sin(math.pi * s) / math.pi) / 2.0)
-    return resample(motion, np.minimum(tau, motion.frames - 1.0))
+    return replace(resample(motion, np.minimum(tau, motion.frames - 1.0)), rest_frame=k0 + ramp)

@@ -101,7 +101,9 @@ class ReceiverConfig:
         hold_time: after the grasp the arm stays out, moving with the body, for this long before
             drawing back, s (arm-extended time 1.30 s minus the reach, 0.67; the hand is drawn
             back 0.37 s before the giver lets go, 1.0 s after the grasp: 0.63).
-        pull_time: how long drawing the hand back to the carry pose takes, s.
+        pull_time: how long drawing the hand back takes, s: first straight toward the body at
+            the height of the hold, by ``pull_distance`` (m), until the robot lets go, then
+            down to the carry pose.
         grasp_radius: the hand grasps when its grip point is this close to the grasp point, m,
         grasp_speed: and moves relative to it slower than this, m/s (a hand closes on an object
             it has caught up with; the grip is then :mod:`handover_env.grip`'s spring).
@@ -129,6 +131,7 @@ class ReceiverConfig:
     give_up_behind: float = 0.35
     hold_time: float = 0.63
     pull_time: float = 0.5
+    pull_distance: float = 0.2
     grasp_radius: float = 0.03
     grasp_speed: float = 0.2
     grasp_offset: float = 0.06
@@ -293,6 +296,12 @@ class Receiver:
         return self.motion is not None and self.tau >= self.motion.frames - 1
 
     @property
+    def at_rest(self) -> bool:
+        """True once a stopping person (static handover) stands still."""
+        rest = None if self.motion is None else self.motion.rest_frame
+        return rest is not None and self.tau >= rest
+
+    @property
     def time_lost(self) -> float:
         """How far the person is behind their nominal walk, s."""
         return max(0.0, self._t - self.tau / RATE)
@@ -435,7 +444,7 @@ class Receiver:
                 # Close on the part of the object the hand comes from (its top or its bottom).
                 self._grasp_side = 1.0 if float((grip - centre) @ self._object_axis) >= 0.0 else -1.0
                 self._begin_reach(t, cfg.close_time)
-        elif self.state == "walking" and self.present_after_walk and self.finished:
+        elif self.state == "walking" and self.present_after_walk and self.at_rest:
             self.state = "presenting"
             self._hand = self._swing_hand(self.tau)
             self._hand_goal_time = t + cfg.present_time
@@ -539,6 +548,13 @@ class Receiver:
             # The arm stays out, moving with the body (the shared hold of the recordings).
             pelvis, rot, vel = self._pelvis(tau)
             goal, goal_v = pelvis + rot @ self._hold_rel, vel
+        elif state == "holding" and not self._released:
+            # Draw the object out toward the body at the height it is held, not down across the
+            # gripper's fingers, until the robot lets go.
+            pelvis, rot, vel = self._pelvis(tau)
+            pull = self._hold_rel.copy()
+            pull[:2] *= max(0.0, 1.0 - cfg.pull_distance / max(float(np.linalg.norm(pull[:2])), 1e-6))
+            goal, goal_v = pelvis + rot @ pull, vel
         elif state == "holding":
             swing = self._swing_hand(tau)
             _, u, _ = self._body_frame(tau)

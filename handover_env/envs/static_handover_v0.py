@@ -20,9 +20,11 @@ class StaticHandoverEnv(HandoverEnvBase):
     :class:`handover_env.envs.dynamic_handover_v0.DynamicHandoverEnv` (see there), except:
 
     ## Receiver
-    A scripted walker whose walk ends at ``STOP_XY`` = (0.45, -0.95) (replayed tracks stop at their
-    last frame). It does not reach while walking. There it raises the right hand; the hand counts
-    as detected when fully raised. Until ``detect + stabilisation_delay`` the robot holds its
+    A scripted walker heading for ``STOP_XY`` = (0.45, -0.95), or a recorded person following their
+    recording, decelerates and stops when the pelvis reaches the stop line x = 0.45 (see
+    :func:`handover_env.person.stopped`); so the static baseline meets the same recorded people as
+    the dynamic agents. They do not reach while walking. There they raise the right hand; the
+    hand counts as detected when fully raised. Until ``detect + stabilisation_delay`` the robot holds its
     ready pose whatever the action (``robot_enabled`` = 0 in the observation). The raised hand
     waits until the robot brings the object within ``ReceiverConfig.present_reach`` (0.15 m),
     then grasps and pulls it toward the hip. Only the TimeLimit (600 steps, 20 s) ends an episode
@@ -41,13 +43,14 @@ class StaticHandoverEnv(HandoverEnvBase):
     static = True
 
     def _configure_receiver(self, kind: str, options: dict[str, Any]) -> None:
-        overrides = {"end_x": STOP_XY[0], "pass_y": STOP_XY[1]} if kind in ("id", "ood") else None
+        # Scripted walkers walk to the stop area; recorded people follow their recording until
+        # their pelvis reaches the stop line (x = STOP_XY[0]), where both stop and stand.
+        overrides = {"end_x": STOP_XY[0] - 0.3, "pass_y": STOP_XY[1]} if kind in ("id", "ood") else None
         self.receiver.reset(
             self.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
             episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
-            walker_overrides=overrides,
+            walker_overrides=overrides, stop_x=STOP_XY[0],
         )
-        self.receiver.present_after_walk = True
 
     def _after_step(self) -> None:
         if math.isinf(self.t_enabled) and not math.isnan(self.receiver.t_hand_raised):
