@@ -64,6 +64,9 @@ BMI = 23.0
 #: solver enforces per step.
 WELD_IMPEDANCE = 0.5
 WELD_DAMPING_RATIO = 1.0
+#: Where the body stands in a freshly compiled model (qpos0), well away from the robot: the env
+#: moves it to its start at every reset; scenes used without a person leave it here.
+PARK_XY = (5.0, -3.0)
 #: Contacts with the body are stiffer than MuJoCo's default (time constant 4 ms instead of 20,
 #: the object's own): the body's compliance is in its welds, not in contact penetration.
 CONTACT_SOLREF = (0.004, 1.0)
@@ -188,7 +191,7 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
     bodies: list[mujoco.MjsBody] = []
     for i, s in enumerate(SEGMENTS):
         parent = world.worldbody if s.parent < 0 else bodies[s.parent]
-        pos = [0.0, 0.0, dims.pelvis_z] if s.parent < 0 else offsets[i].tolist()
+        pos = [*PARK_XY, dims.pelvis_z] if s.parent < 0 else offsets[i].tolist()
         body = parent.add_body(name=PREFIX + s.name, pos=pos, gravcomp=1.0)
         if s.parent < 0:
             body.add_freejoint(name=PREFIX + "root")
@@ -211,8 +214,10 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
     hand = SEG["hand_r"]
     bodies[hand].add_site(name=PREFIX + "grip_r", pos=dims.grip("r").tolist(),
                           size=[0.01, 0.01, 0.01], group=4)
+    rest = np.zeros((N_SEGMENTS, 3))
     for i, s in enumerate(SEGMENTS):
-        world.worldbody.add_body(name=PREFIX + "target_" + s.name, mocap=True)
+        rest[i] = (np.array([*PARK_XY, dims.pelvis_z]) if s.parent < 0 else rest[s.parent] + offsets[i])
+        world.worldbody.add_body(name=PREFIX + "target_" + s.name, mocap=True, pos=rest[i].tolist())
         k, b = weld_solref(i, dims.height)
         com = geo.com[i].tolist()
         # Anchor at the segment's centre of mass, on both sides (target pose = segment pose).
@@ -313,7 +318,7 @@ def apply_dims(model: mujoco.MjModel, ids: BodyIds, dims: BodyDims) -> None:
     for i, s in enumerate(SEGMENTS):
         if s.parent >= 0:
             model.body_pos[ids.bodies[i]] = offsets[i]
-    model.body_pos[ids.bodies[0]] = (0.0, 0.0, dims.pelvis_z)
+    model.body_pos[ids.bodies[0]] = (*PARK_XY, dims.pelvis_z)
     for g, (_, pos, quat, half, r) in zip(ids.geoms, geo.geoms):
         model.geom_pos[g] = pos
         model.geom_quat[g] = quat

@@ -54,9 +54,8 @@ from handover_env.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, mat_to_quat
 
 CAMERA_RATE = RATE
 STATES = ("walking", "reaching", "holding", "presenting", "presented", "passed")
-#: Re-planning horizon of a hand that holds a point fixed to the body (s): it follows within
-#: a few frames.
-HOLD_TRACKING = 0.15
+#: Shortest re-planning horizon of a hand that holds a point fixed to the body, s.
+HOLD_TRACKING = 0.3
 #: The arm counts as straight at this fraction of its full length (the elbow never locks).
 STRAIGHT_ARM = 0.97
 #: The farthest the trunk turns and leans toward a far hand target, rad (20 deg).
@@ -65,6 +64,9 @@ TRUNK_MAX_TURN = math.radians(20.0)
 _UPPER_BODY = tuple(i for i in range(len(SEGMENTS)) if i == SEG["torso"] or SEGMENTS[i].parent in (
     SEG["torso"], SEG["upper_arm_r"], SEG["forearm_r"], SEG["upper_arm_l"], SEG["forearm_l"]))
 _CONJ = np.array([1.0, -1.0, -1.0, -1.0])
+#: A held object counts as out of the (released) gripper once its centre is this far from the
+#: TCP (m): the bottle's radius plus the open fingers' depth.
+CLEAR_OF_GRIPPER = 0.1
 #: An object behind the person counts as walked past only if it is within this distance, m.
 PASS_DISTANCE = 1.2
 #: Where the static receiver holds the raised right hand: forward, right and up from the
@@ -134,7 +136,7 @@ class ReceiverConfig:
     pull_distance: float = 0.2
     grasp_radius: float = 0.03
     grasp_speed: float = 0.2
-    grasp_offset: float = 0.06
+    grasp_offset: float = 0.075
     approach_distance: float = 0.12
     approach_height: float = 0.04
     close_radius: float = 0.25
@@ -282,6 +284,7 @@ class Receiver:
         self._released = False
         self._dt = 1.0 / RATE
         self._gripper: np.ndarray | None = None
+        self._clear = False
         self._gripper_axis: np.ndarray | None = None
 
     # ------------------------------------------------------------------ queries
@@ -355,7 +358,7 @@ class Receiver:
             object_pos, object_vel, object_rot: the object's position, velocity and rotation.
             object_free: the person does not hold the object yet.
             released: the gripper has opened.
-            gripper_pos: the gripper's TCP while it holds the object (the hand avoids it).
+            gripper_pos: the gripper's TCP (the hand avoids it and draws the object clear of it).
             gripper_axis: the gripper's approach axis (toward its fingertips) while it holds.
         """
         cfg = self.config
@@ -363,6 +366,8 @@ class Receiver:
         self._t = t0
         self._released = released
         self._gripper = None if gripper_pos is None else np.asarray(gripper_pos, dtype=np.float64)
+        if self._gripper is not None and self.state == "holding" and released and not self._clear:
+            self._clear = float(np.linalg.norm(object_pos - self._gripper)) > CLEAR_OF_GRIPPER
         self._gripper_axis = None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
         self._object_axis = object_rot[:, 2].copy()
         grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
@@ -548,9 +553,9 @@ class Receiver:
             # The arm stays out, moving with the body (the shared hold of the recordings).
             pelvis, rot, vel = self._pelvis(tau)
             goal, goal_v = pelvis + rot @ self._hold_rel, vel
-        elif state == "holding" and not self._released:
+        elif state == "holding" and not self._clear:
             # Draw the object out toward the body at the height it is held, not down across the
-            # gripper's fingers, until the robot lets go.
+            # gripper's fingers, until it is clear of the gripper.
             pelvis, rot, vel = self._pelvis(tau)
             pull = self._hold_rel.copy()
             pull[:2] *= max(0.0, 1.0 - cfg.pull_distance / max(float(np.linalg.norm(pull[:2])), 1e-6))
@@ -565,7 +570,8 @@ class Receiver:
         else:  # passed: the hand returns to the swing
             goal, goal_v = self._swing_hand(tau)[:2]
         if state == "holding" and self._t < self.t_grasp + cfg.hold_time:
-            remaining = HOLD_TRACKING
+            # Settle onto the body-fixed hold over the hold time (no yank to catch up).
+            remaining = max(self.t_grasp + cfg.hold_time - self._t, HOLD_TRACKING)
         elif state == "passed":
             remaining = max(self._hand_goal_time - self._t, cfg.pull_time)
         else:

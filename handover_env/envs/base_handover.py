@@ -223,12 +223,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         mujoco.mj_forward(m, d)
         ctrl.reset(d)
         ctrl.set_target(READY_POS, READY_YAW)
-        # The person stands well away while the arm settles (reset places them).
-        b = ids.body
-        d.qpos[b.root_qpos:b.root_qpos + 3] = (5.0, -3.0, float(m.body_pos[b.bodies[0], 2]))
-        mujoco.mj_kinematics(m, d)
-        d.mocap_pos[b.mocap] = d.xpos[b.bodies]
-        d.mocap_quat[b.mocap] = d.xquat[b.bodies]
+        # The person stands at the model's parking spot, well away, while the arm settles.
         for _ in range(100):
             d.ctrl[ids.arm_act] = ctrl.compute(d)
             mujoco.mj_step(m, d, nstep=ctrl.config.ticks)
@@ -344,7 +339,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.receiver.plan_step(t0, t1, d, self._object_pos_v.copy(), self._vel6[3:].copy(),
                                 self._object_xmat_v.reshape(3, 3).copy(),
                                 object_free=not self._receiver_holds, released=self.released,
-                                gripper_pos=self._tcp_pos_v.copy() if self._gripper_holds else None,
+                                gripper_pos=self._tcp_pos_v.copy(),
                                 gripper_axis=(self._tcp_xmat_v.reshape(3, 3)[:, 2].copy()
                                               if self._gripper_holds else None))
         self.receiver.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
