@@ -102,9 +102,9 @@ GEOM_NAMES = tuple(g[1] for g in _GEOMS)
 #: Calibration of the weld stiffness: measured quasi-static stiffness / ISO value is 1 with this
 #: gain per segment (see the module docstring; ``tests/test_body_model.py`` re-measures it).
 WELD_GAIN = {
-    "pelvis": 0.0714, "torso": 0.1146, "head": 0.2643, "upper_arm_r": 0.0622, "forearm_r": 0.1205,
-    "hand_r": 0.1852, "upper_arm_l": 0.0622, "forearm_l": 0.1205, "hand_l": 0.1852, "thigh_r": 0.2083,
-    "shank_r": 0.2714, "thigh_l": 0.2083, "shank_l": 0.2714,
+    "pelvis": 0.0709, "torso": 0.1165, "head": 0.2642, "upper_arm_r": 0.0591, "forearm_r": 0.1157,
+    "hand_r": 0.1662, "upper_arm_l": 0.0591, "forearm_l": 0.1157, "hand_l": 0.1662, "thigh_r": 0.2082,
+    "shank_r": 0.2711, "thigh_l": 0.2082, "shank_l": 0.2711,
 }
 _MATERIALS = {"pelvis": "trousers", "thigh_r": "trousers", "thigh_l": "trousers", "shank_r": "trousers",
               "shank_l": "trousers", "head": "skin", "hand_r": "skin", "hand_l": "skin"}
@@ -359,3 +359,44 @@ def _refresh_bvh(model: mujoco.MjModel, ids: BodyIds) -> None:
         box = np.concatenate([(lo + hi) / 2, (hi - lo) / 2])
         for node in range(adr, adr + num):
             model.bvh_aabb[node] = box  # conservative: every node bounds all of the body's geoms
+
+
+def measure_stiffness(model: mujoco.MjModel, data: mujoco.MjData, ids: BodyIds, segment: int,
+                      force: float = 40.0, axis: int = 1, steps: int = 1500) -> float:
+    """Quasi-static stiffness of one segment, N/m: a horizontal force at its centre of mass over
+    the deflection it causes once settled, with every target held still (the body at qpos0)."""
+    mujoco.mj_resetData(model, data)
+    mujoco.mj_forward(model, data)
+    data.mocap_pos[ids.mocap] = data.xpos[ids.bodies]
+    data.mocap_quat[ids.mocap] = data.xquat[ids.bodies]
+    mujoco.mj_step(model, data, 300)
+    base = data.xipos[ids.bodies[segment], axis]
+    data.xfrc_applied[:] = 0.0
+    data.xfrc_applied[ids.bodies[segment], axis] = force
+    mujoco.mj_step(model, data, steps)
+    data.xfrc_applied[:] = 0.0
+    return force / (data.xipos[ids.bodies[segment], axis] - base)
+
+
+def calibrate_weld_gains(iterations: int = 6) -> dict[str, float]:
+    """Find :data:`WELD_GAIN` so that every segment's measured stiffness (mean over the two
+    horizontal axes) is its region's ISO value; how the committed gains were made."""
+    gains = dict(WELD_GAIN)
+    for _ in range(iterations):
+        WELD_GAIN.update(gains)
+        spec = mujoco.MjSpec()
+        spec.option.timestep = 1.0 / 600.0
+        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        for name in set(_MATERIALS.values()) | {"shirt"}:
+            spec.add_material(name=name)
+        add_receiver(spec)
+        model = spec.compile()
+        data = mujoco.MjData(model)
+        ids = body_ids(model)
+        for i, s in enumerate(SEGMENTS):
+            k = 0.5 * sum(measure_stiffness(model, data, ids, i, axis=a) for a in (0, 1))
+            gains[s.name] *= (ISO_REGIONS[s.region][0] * 1000.0 / k) ** 0.8
+    for left, right in (("upper_arm_l", "upper_arm_r"), ("forearm_l", "forearm_r"), ("hand_l", "hand_r"),
+                        ("thigh_l", "thigh_r"), ("shank_l", "shank_r")):
+        gains[left] = gains[right] = 0.5 * (gains[left] + gains[right])
+    return {k: round(v, 4) for k, v in gains.items()}

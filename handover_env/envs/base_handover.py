@@ -43,6 +43,7 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 import gymnasium as gym
@@ -105,14 +106,18 @@ class HandoverEnvBase(gym.Env, EzPickle):
         width: int = 640,
         height: int = 480,
         camera: str = "overview",
+        person: dict[str, float] | None = None,
     ) -> None:
         EzPickle.__init__(
             self, render_mode, stiffness, damping, forecast_time, release_force, safety_force, history,
             obs_noise, obs_latency, default_receiver, stabilisation_delay, object_mass, miss_distance,
-            force_filter_tau, width, height, camera,
+            force_filter_tau, width, height, camera, person,
         )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if render_mode == "human" and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+            raise RuntimeError("render_mode='human' needs a display (DISPLAY is not set); use "
+                               "render_mode='rgb_array' (with MUJOCO_GL=egl or osmesa) on a headless machine")
         if default_receiver not in ("id", "ood"):
             raise ValueError(f"default_receiver must be 'id' or 'ood', got {default_receiver!r}")
         for name, v in (("safety_force", safety_force), ("obs_noise", obs_noise),
@@ -143,7 +148,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.ids = scene_ids(self.model)
         self.layout = ObsLayout(history=int(history))
         self.controller = ImpedanceController(self.model, self.ids, self.params, ControllerConfig())
-        self.receiver = Receiver(self.model, self.ids, ReceiverConfig(give_up_behind=self.miss_distance))
+        overrides = dict(person or {})
+        unknown = sorted(set(overrides) - set(ReceiverConfig.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"unknown person setting(s) {unknown}; see handover_env.receiver.ReceiverConfig")
+        overrides.setdefault("give_up_behind", self.miss_distance)
+        self.receiver = Receiver(self.model, self.ids, ReceiverConfig(**overrides))
         self.dt = self.model.opt.timestep * FRAME_SKIP
         self._ticks = self.controller.config.ticks
         # Fractions of an env step at which ticks fall, by the global step phase at its start.
@@ -261,6 +271,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self._ready = False  # a reset that fails leaves an env that must be reset again
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = sorted(set(options) - set(RESET_OPTIONS))
