@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from handover_env.skeleton import SEG, J, N_SEGMENTS, SEGMENTS, BodyDims, TEMPLATE_HEIGHT
+from handover_env.skeleton import N_SEGMENTS, SEG, SEGMENTS, TEMPLATE_HEIGHT, BodyDims, J
 
 PREFIX = "receiver/"
 #: ISO/TS 15066:2016 Annex A: effective spring constant (N/mm, Table A.3) and maximum permissible

@@ -44,11 +44,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from handover_env.body_model import BodyIds, apply_dims, weld_lag_times
+from handover_env.body_model import apply_dims, weld_lag_times
 from handover_env.gait import arm_pose
+from handover_env.grip import ArmGrip
 from handover_env.min_jerk import min_jerk_step
 from handover_env.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
-from handover_env.grip import ArmGrip
 from handover_env.scene import SceneIds
 from handover_env.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, mat_to_quat
 

@@ -11,14 +11,15 @@ import pytest
 from handover_env import receiver_motion as rm
 from handover_env.gait import arm_pose, walking_pose
 from handover_env.skeleton import (
-    J,
-    N_JOINTS,
     N_SEGMENTS,
     SEG,
     SEGMENTS,
     TEMPLATE,
     BodyDims,
+    BodyPose,
+    J,
     forward_kinematics,
+    joints_of,
     mat_to_quat,
     measure_dims,
     retarget,
@@ -69,27 +70,6 @@ def test_triad_and_yaw():
     np.testing.assert_allclose(yaw_matrix(math.pi / 2) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)
 
 
-def _pose_joints(pelvis: np.ndarray, rot: np.ndarray, dims: BodyDims) -> np.ndarray:
-    """BODY_34 joints of a rigid body pose: each joint rides on the segment whose frame holds it."""
-    origin = forward_kinematics(pelvis, rot, dims)
-    owner = np.zeros(N_JOINTS, dtype=np.int64)  # the segment each joint moves with
-    for i, s in enumerate(SEGMENTS):
-        owner[s.origin] = i if s.parent < 0 else s.parent
-        if s.tip >= 0:
-            owner[s.tip] = i
-    for name, seg in (("LEFT_EAR", "head"), ("RIGHT_EAR", "head"), ("NOSE", "head"), ("LEFT_EYE", "head"),
-                      ("RIGHT_EYE", "head"), ("CHEST_SPINE", "torso"), ("LEFT_CLAVICLE", "torso"),
-                      ("RIGHT_CLAVICLE", "torso"), ("LEFT_SHOULDER", "torso"), ("RIGHT_SHOULDER", "torso"),
-                      ("LEFT_HIP", "pelvis"), ("RIGHT_HIP", "pelvis"), ("RIGHT_HAND", "hand_r"),
-                      ("LEFT_HAND", "hand_l"), ("RIGHT_THUMB", "hand_r"), ("LEFT_THUMB", "hand_l")):
-        owner[J[name]] = SEG[seg]
-    joints = np.empty((N_JOINTS, 3))
-    for j in range(N_JOINTS):
-        s = owner[j]
-        joints[j] = origin[s] + rot[s] @ dims.local(j, s)
-    return joints
-
-
 def test_retarget_recovers_a_rigid_pose():
     """Joints made by the rigid model from known rotations retarget to those rotations."""
     dims = BodyDims.from_height(1.8)
@@ -105,8 +85,8 @@ def test_retarget_recovers_a_rigid_pose():
         mujoco.mju_quat2Mat(m, np.r_[math.cos(ang / 2), axis * math.sin(ang / 2)])
         rot[i] = rot[s.parent] @ m.reshape(3, 3)
     pelvis = np.array([0.4, -0.9, 0.95])
-    pose = retarget(_pose_joints(pelvis, rot, dims), dims)
     origin = forward_kinematics(pelvis, rot, dims)
+    pose = retarget(joints_of(BodyPose(origin, rot), dims), dims)
     np.testing.assert_allclose(pose.origin, origin, atol=1e-9)
     # Bone directions agree (the twist of a limb about its own bone is not observable).
     for i, s in enumerate(SEGMENTS):

@@ -58,8 +58,6 @@ from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.observation import ObsLayout
 from handover_env.receiver import CAMERA_RATE, Receiver, ReceiverConfig
 from handover_env.scene import (
-    ARM_PREFIX,
-    GRIPPER_PREFIX,
     SceneConfig,
     build_model,
     place_object_in_gripper,
@@ -432,15 +430,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._f_ext_f = (fx, fy, fz)
         self.f_ext[0], self.f_ext[1], self.f_ext[2] = fx, fy, fz
         f_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
-        if f_mag > self.peak_wrist_force:
-            self.peak_wrist_force = f_mag
+        self.peak_wrist_force = max(self.peak_wrist_force, f_mag)
         rec = self.receiver
         holds = rec.grip.active
         if holds and self._gripper_holds:
             pull = rec.grip.force
             p = math.sqrt(float(pull[0] * pull[0] + pull[1] * pull[1] + pull[2] * pull[2]))
-            if p > self.pull_force:
-                self.pull_force = p  # what the person pulls with while both hold the object
+            self.pull_force = max(self.pull_force, p)  # what the person pulls with while both hold the object
         if not self.released and f_mag > self.params.release_force:
             self.released = True
             self.released_while_held = bool(holds)
@@ -492,8 +488,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         j2 = sum(((a - 3.0 * b + 3.0 * c - e) * r) ** 2 for a, b, c, e in zip(p0, p1, p2, p3))
         self._jerk_sq += j2
         self._jerk_n += 1
-        if j2 > self._jerk_peak_sq:
-            self._jerk_peak_sq = j2
+        self._jerk_peak_sq = max(self._jerk_peak_sq, j2)
         del hist[0]
 
     def _after_step(self) -> None:

@@ -73,8 +73,7 @@ class ContactMonitor:
             mujoco.mj_contactForce(self.model, data, i, self._force6)
             force = abs(float(self._force6[0]))
             s = int(seg[g1] if seg[g1] >= 0 else seg[g2])
-            if force > self.peak[s]:
-                self.peak[s] = force
+            self.peak[s] = max(self.peak[s], force)
             if force > self.limits[s]:
                 over[s] = True
                 if force > TRANSIENT_FACTOR * self.limits[s] and self.unsafe_segment < 0:
