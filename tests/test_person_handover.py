@@ -68,7 +68,7 @@ def env():
 
 def test_a_handover_grasps_before_the_release_without_ghosts(env):
     for seed in (0, 1):
-        info, term, _ = _run(env, ReactiveAgent(), seed)
+        info, _term, _ = _run(env, ReactiveAgent(), seed)
         assert info["outcome"] == "success"
         assert info["transfer_time"] < info["release_time"]  # the hand held it first
         assert info["penetration"] < 0.01
@@ -122,7 +122,7 @@ def test_a_delayed_agent_acts_half_a_second_late():
 
 def test_replay_without_a_skeleton_walks_the_track_with_a_scripted_gait(env):
     episode = _straight_walk(-0.9)
-    info, term, _ = _run(env, ReactiveAgent(), options={"receiver": "replay", "episode": episode})
+    info, _term, _ = _run(env, ReactiveAgent(), options={"receiver": "replay", "episode": episode})
     assert info["outcome"] == "success"
     # The camera saw the recorded track.
     u = env.unwrapped
@@ -187,7 +187,7 @@ def test_a_recorded_person_stops_on_the_static_stop_line():
 
     env = gym.make("handover_env/StaticHandover-v0")
     rec = load_recording(DATA / "motion_normal_0.pkl")
-    info, term, _ = _run(env, StaticAgent(), options={"receiver": "replay", "episode": rec})
+    info, _term, _ = _run(env, StaticAgent(), options={"receiver": "replay", "episode": rec})
     u = env.unwrapped
     assert info["outcome"] == "success"
     assert u.receiver.at_rest and abs(u.receiver.base()[0] - STOP_XY[0]) < 0.05
