@@ -71,6 +71,9 @@ PARK_XY = (5.0, -3.0)
 #: the object's own): the body's compliance is in its welds, not in contact penetration.
 CONTACT_SOLREF = (0.004, 1.0)
 CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+#: The BODY_34 ankles of the recordings sit about 8 cm above the floor for the pelvis height
+#: (the tracker's legs are short for its pelvis); the shank and foot geoms reach down that far.
+FOOT_DROP = 0.08
 #: A geom end point at the hand's grip point (:meth:`BodyDims.grip`) instead of a joint.
 GRIP = -1
 #: Contact geoms: (segment, name, point a, point b, radius), points as (BODY_34 joint or GRIP,
@@ -92,11 +95,13 @@ _GEOMS: tuple[tuple[str, str, tuple[int, tuple], tuple[int, tuple], float], ...]
     ("forearm_l", "forearm_l", (J["LEFT_ELBOW"], (0, 0, 0)), (J["LEFT_WRIST"], (0, 0, 0)), 0.037),
     ("hand_l", "hand_l", (J["LEFT_WRIST"], (0, 0, 0)), (GRIP, (0, 0, 0)), 0.035),
     ("thigh_r", "thigh_r", (J["RIGHT_HIP"], (0, 0, 0)), (J["RIGHT_KNEE"], (0, 0, 0)), 0.07),
-    ("shank_r", "shank_r", (J["RIGHT_KNEE"], (0, 0, 0)), (J["RIGHT_ANKLE"], (0, 0, 0)), 0.05),
-    ("shank_r", "foot_r", (J["RIGHT_ANKLE"], (0, 0, 0)), (J["RIGHT_FOOT"], (0, 0, 0)), 0.035),
+    ("shank_r", "shank_r", (J["RIGHT_KNEE"], (0, 0, 0)), (J["RIGHT_ANKLE"], (0, 0, -FOOT_DROP)), 0.05),
+    ("shank_r", "foot_r", (J["RIGHT_ANKLE"], (0, 0, -FOOT_DROP)), (J["RIGHT_FOOT"], (0, 0, -FOOT_DROP)),
+     0.035),
     ("thigh_l", "thigh_l", (J["LEFT_HIP"], (0, 0, 0)), (J["LEFT_KNEE"], (0, 0, 0)), 0.07),
-    ("shank_l", "shank_l", (J["LEFT_KNEE"], (0, 0, 0)), (J["LEFT_ANKLE"], (0, 0, 0)), 0.05),
-    ("shank_l", "foot_l", (J["LEFT_ANKLE"], (0, 0, 0)), (J["LEFT_FOOT"], (0, 0, 0)), 0.035),
+    ("shank_l", "shank_l", (J["LEFT_KNEE"], (0, 0, 0)), (J["LEFT_ANKLE"], (0, 0, -FOOT_DROP)), 0.05),
+    ("shank_l", "foot_l", (J["LEFT_ANKLE"], (0, 0, -FOOT_DROP)), (J["LEFT_FOOT"], (0, 0, -FOOT_DROP)),
+     0.035),
 )
 GEOM_NAMES = tuple(g[1] for g in _GEOMS)
 #: Calibration of the weld stiffness: measured quasi-static stiffness / ISO value is 1 with this
