@@ -76,7 +76,7 @@ ACTION_LOW = np.array([-0.3, -1.1, 0.8, -math.pi], dtype=np.float32)
 ACTION_HIGH = np.array([0.9, 0.1, 1.6, math.pi], dtype=np.float32)
 OUTCOMES = ("running", "success", "premature_release", "dropped", "unsafe_force", "missed")
 #: reset() options the envs understand; anything else is warned about by name.
-RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode")
+RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode", "walker")
 
 
 class HandoverEnvBase(gym.Env, EzPickle):
@@ -310,9 +310,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return self._observation(), self._info()
 
     def _configure_receiver(self, kind: str, options: dict[str, Any]) -> None:
+        walker = options.get("walker")
+        if walker is not None and not isinstance(walker, dict):
+            raise ValueError(f"options['walker'] must be a dict of WalkerParams fields, got {type(walker).__name__}")
         self.receiver.reset(
             self.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
             episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
+            walker_overrides=walker,
         )
 
     def _record_camera_frame(self) -> None:

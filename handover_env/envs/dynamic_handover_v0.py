@@ -57,7 +57,9 @@ class DynamicHandoverEnv(HandoverEnvBase):
     (``"replay"`` with ``options["episode"]``: a ``Recording`` with the BODY_34 skeleton, an
     ``Episode`` or a dict of arrays; ``options["hand_mode"]`` ``"reach"`` (modelled hand) or
     ``"recorded"``); ``options["height"]`` and ``["speed"]`` fix the body height and walking
-    speed. Unknown option keys are warned about by name.
+    speed, ``options["walker"]`` any other field of a scripted walker
+    (:class:`handover_env.receiver_motion.WalkerParams`, e.g. ``{"pass_y": -1.0}``). Unknown
+    option keys are warned about by name.
 
     ## Episode End
     ``terminated`` on success (released at a pull above f_r, fingers open, the person holding the
