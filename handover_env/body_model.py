@@ -82,8 +82,8 @@ GRIP = -1
 _GEOMS: tuple[tuple[str, str, tuple[int, tuple], tuple[int, tuple], float], ...] = (
     ("pelvis", "hips", (J["LEFT_HIP"], (-0.01, -0.03, 0.0)), (J["RIGHT_HIP"], (-0.01, 0.03, 0.0)), 0.11),
     ("torso", "abdomen", (J["NAVAL_SPINE"], (0.0, 0.0, -0.02)), (J["CHEST_SPINE"], (0.0, 0.0, 0.0)), 0.12),
-    ("torso", "chest", (J["LEFT_SHOULDER"], (0.02, -0.07, -0.16)), (J["RIGHT_SHOULDER"], (0.02, 0.07, -0.16)),
-     0.11),
+    ("torso", "chest", (J["LEFT_SHOULDER"], (0.02, -0.10, -0.16)), (J["RIGHT_SHOULDER"], (0.02, 0.10, -0.16)),
+     0.10),
     ("torso", "shoulders", (J["LEFT_SHOULDER"], (0.0, 0.0, -0.02)), (J["RIGHT_SHOULDER"], (0.0, 0.0, -0.02)),
      0.055),
     ("head", "neck", (J["NECK"], (0.0, 0.0, 0.0)), (J["HEAD"], (0.0, 0.0, -0.08)), 0.05),
@@ -107,9 +107,9 @@ GEOM_NAMES = tuple(g[1] for g in _GEOMS)
 #: Calibration of the weld stiffness: measured quasi-static stiffness / ISO value is 1 with this
 #: gain per segment (see the module docstring; ``tests/test_body_model.py`` re-measures it).
 WELD_GAIN = {
-    "pelvis": 0.0709, "torso": 0.1165, "head": 0.2642, "upper_arm_r": 0.0591, "forearm_r": 0.1157,
-    "hand_r": 0.1662, "upper_arm_l": 0.0591, "forearm_l": 0.1157, "hand_l": 0.1662, "thigh_r": 0.2082,
-    "shank_r": 0.2711, "thigh_l": 0.2082, "shank_l": 0.2711,
+    "pelvis": 0.0732, "torso": 0.1188, "head": 0.2642, "upper_arm_r": 0.0599, "forearm_r": 0.116,
+    "hand_r": 0.1663, "upper_arm_l": 0.0599, "forearm_l": 0.116, "hand_l": 0.1663, "thigh_r": 0.216,
+    "shank_r": 0.2744, "thigh_l": 0.216, "shank_l": 0.2744,
 }
 _MATERIALS = {"pelvis": "trousers", "thigh_r": "trousers", "thigh_l": "trousers", "shank_r": "trousers",
               "shank_l": "trousers", "head": "skin", "hand_r": "skin", "hand_l": "skin"}

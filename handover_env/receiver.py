@@ -64,6 +64,9 @@ TRUNK_MAX_TURN = math.radians(20.0)
 _UPPER_BODY = tuple(i for i in range(len(SEGMENTS)) if i == SEG["torso"] or SEGMENTS[i].parent in (
     SEG["torso"], SEG["upper_arm_r"], SEG["forearm_r"], SEG["upper_arm_l"], SEG["forearm_l"]))
 _CONJ = np.array([1.0, -1.0, -1.0, -1.0])
+#: A hand drawing an object out keeps it this far from the pelvis axis (horizontally), m: the
+#: held bottle stays clear of the torso.
+CARRY_CLEARANCE = 0.35
 #: A held object counts as out of the (released) gripper once its centre is this far from the
 #: TCP (m): the bottle's radius plus the open fingers' depth.
 CLEAR_OF_GRIPPER = 0.1
@@ -104,8 +107,9 @@ class ReceiverConfig:
             drawing back, s (arm-extended time 1.30 s minus the reach, 0.67; the hand is drawn
             back 0.37 s before the giver lets go, 1.0 s after the grasp: 0.63).
         pull_time: how long drawing the hand back takes, s: first straight toward the body at
-            the height of the hold, by ``pull_distance`` (m), until the robot lets go, then
-            down to the carry pose.
+            the height of the hold, by ``pull_distance`` (m, but no closer than
+            ``CARRY_CLEARANCE`` to the pelvis axis), until the object is clear of the gripper,
+            then down to the carry pose.
         grasp_radius: the hand grasps when its grip point is this close to the grasp point, m,
         grasp_speed: and moves relative to it slower than this, m/s (a hand closes on an object
             it has caught up with; the grip is then :mod:`handover_env.grip`'s spring).
@@ -558,7 +562,8 @@ class Receiver:
             # gripper's fingers, until it is clear of the gripper.
             pelvis, rot, vel = self._pelvis(tau)
             pull = self._hold_rel.copy()
-            pull[:2] *= max(0.0, 1.0 - cfg.pull_distance / max(float(np.linalg.norm(pull[:2])), 1e-6))
+            reach = float(np.linalg.norm(pull[:2]))
+            pull[:2] *= max(reach - cfg.pull_distance, min(reach, CARRY_CLEARANCE)) / max(reach, 1e-6)
             goal, goal_v = pelvis + rot @ pull, vel
         elif state == "holding":
             swing = self._swing_hand(tau)

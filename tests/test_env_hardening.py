@@ -72,3 +72,11 @@ def test_unknown_reset_options_warn_by_name():
     env = gym.make(ENV_ID)
     with pytest.warns(UserWarning, match="reciever"):
         env.reset(seed=0, options={"reciever": "ood"})
+
+
+def test_a_diverging_simulation_ends_the_episode_as_unstable():
+    env = gym.make(ENV_ID).unwrapped
+    env.reset(seed=0)
+    env.data.qvel[env.ids.object_dof:env.ids.object_dof + 3] = 1e30  # blow it up
+    *_, terminated, _, info = env.step(np.array([0.3, -0.4, 1.15, 0.0], dtype=np.float32))
+    assert terminated and info["outcome"] == "unstable" and not info["is_success"]

@@ -31,10 +31,14 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
   hand catches the object afterwards: the episode ends at the release.
 * ``dropped``: nobody holds the object (gripper weld off, receiver not holding) and it has fallen
   0.15 m below where it was last held, or touches the floor.
-* ``unsafe_force``: the external force at the wrist (the person's pull) exceeded
-  ``safety_force`` (default 140 N: ISO/TS 15066, Annex A, maximum permissible quasi-static force
-  for the hand and fingers), or a robot/object contact on a body segment exceeded the
-  quasi-static limit of that body region (:mod:`handover_env.envs.contacts`).
+* ``unsafe_force``: the person's pull on an object the robot still holds (the grip force,
+  :mod:`handover_env.grip`) exceeded ``safety_force`` (default 140 N: ISO/TS 15066, Annex A,
+  maximum permissible quasi-static force for the hand and fingers: a tug of war), or a
+  robot/object contact on a body segment exceeded its body region's ISO/TS 15066 limit
+  (:mod:`handover_env.envs.contacts`). The wrist sensor's peak is reported but not held to a
+  limit: after the release it measures contacts, which are judged where they touch the body.
+* ``unstable``: MuJoCo reported a diverging position, velocity or acceleration (and reset its
+  state); the episode is void and says so instead of going on from a reset simulation.
 * ``missed``: the person walked past without taking the object (gave up on an object left
   behind them, see :class:`handover_env.receiver.ReceiverConfig`), or their walk ended (+1 s)
   without it. The static receiver waits; there only the TimeLimit ends an episode.
@@ -74,7 +78,10 @@ READY_YAW = -math.pi / 2
 HOME_Q = np.array([-2.3, -1.8, 2.1, -0.3, -3.9, 0.0])
 ACTION_LOW = np.array([-0.3, -1.1, 0.8, -math.pi], dtype=np.float32)
 ACTION_HIGH = np.array([0.9, 0.1, 1.6, math.pi], dtype=np.float32)
-OUTCOMES = ("running", "success", "premature_release", "dropped", "unsafe_force", "missed")
+OUTCOMES = ("running", "success", "premature_release", "dropped", "unsafe_force", "missed", "unstable")
+#: MuJoCo's warnings for a diverging state (it then resets the simulation).
+_DIVERGED = tuple(int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                                   mujoco.mjtWarning.mjWARN_BADQACC))
 #: reset() options the envs understand; anything else is warned about by name.
 RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode", "walker")
 
@@ -174,7 +181,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._slices = {k: v[0] for k, v in self.layout.slices().items()}
         self._obs = np.zeros(self.layout.size, dtype=np.float64)
 
-        self.contacts = ContactMonitor(self.model, self.ids)
+        self.contacts = ContactMonitor(self.model, self.ids, tick=self.model.opt.timestep * ControllerConfig().ticks)
         self._gripper_qpos = self.ids.gripper_driver_qpos
         self._object_body = self.ids.object_body
         arm_act = np.asarray(self.ids.arm_act)
@@ -496,12 +503,17 @@ class HandoverEnvBase(gym.Env, EzPickle):
         del hist[0]
 
     def _after_step(self) -> None:
+        warning = self.data.warning
+        if any(warning[w].number for w in _DIVERGED):
+            # MuJoCo found a diverging acceleration and reset the simulation: the episode is void.
+            self.outcome = "unstable"
+            return
         t = float(self.data.time)
         obj = self._object_pos_v
         ox, oy, oz = obj.tolist()
         holds = self._receiver_holds
         self.peak_contact_force = max(self.peak_wrist_force, float(self.contacts.peak.max()))
-        if self.peak_wrist_force > self.safety_force or self.contacts.unsafe_segment >= 0:
+        if self.pull_force > self.safety_force or self.contacts.unsafe_segment >= 0:
             self.outcome = "unsafe_force"
         elif self.released and not self.released_while_held:
             self.outcome = "premature_release"
