@@ -71,6 +71,9 @@ PARK_XY = (5.0, -3.0)
 #: the object's own): the body's compliance is in its welds, not in contact penetration.
 CONTACT_SOLREF = (0.004, 1.0)
 CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+#: MuJoCo mixes the two geoms' contact parameters by their solmix weights: the body's dominate
+#: (a robot geom's 20 ms default would otherwise soften every contact with the person).
+CONTACT_SOLMIX = 100.0
 #: The BODY_34 ankles of the recordings sit about 8 cm above the floor for the pelvis height
 #: (the tracker's legs are short for its pelvis); the shank and foot geoms reach down that far.
 FOOT_DROP = 0.08
@@ -214,7 +217,7 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
         bodies[i].add_geom(name=PREFIX + name, type=kind, pos=pos.tolist(), quat=quat.tolist(),
                            size=[r, max(half, 1e-6), 0.0], contype=contype, conaffinity=conaffinity,
                            mass=float(geo.mass[i] * vol / seg_vol[i]), material=_MATERIALS.get(seg, "shirt"),
-                           solref=list(CONTACT_SOLREF), solimp=list(CONTACT_SOLIMP))
+                           solref=list(CONTACT_SOLREF), solimp=list(CONTACT_SOLIMP), solmix=CONTACT_SOLMIX)
     # The right hand's grip point: where it holds the object.
     hand = SEG["hand_r"]
     bodies[hand].add_site(name=PREFIX + "grip_r", pos=dims.grip("r").tolist(),

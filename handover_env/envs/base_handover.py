@@ -367,10 +367,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         # The controller ticks on the global step clock: the schedule of (tick?, physics steps)
         # segments depends only on the clock's phase at the start of the env step.
         apply_tick, tick, mj_step = self.receiver.apply_tick, self._tick, mujoco.mj_step
+        contacts = self.contacts
         for is_tick, n in self._segments[self._global_step % self._ticks]:
             if is_tick:
                 apply_tick(d)
                 tick()
+                if contacts.unsafe_segment >= 0:
+                    break  # the episode ends at the unsafe contact, not pressed on to the step's end
             mj_step(m, d, n)  # positional: pybind keyword parsing costs ~0.5 us a call
         self._global_step += FRAME_SKIP
         self.receiver.apply(d, 1.0)
