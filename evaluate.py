@@ -4,6 +4,7 @@
     python evaluate.py table1 --data PATH --folds 10 --seed 0     # Table I: RMS (mm), ID / OOD
     python evaluate.py sample-efficiency --data PATH              # RMS vs training-data ratio
     python evaluate.py tradeoff --data PATH                       # RMS vs per-frame inference time
+    python evaluate.py user-study --participants 8 --trials 5     # H1-H3 with simulated participants
 
 PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
 omitted for the embedded synthetic default. Every method is scored by the same open-loop protocol
@@ -33,6 +34,7 @@ from handover_env.evaluation.methods import (  # noqa: E402
     default_workers,
 )
 from handover_env.evaluation.reporting import METHOD_LABELS, markdown_table, mean_std  # noqa: E402
+from handover_env.evaluation import user_study_cli  # noqa: E402
 
 QUICK_EPISODES = 30
 
@@ -96,6 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="inducing rates of ours (default: 0.1 to 1.0 in steps of 0.1)")
     p.add_argument("--timing-episodes", type=int, default=20,
                    help="test episodes streamed frame by frame to time each variant (default: 20)")
+    user_study_cli.add_parser(sub)
     return parser
 
 
@@ -121,6 +124,8 @@ def load_dataset(path: str | None, quick: bool, seed: int):
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.command == "user-study":
+        return user_study_cli.run(args)
     from handover_env.evaluation import experiments
     from handover_env.evaluation.openloop import OpenLoopProtocol
 
