@@ -34,7 +34,7 @@ from handover_env.evaluation.methods import (  # noqa: E402
     default_workers,
 )
 from handover_env.evaluation.reporting import METHOD_LABELS, markdown_table, mean_std  # noqa: E402
-from handover_env.evaluation import user_study_cli  # noqa: E402
+from handover_env.evaluation import user_study_cli  # noqa: E402,I001
 
 QUICK_EPISODES = 30
 

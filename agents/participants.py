@@ -385,5 +385,5 @@ def sample_population(n: int, seed: int = 0, male_fraction: float = 0.75,
         raise ValueError(f"need at least one participant, got {n!r}")
     if not 0.0 <= male_fraction <= 1.0:
         raise ValueError(f"male_fraction must be in [0, 1], got {male_fraction}")
-    n_male = int(round(male_fraction * n))
+    n_male = round(male_fraction * n)
     return [sample_participant(seed * 1000 + i, "male" if i < n_male else "female", population) for i in range(n)]

@@ -105,11 +105,11 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
     write_csv(out / "check.csv", rows)
     passed = sum(r["passed"] for r in rows)
     lines = [
-        "# CoSpar learns: Θ̂ after %d iterations vs the brute-forced optimum (simulated participants)" % config.iterations,
+        f"# CoSpar learns: Θ̂ after {config.iterations} iterations vs the brute-forced optimum (simulated participants)",
         "",
-        f"Grid {'x'.join(map(str, config.grid))} = {len(grid)} Θ over the paper's ranges, {config.walks} walks each, "
+        (f"Grid {'x'.join(map(str, config.grid))} = {len(grid)} Θ over the paper's ranges, {config.walks} walks each, "
         f"agent {config.agent}, receiver {config.receiver}. gain = (u(Θ̂) − mean u) / (max u − mean u); "
-        f"pass at ≥ {PASS_GAIN:.0%}.",
+        f"pass at ≥ {PASS_GAIN:.0%}."),
         "",
         "| participant | height (m) | speed (m/s) | best Θ | u best | u random | CoSpar Θ̂ | u Θ̂ | rank | gain | pass |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
@@ -120,9 +120,9 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
         lines.append(f"| {r['participant']} | {r['height']:.2f} | {r['speed']:.2f} | {theta_line(best)} | "
                      f"{r['u_best']:.2f} | {r['u_random']:.2f} | {theta_line(hat)} | {r['u_hat']:.2f} | "
                      f"{r['rank_of_hat']}/{len(grid)} | {r['gain']:.0%} | {'yes' if r['passed'] else 'no'} |")
-    lines += ["", f"**{passed} of {len(rows)} participants reach ≥ {PASS_GAIN:.0%} of the achievable gain** "
+    lines += ["", (f"**{passed} of {len(rows)} participants reach ≥ {PASS_GAIN:.0%} of the achievable gain** "
               f"(acceptance: ≥ 3 of 4). Episodes run now: {runner.episodes_run} ({runner.seconds:.0f} s); "
-              f"cached in `{cache.name}`."]
+              f"cached in `{cache.name}`.")]
     (out / "check.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return rows

@@ -183,9 +183,9 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     per = {cond: [] for cond in ("dynamic", "static")}
     times = {cond: [] for cond in ("dynamic", "static")}
     for p in people:
-        for cond in per:
+        for cond, ratings in per.items():
             rows = [r for r in result.trials if r["participant"] == p.pid and r["condition"] == cond]
-            per[cond].append(float(np.mean([r["likert"] for r in rows])))
+            ratings.append(float(np.mean([r["likert"] for r in rows])))
             ok = [r["handover_time"] for r in rows if r["handover_time"] is not None]
             times[cond].append(float(np.mean(ok)) if ok else math.nan)
     result.h1_h2 = {"comfort": paired_stats(per["dynamic"], per["static"]),

@@ -44,27 +44,27 @@ def markdown(result: StudyResult) -> str:
     td, ts = PAPER["time_dynamic"], PAPER["time_static"]
     lines = [
         "# User study with simulated participants (paper Sec. V-B)", "", SOURCE, "",
-        f"{len(result.participants)} participants (seed {cfg.seed}), {cfg.trials} trials per condition, "
+        (f"{len(result.participants)} participants (seed {cfg.seed}), {cfg.trials} trials per condition, "
         f"CoSpar {cfg.iterations} iterations on a {'x'.join(map(str, cfg.grid))} grid, {cfg.walks} tuning walks "
-        f"per Θ, agent `{cfg.agent}`.", "",
+        f"per Θ, agent `{cfg.agent}`."), "",
         "## Population Θ̂ (CoSpar pooled over the participants)", "",
         f"- ours: {theta_line(result.theta_pop)}" + (" (given with --theta)" if cfg.theta else ""),
         f"- the paper's: {theta_line(HandoverParams(*PAPER_THETA))}", "",
         "## H1 (comfort, Q1 Likert 1-5) and H2 (handover time) — dynamic vs static", "",
-        "| measure | dynamic (ours) | static (ours) | paired t-test p | Cohen's d_z | d_av | paper dynamic | "
-        "paper static | paper p | paper d |",
+        ("| measure | dynamic (ours) | static (ours) | paired t-test p | Cohen's d_z | d_av | paper dynamic | "
+        "paper static | paper p | paper d |"),
         "|---|---|---|---|---|---|---|---|---|---|",
-        f"| comfort (Likert) | {_ms(com['mean_a'], com['sd_a'])} | {_ms(com['mean_b'], com['sd_b'])} | "
+        (f"| comfort (Likert) | {_ms(com['mean_a'], com['sd_a'])} | {_ms(com['mean_b'], com['sd_b'])} | "
         f"{_p(com['p'])} | {com['d_z']:.2f} | {com['d_av']:.2f} | {pd[0]} ± {pd[1]} | {ps[0]} ± {ps[1]} | "
-        f"{PAPER['comfort_p']} | {PAPER['comfort_d']} |",
-        f"| handover time (s) | {_ms(tim['mean_b'], tim['sd_b'], ' s')} | {_ms(tim['mean_a'], tim['sd_a'], ' s')} | "
+        f"{PAPER['comfort_p']} | {PAPER['comfort_d']} |"),
+        (f"| handover time (s) | {_ms(tim['mean_b'], tim['sd_b'], ' s')} | {_ms(tim['mean_a'], tim['sd_a'], ' s')} | "
         f"{_p(tim['p'])} | {tim['d_z']:.2f} | {tim['d_av']:.2f} | {td[0]} ± {td[1]} s | {ts[0]} ± {ts[1]} s | "
-        f"{PAPER['time_p']} | {PAPER['time_d']} |", "",
-        f"M ± SD over participants of their trial averages (n = {com['n']} / {tim['n']} pairs). Handover time: "
+        f"{PAPER['time_p']} | {PAPER['time_d']} |"), "",
+        (f"M ± SD over participants of their trial averages (n = {com['n']} / {tim['n']} pairs). Handover time: "
         "from setting off to the gripper's release, the static robot's 2 s stabilisation delay excluded (as in "
         "the paper), successful handovers only. d_z = mean difference / SD of the differences; d_av = mean "
         "difference / mean of the two SDs. Success rate: dynamic "
-        f"{c['success']['dynamic']:.0%}, static {c['success']['static']:.0%}.", "",
+        f"{c['success']['dynamic']:.0%}, static {c['success']['static']:.0%}."), "",
         "## H3 — optimised Θ̂ vs Θ uniform in the paper's ranges (A/B)", "",
         "| | choices preferring optimised | share | two-tailed binomial p | Cohen's h |",
         "|---|---|---|---|---|",
@@ -76,9 +76,9 @@ def markdown(result: StudyResult) -> str:
         lines += _personal_lines(result)
     t = result.timings
     lines += ["## Cost", "",
-              f"{t.get('episodes', 0):.0f} episodes ({t.get('episode_s', 0):.0f} s of env time); pooled CoSpar "
+              (f"{t.get('episodes', 0):.0f} episodes ({t.get('episode_s', 0):.0f} s of env time); pooled CoSpar "
               f"{t.get('pooled_cospar_s', 0):.0f} s, H1/H2 {t.get('h1_h2_s', 0):.0f} s, H3 {t.get('h3_s', 0):.0f} s, "
-              f"personalised {t.get('personalised_s', 0):.0f} s; total {t.get('total_s', 0):.0f} s.", ""]
+              f"personalised {t.get('personalised_s', 0):.0f} s; total {t.get('total_s', 0):.0f} s."), ""]
     return "\n".join(lines)
 
 
@@ -89,11 +89,11 @@ def _personal_lines(result: StudyResult) -> list[str]:
     better = sum(r["u_own"] > r["u_population"] for r in rows)
     lines = [
         "## Personalised Θ (beyond the paper: its stated limitation, height and walking speed)", "",
-        f"Each participant's own CoSpar Θ̂ against the population Θ̂ on {rows[0]['comparisons']} held-out walks: "
+        (f"Each participant's own CoSpar Θ̂ against the population Θ̂ on {rows[0]['comparisons']} held-out walks: "
         f"own preferred in **{wins} / {n}** choices ({wins / n:.0%}); own Θ̂ gives the higher mean "
-        f"satisfaction for **{better} / {len(rows)}** participants.", "",
-        "| participant | sex | height (m) | speed (m/s) | own Θ̂ | prefers own | u own | u population | "
-        "success own / pop | time own / pop (s) | pull own / pop (N) | reach own / pop (m) |",
+        f"satisfaction for **{better} / {len(rows)}** participants."), "",
+        ("| participant | sex | height (m) | speed (m/s) | own Θ̂ | prefers own | u own | u population | "
+        "success own / pop | time own / pop (s) | pull own / pop (N) | reach own / pop (m) |"),
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in sorted(rows, key=lambda r: r["height"]):
@@ -109,9 +109,9 @@ def _personal_lines(result: StudyResult) -> list[str]:
         v = np.array([r["speed"] for r in rows])
         gain = np.array([r["u_own"] - r["u_population"] for r in rows])
         tf = np.array([r["own_forecast_time"] for r in rows])
-        lines += ["", f"Correlation over participants: gain of own over population utility vs height "
+        lines += ["", (f"Correlation over participants: gain of own over population utility vs height "
                   f"{_corr(h, gain)}, vs speed {_corr(v, gain)}; own t_f vs speed {_corr(v, tf)}; own t_f vs "
-                  f"height {_corr(h, tf)} (Pearson r; few participants, indicative only)."]
+                  f"height {_corr(h, tf)} (Pearson r; few participants, indicative only).")]
     return lines + [""]
 
 
@@ -126,6 +126,7 @@ def _figure(result: StudyResult, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from handover_env.evaluation.user_study import PAPER
 
     c = result.h1_h2
