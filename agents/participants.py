@@ -245,6 +245,11 @@ class Participant:
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(np.random.SeedSequence([int(self.seed), int(self.pid), 7]))
 
+    def reseed(self, stream: int) -> None:
+        """Restart the answer noise on its own stream (so that one part of a study does not depend
+        on how many questions an earlier part asked)."""
+        self.rng = np.random.default_rng(np.random.SeedSequence([int(self.seed), int(self.pid), 7, int(stream)]))
+
     # ------------------------------------------------------------------ the walk
     def walk_options(self, receiver: str = "id") -> dict:
         """Reset options for a scripted walker with this body and path (seeded by ``reset(seed)``)."""

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from agents.cospar import THETA_NAMES, CoSparConfig
-from agents.participants import Participant, sample_population
+from agents.participants import COST_NAMES, Participant, sample_population
 from handover_env.config import THETA_RANGES, HandoverParams
 from handover_env.evaluation.preference import (
     EpisodeRunner,
@@ -140,6 +140,27 @@ def binomial_stats(k: int, n: int) -> dict[str, float]:
             "h": 2 * math.asin(math.sqrt(share)) - 2 * math.asin(math.sqrt(0.5)) if n else math.nan}
 
 
+def _reseed(people: Sequence[Participant], stream: int) -> None:
+    """Each part of the study draws its answer noise from its own stream: a run with ``--theta``
+    set to the pooled Theta-hat reproduces H1-H3 exactly."""
+    for p in people:
+        p.reseed(stream)
+
+
+def _cost_difference(trials: Sequence[dict[str, Any]], people: Sequence[Participant]) -> dict[str, float]:
+    """Mean over participants of (static - dynamic) per cost term, comfort points: what each term
+    contributes to the dynamic condition's advantage (negative: it favours static)."""
+    out = {}
+    for name in COST_NAMES:
+        diffs = []
+        for p in people:
+            rows = {c: [r[f"cost_{name}"] for r in trials if r["participant"] == p.pid and r["condition"] == c]
+                    for c in ("dynamic", "static")}
+            diffs.append(float(np.mean(rows["static"]) - np.mean(rows["dynamic"])))
+        out[name] = float(np.mean(diffs))
+    return out
+
+
 def random_theta(rng: np.random.Generator) -> HandoverParams:
     """Theta uniform in the paper's ranges (H3's unoptimised system)."""
     return HandoverParams(*(float(rng.uniform(*THETA_RANGES[n])) for n in THETA_NAMES))
@@ -162,6 +183,7 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     timings: dict[str, float] = {}
     # 1. population Theta-hat
     t0 = time.perf_counter()
+    _reseed(people, 10)
     if config.theta is None:
         pooled = run_preference(people, pcfg, runner=runner, progress=progress)
         save_run(pooled, people, pcfg, out / "pooled")
@@ -172,6 +194,7 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     result = StudyResult(config, people, theta_pop)
     # 2. H1/H2
     t0 = time.perf_counter()
+    _reseed(people, 11)
     for p in tqdm(people, desc="H1/H2 dynamic vs static", unit="participant", disable=not progress):
         for t, seed in enumerate(p.walk_seeds(config.trials, STUDY)):
             for cond, static in (("dynamic", False), ("static", True)):
@@ -179,7 +202,8 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
                 result.trials.append({"participant": p.pid, "trial": t, "condition": cond, "walk_seed": seed,
                                       "outcome": info["outcome"], "handover_time": info.get("handover_time"),
                                       "handover_time_with_delay": info.get("handover_time_with_delay"),
-                                      "likert": p.likert(info), "satisfaction": p.satisfaction(info)})
+                                      "likert": p.likert(info), "satisfaction": p.satisfaction(info),
+                                      **{f"cost_{k}": v for k, v in p.costs(info).items()}})
     per = {cond: [] for cond in ("dynamic", "static")}
     times = {cond: [] for cond in ("dynamic", "static")}
     for p in people:
@@ -189,6 +213,7 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
             ok = [r["handover_time"] for r in rows if r["handover_time"] is not None]
             times[cond].append(float(np.mean(ok)) if ok else math.nan)
     result.h1_h2 = {"comfort": paired_stats(per["dynamic"], per["static"]),
+                    "cost_difference": _cost_difference(result.trials, people),
                     "time": paired_stats(times["static"], times["dynamic"]),
                     "comfort_per_participant": per, "time_per_participant": times,
                     "success": {c: float(np.mean([r["outcome"] == "success" for r in result.trials
@@ -196,6 +221,7 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     timings["h1_h2_s"] = time.perf_counter() - t0
     # 3. H3
     t0 = time.perf_counter()
+    _reseed(people, 12)
     for p in tqdm(people, desc="H3 optimised vs random", unit="participant", disable=not progress):
         rng = np.random.default_rng(np.random.SeedSequence([config.seed, p.pid, 3]))
         for t, seed in enumerate(p.walk_seeds(config.trials, STUDY)):
@@ -213,6 +239,7 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     timings["h3_s"] = time.perf_counter() - t0
     # 4. personalised
     t0 = time.perf_counter()
+    _reseed(people, 13)
     if config.personalised:
         for p in tqdm(people, desc="personalised CoSpar", unit="participant", disable=not progress):
             own = run_preference([p], pcfg, runner=runner).theta_hat
