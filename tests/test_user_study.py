@@ -61,6 +61,15 @@ def test_user_study_quick_end_to_end(tmp_path: Path) -> None:
     assert len(list(csv.DictReader((out / "personalised.csv").open()))) == 2
     assert (out / "user_study.png").stat().st_size > 1000
     assert (out / "pooled" / "theta_hat.json").exists()
+    assert "What makes the comfort difference" in text
+    # each part has its own answer-noise stream: --theta with the pooled Θ̂ reproduces H1-H3
+    theta = json.loads((out / "pooled" / "theta_hat.json").read_text())["theta_hat"]
+    again = tmp_path / "again"
+    assert evaluate.main(["user-study", "--quick", "--out", str(again), "--no-progress", "--no-personalised",
+                          "--theta", *(str(theta[k]) for k in ("stiffness", "damping", "forecast_time",
+                                                               "release_force"))]) == 0
+    assert (again / "trials.csv").read_text() == (out / "trials.csv").read_text()
+    assert (again / "h3_choices.csv").read_text() == (out / "h3_choices.csv").read_text()
 
 
 def test_user_study_rejects_bad_input(capsys) -> None:

@@ -65,6 +65,9 @@ def markdown(result: StudyResult) -> str:
         "the paper), successful handovers only. d_z = mean difference / SD of the differences; d_av = mean "
         "difference / mean of the two SDs. Success rate: dynamic "
         f"{c['success']['dynamic']:.0%}, static {c['success']['static']:.0%}."), "",
+        ("What makes the comfort difference (mean over participants of static − dynamic cost, comfort points; "
+         "positive favours dynamic): " + ", ".join(f"{k} {v:+.2f}" for k, v in c["cost_difference"].items())
+         + f"; total {sum(c['cost_difference'].values()):+.2f}."), "",
         "## H3 — optimised Θ̂ vs Θ uniform in the paper's ranges (A/B)", "",
         "| | choices preferring optimised | share | two-tailed binomial p | Cohen's h |",
         "|---|---|---|---|---|",
@@ -175,7 +178,7 @@ def write_report(result: StudyResult, out: Path) -> list[Path]:
         "source": "simulated participants (agents/participants.py), not people",
         "theta_population": dict(zip(THETA_NAMES, result.theta_pop.as_array())),
         "h1_comfort": result.h1_h2["comfort"], "h2_time": result.h1_h2["time"],
-        "success": result.h1_h2["success"], "h3": result.h3, "timings": result.timings,
+        "success": result.h1_h2["success"], "cost_difference": result.h1_h2["cost_difference"], "h3": result.h3, "timings": result.timings,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
     _figure(result, out / "user_study.png")
