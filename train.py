@@ -254,11 +254,11 @@ def build_parser() -> argparse.ArgumentParser:
     from handover_env.evaluation import preference_cli as pref
 
     sp = sub.add_parser("preference", help="CoSpar tunes Θ = {K, B, t_f, f_r} from simulated participants "
-                        "who judge real handovers in the env", description=pref.__doc__)
+                        "who judge real handovers in the env", description=pref.PREFERENCE_HELP)
     pref.add_preference_arguments(sp)
     sp.set_defaults(func=pref.run_preference_command, threads=1, device="cpu")
     sc = sub.add_parser("preference-check", help="acceptance: CoSpar's Θ̂ against the optimum brute-forced "
-                        "over a small grid (episodes cached)", description=pref.__doc__)
+                        "over a small grid (episodes cached)", description=pref.CHECK_HELP)
     pref.add_check_arguments(sc)
     sc.set_defaults(func=pref.run_check_command, threads=1, device="cpu")
     return p

@@ -10,6 +10,18 @@ import argparse
 from pathlib import Path
 
 
+PREFERENCE_HELP = """CoSpar (paper Sec. IV-B, V-B-1) tunes Theta = {K, B, t_f, f_r} over the paper's ranges from a
+simulated participant (agents/participants.py) who walks past the robot in the env and judges what
+happened: each iteration CoSpar proposes Theta, each is run as real episodes on the participant's
+walks, the participant states preferences (paper Eq. 2 noise), the Laplace posterior is updated.
+Prints Theta-hat beside the paper's and writes theta_hat.json, history.csv, preferences.csv,
+participants.csv and posterior_marginals.png. Results come from simulated participants, not people."""
+
+CHECK_HELP = """Acceptance check: for each participant, brute-force their utility over a small grid of Theta
+(episodes cached in OUT/episodes.jsonl), run CoSpar on the same grid for 20 iterations and report the
+share of the achievable gain over a random Theta that its Theta-hat reaches (pass at >= 90 %)."""
+
+
 def _int_at_least(low: int):
     def parse(text: str) -> int:
         try:
