@@ -11,7 +11,12 @@ import pytest
 
 from agents.cospar import CoSparConfig, action_grid
 from agents.participants import sample_participant, sample_population
-from handover_env.evaluation.preference import EpisodeRunner, PreferenceConfig, run_preference, summarise_outcomes
+from handover_env.evaluation.preference import (
+    EpisodeRunner,
+    PreferenceConfig,
+    run_preference,
+    summarise_outcomes,
+)
 
 SMALL = CoSparConfig(points_per_dim=(3, 3, 3, 3))
 
