@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
 PREFERENCE_HELP = """CoSpar (paper Sec. IV-B, V-B-1) tunes Theta = {K, B, t_f, f_r} over the paper's ranges from a
 simulated participant (agents/participants.py) who walks past the robot in the env and judges what
 happened: each iteration CoSpar proposes Theta, each is run as real episodes on the participant's
