@@ -14,6 +14,7 @@ from agents.participants import sample_participant, sample_population
 from handover_env.evaluation.preference import (
     EpisodeRunner,
     PreferenceConfig,
+    lived,
     run_preference,
     summarise_outcomes,
 )
@@ -54,6 +55,10 @@ def test_summary_of_outcomes() -> None:
     s = summarise_outcomes(infos)
     assert s["success_rate"] == 0.5 and s["handover_time"] == 2.0 and s["pull_force"] == 5.0
     assert s["measured_release_force"] == 6.0 and "release_force" not in s
+    # a numerical blow-up is not a lived handover: not judged, unless nothing else is left
+    unstable = {"outcome": "unstable"}
+    assert lived([infos[0], unstable]) == [infos[0]] and lived([unstable]) == [unstable]
+    assert summarise_outcomes([infos[0], unstable])["unstable"] == 1.0
 
 
 def test_runner_caches_episodes_and_runs_static_too() -> None:

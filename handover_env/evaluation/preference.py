@@ -12,7 +12,8 @@ K in [80, 140], B in [10, 20], t_f in [0, 1] s, f_r in [5, 20] N. Here every ite
    caches episodes by participant, walk and Theta);
 3. the participant (:mod:`agents.participants`) compares every pair among the new actions and the
    ``buffer_size`` actions they tried last, by their mean satisfaction over the walks, with the
-   probit noise of Eq. 2; each answer is a preference added to the data;
+   probit noise of Eq. 2; each answer is a preference added to the data (episodes the env ended
+   as ``unstable``, a numerical event, are not judged: :func:`lived`);
 4. the posterior is updated.
 
 Theta-hat is the argmax of the posterior mean over the actions tried (``CoSpar.best``); the
@@ -176,6 +177,14 @@ class EpisodeRunner:
             self._env, self._env_key = None, None
 
 
+def lived(infos: Sequence[Mapping]) -> list[Mapping]:
+    """The episodes a participant judges: all but those the env ended as ``unstable`` (MuJoCo reset
+    a diverging simulation: a numerical event no person lives through). If every episode is
+    unstable, all are returned (and judged as failed handovers)."""
+    kept = [i for i in infos if i.get("outcome") != "unstable"]
+    return kept or list(infos)
+
+
 def summarise_outcomes(infos: Sequence[Mapping]) -> dict[str, float]:
     """Mean outcome measures over episodes (times over successful ones; NaN if none); the measured
     release force is ``measured_release_force`` (``release_force`` is Theta's f_r)."""
@@ -185,7 +194,8 @@ def summarise_outcomes(infos: Sequence[Mapping]) -> dict[str, float]:
         vals = [float(r[key]) for r in rows if r.get(key) is not None]
         return float(np.mean(vals)) if vals else math.nan
 
-    out = {"success_rate": len(ok) / len(infos) if infos else math.nan, "handover_time": mean("handover_time", ok)}
+    out = {"success_rate": len(ok) / len(infos) if infos else math.nan, "handover_time": mean("handover_time", ok),
+           "unstable": float(sum(i.get("outcome") == "unstable" for i in infos))}
     for key in OUTCOME_COLUMNS[2:]:
         out[_RENAMED.get(key, key)] = mean(key, infos)
     return out
@@ -270,7 +280,7 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
             if judge is not None:
                 memory[(p.pid, a)] = (float(judge(p, a)), {})
             else:
-                infos = runner.run(p, HandoverParams(*grid[a]), seeds[p.pid])
+                infos = lived(runner.run(p, HandoverParams(*grid[a]), seeds[p.pid]))
                 costs = {f"cost_{c}": float(np.mean([p.costs(i)[c] for i in infos])) for c in COST_NAMES}
                 memory[(p.pid, a)] = (p.utility(infos), {**summarise_outcomes(infos), **costs})
         return memory[(p.pid, a)]

@@ -28,6 +28,7 @@ from handover_env.config import HandoverParams
 from handover_env.evaluation.preference import (
     EpisodeRunner,
     PreferenceConfig,
+    lived,
     run_preference,
     theta_line,
     write_csv,
@@ -83,7 +84,7 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
         for p in participants:
             seeds = p.walk_seeds(config.walks, 0)
             bar = tqdm(grid, desc=f"brute force, participant {p.pid}", unit="Θ", disable=not progress)
-            utilities[p.pid] = np.array([p.utility(runner.run(p, HandoverParams(*g), seeds)) for g in bar])
+            utilities[p.pid] = np.array([p.utility(lived(runner.run(p, HandoverParams(*g), seeds))) for g in bar])
     finally:
         _save_cache(runner, cache)
     rows = []

@@ -51,6 +51,7 @@ PAPER = {
     "time_dynamic": (3.2, 0.50), "time_static": (6.9, 1.2), "time_p": "< 0.001", "time_d": 1.92,
     "h3_share": 0.725, "h3_k": 29, "h3_n": 40, "h3_p": "< 0.01", "h3_h": 0.47,
 }
+UNSTABLE = "unstable"
 #: Walk-seed streams of a participant (never overlapping).
 TUNING, STUDY, HELD_OUT = 0, 1, 2
 
@@ -102,6 +103,7 @@ class StudyResult:
     h3: dict[str, Any] = field(default_factory=dict)
     personal: list[dict[str, Any]] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    unjudged: int = 0
 
 
 # ---------------------------------------------------------------------------- statistics
@@ -156,8 +158,8 @@ def _cost_difference(trials: Sequence[dict[str, Any]], people: Sequence[Particip
         for p in people:
             rows = {c: [r[f"cost_{name}"] for r in trials if r["participant"] == p.pid and r["condition"] == c]
                     for c in ("dynamic", "static")}
-            diffs.append(float(np.mean(rows["static"]) - np.mean(rows["dynamic"])))
-        out[name] = float(np.mean(diffs))
+            diffs.append(float(np.nanmean(rows["static"]) - np.nanmean(rows["dynamic"])))
+        out[name] = float(np.nanmean(diffs))
     return out
 
 
@@ -199,17 +201,20 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
         for t, seed in enumerate(p.walk_seeds(config.trials, STUDY)):
             for cond, static in (("dynamic", False), ("static", True)):
                 info = runner.run(p, theta_pop, [seed], static=static)[0]
+                judged = info["outcome"] != UNSTABLE  # a numerical event is not rated (see lived())
                 result.trials.append({"participant": p.pid, "trial": t, "condition": cond, "walk_seed": seed,
                                       "outcome": info["outcome"], "handover_time": info.get("handover_time"),
                                       "handover_time_with_delay": info.get("handover_time_with_delay"),
-                                      "likert": p.likert(info), "satisfaction": p.satisfaction(info),
-                                      **{f"cost_{k}": v for k, v in p.costs(info).items()}})
+                                      "likert": p.likert(info) if judged else math.nan,
+                                      "satisfaction": p.satisfaction(info) if judged else math.nan,
+                                      **{f"cost_{k}": v if judged else math.nan for k, v in p.costs(info).items()}})
     per = {cond: [] for cond in ("dynamic", "static")}
     times = {cond: [] for cond in ("dynamic", "static")}
     for p in people:
         for cond, ratings in per.items():
             rows = [r for r in result.trials if r["participant"] == p.pid and r["condition"] == cond]
-            ratings.append(float(np.mean([r["likert"] for r in rows])))
+            rated = [r["likert"] for r in rows if math.isfinite(r["likert"])]
+            ratings.append(float(np.mean(rated)) if rated else math.nan)
             ok = [r["handover_time"] for r in rows if r["handover_time"] is not None]
             times[cond].append(float(np.mean(ok)) if ok else math.nan)
     result.h1_h2 = {"comfort": paired_stats(per["dynamic"], per["static"]),
@@ -228,6 +233,9 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
             theta_r = random_theta(rng)
             opt = runner.run(p, theta_pop, [seed])[0]
             rnd = runner.run(p, theta_r, [seed])[0]
+            if UNSTABLE in (opt["outcome"], rnd["outcome"]):
+                result.unjudged += 1
+                continue
             u_opt, u_rnd = p.satisfaction(opt), p.satisfaction(rnd)
             result.choices.append({"participant": p.pid, "trial": t, "walk_seed": seed,
                                    **{f"random_{n}": v for n, v in zip(THETA_NAMES, theta_r.as_array())},
@@ -244,13 +252,18 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
         for p in tqdm(people, desc="personalised CoSpar", unit="participant", disable=not progress):
             own = run_preference([p], pcfg, runner=runner).theta_hat
             seeds = p.walk_seeds(config.trials, HELD_OUT)
-            a, b = runner.run(p, own, seeds), runner.run(p, theta_pop, seeds)
+            pairs = [(x, y) for x, y in zip(runner.run(p, own, seeds), runner.run(p, theta_pop, seeds))
+                     if UNSTABLE not in (x["outcome"], y["outcome"])]
+            result.unjudged += len(seeds) - len(pairs)
+            if not pairs:
+                continue
+            a, b = [x for x, _ in pairs], [y for _, y in pairs]
             wins = sum(p.prefers(p.satisfaction(x), p.satisfaction(y)) for x, y in zip(a, b))
             oa, ob = summarise_outcomes(a), summarise_outcomes(b)
             result.personal.append({
                 "participant": p.pid, "sex": p.body.sex, "height": p.body.height, "speed": p.body.speed,
                 "pass_y": p.body.pass_y, **{f"own_{n}": v for n, v in zip(THETA_NAMES, own.as_array())},
-                "prefers_own": wins, "comparisons": len(seeds),
+                "prefers_own": wins, "comparisons": len(pairs),
                 "u_own": p.utility(a), "u_population": p.utility(b),
                 **{f"own_{k2}": v for k2, v in oa.items()}, **{f"pop_{k2}": v for k2, v in ob.items()},
             })

@@ -78,6 +78,10 @@ def markdown(result: StudyResult) -> str:
     if result.personal:
         lines += _personal_lines(result)
     t = result.timings
+    n_unstable = sum(r["outcome"] == "unstable" for r in result.trials)
+    lines += [(f"Episodes the env ended as `unstable` (MuJoCo reset a diverging simulation; not rated, and "
+               f"their A/B pairs not asked): {n_unstable} of {len(result.trials)} H1/H2 trials, "
+               f"{result.unjudged} A/B pairs."), ""]
     lines += ["## Cost", "",
               (f"{t.get('episodes', 0):.0f} episodes ({t.get('episode_s', 0):.0f} s of env time); pooled CoSpar "
               f"{t.get('pooled_cospar_s', 0):.0f} s, H1/H2 {t.get('h1_h2_s', 0):.0f} s, H3 {t.get('h3_s', 0):.0f} s, "
