@@ -9,18 +9,26 @@ person's own business, not the robot's.
 
 Driving. Each segment has a mocap *target* body, moved by :mod:`handover_env.receiver` along the
 recorded or scripted motion, and a soft **weld** from target to segment. So the person follows
-their motion exactly in free space, while a collision with the robot deflects the touched parts
-with a bounded, measured force: there is no infinite-mass body pushing through the robot, and no
-interpenetration (contacts stay MuJoCo's near-rigid default).
+their motion in free space (the targets lead by the welds' velocity and acceleration lag,
+:func:`weld_lag_times`), while a collision with the robot deflects the touched parts with a
+bounded, measured force: there is no infinite-mass body pushing through the robot.
 
-Stiffness. Each weld holds its segment with the **effective spring constant of its body region
-from ISO/TS 15066:2016, Annex A (Table A.3)**, the stiffness collaborative-robot standards use to
-model a transient or quasi-static contact with that region: skull 150 N/mm, chest 25, pelvis 25,
-upper arm 30, lower arm 40, hand 75, thigh 50, lower leg 60. MuJoCo welds take a stiffness in
-acceleration units; :data:`WELD_GAIN` converts, calibrated once so that a static force at a
-segment's centre of mass deflects it by force / K (measured in ``tests/test_body_model.py``).
-Damping gives a damping ratio of about 1. The quasi-static force limits of the same standard
-(Table A.2; e.g. hand 140 N, chest 140 N) are reported beside the measured contact forces.
+Stiffness of the posture. The trunk, head and legs are held with the **effective spring constant
+of their body region from ISO/TS 15066:2016, Annex A (Table A.3)**: chest 25 N/mm, pelvis 25,
+skull 150, thigh 50, lower leg 60. The arms are held far more softly, with a hand endpoint
+stiffness of 1 N/mm (:data:`ARM_POSTURE_STIFFNESS`; measured human arm endpoint stiffness in
+relaxed posture is a few hundred N/m to a few N/mm), so an arm struck by the robot gives way at
+the shoulder and elbow as a person's does. MuJoCo welds take a stiffness in acceleration units;
+:data:`WELD_GAIN` converts, calibrated once so that a static 40 N force at a segment's centre of
+mass deflects it by force / K (measured in ``tests/test_body_model.py``). Damping gives a damping
+ratio of about 1.
+
+Stiffness of the tissue. The ISO constants also set the **contacts**: a robot or object geom
+pressing on a region compresses it like that region's tissue (:func:`contact_timeconst`,
+:data:`CONTACT_MASS`), a few millimetres at the region's force limit, instead of MuJoCo's
+near-rigid default. The quasi-static force limits of the same standard (Table A.2; e.g. hand
+140 N, chest 140 N) are reported beside the measured contact forces
+(:mod:`handover_env.envs.contacts`).
 
 Masses: de Leva (1996) segment fractions of a body of mass 23 kg/m² x height² (BMI 23).
 
@@ -60,6 +68,12 @@ MASS_FRACTION = {
     "thigh_r": 0.1416, "shank_r": 0.0570, "thigh_l": 0.1416, "shank_l": 0.0570,
 }
 BMI = 23.0
+#: The arm's segments yield like the arm they are: a bumped arm gives way at the shoulder and
+#: elbow long before its tissue compresses. Their holding stiffness is the human hand's endpoint
+#: stiffness with the arm held out (Mussa-Ivaldi, Hogan & Bizzi 1985: 300-800 N/m relaxed;
+#: Burdet et al. 2001: up to about 1-2 N/mm with co-contraction), not the ISO tissue value.
+ARM_POSTURE_STIFFNESS = 1000.0
+ARM_REGIONS = ("upper_arm", "lower_arm", "hand")
 #: Weld impedance (MuJoCo ``solimp`` d, constant): the share of the reference acceleration the
 #: solver enforces per step.
 WELD_IMPEDANCE = 0.5
@@ -67,9 +81,14 @@ WELD_DAMPING_RATIO = 1.0
 #: Where the body stands in a freshly compiled model (qpos0), well away from the robot: the env
 #: moves it to its start at every reset; scenes used without a person leave it here.
 PARK_XY = (5.0, -3.0)
-#: Contacts with the body are stiffer than MuJoCo's default (time constant 4 ms instead of 20,
-#: the object's own): the body's compliance is in its welds, not in contact penetration.
-CONTACT_SOLREF = (0.004, 1.0)
+#: Contacts carry the body's tissue compliance: a contact with a segment is a spring of its
+#: region's ISO/TS 15066 effective spring constant K for a robot-side effective mass of
+#: CONTACT_MASS (the gripper with the arm behind it, or a held bottle, a few kg), i.e. a MuJoCo
+#: contact time constant sqrt(CONTACT_MASS / K) (5 ms for the skull, 7 ms for the hand, 13 ms for
+#: the chest). Impacts then peak near ISO's two-body estimate v sqrt(K mu) instead of a rigid
+#: contact's impulse, and a quasi-static contact at the region's limit compresses the body by
+#: limit / K (2-6 mm).
+CONTACT_MASS = 4.0
 CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
 #: MuJoCo mixes the two geoms' contact parameters by their solmix weights: the body's dominate
 #: (a robot geom's 20 ms default would otherwise soften every contact with the person).
@@ -107,12 +126,15 @@ _GEOMS: tuple[tuple[str, str, tuple[int, tuple], tuple[int, tuple], float], ...]
      0.035),
 )
 GEOM_NAMES = tuple(g[1] for g in _GEOMS)
-#: Calibration of the weld stiffness: measured quasi-static stiffness / ISO value is 1 with this
-#: gain per segment (see the module docstring; ``tests/test_body_model.py`` re-measures it).
+#: Calibration of the weld stiffness: measured quasi-static stiffness / target is 1 with this
+#: gain per segment (see the module docstring; ``tests/test_body_model.py`` re-measures it). The
+#: upper arms are the exception: pushed at the centre of mass they are held by the shoulder and the
+#: forearm chain, about 1.1 kN/m however weak their own weld, so their gain is left out of
+#: :func:`calibrate_weld_gains` (measured 1.09 and 1.15 kN/m for the right and left arm).
 WELD_GAIN = {
-    "pelvis": 0.0732, "torso": 0.1188, "head": 0.2642, "upper_arm_r": 0.0599, "forearm_r": 0.116,
-    "hand_r": 0.1663, "upper_arm_l": 0.0599, "forearm_l": 0.116, "hand_l": 0.1663, "thigh_r": 0.216,
-    "shank_r": 0.2744, "thigh_l": 0.216, "shank_l": 0.2744,
+    "pelvis": 0.0952, "torso": 0.1288, "head": 0.2725, "upper_arm_r": 0.0255, "forearm_r": 0.1054,
+    "hand_r": 0.1492, "upper_arm_l": 0.0255, "forearm_l": 0.1054, "hand_l": 0.1492, "thigh_r": 0.2168,
+    "shank_r": 0.2744, "thigh_l": 0.2168, "shank_l": 0.2744,
 }
 _MATERIALS = {"pelvis": "trousers", "thigh_r": "trousers", "thigh_l": "trousers", "shank_r": "trousers",
               "shank_l": "trousers", "head": "skin", "hand_r": "skin", "hand_l": "skin"}
@@ -121,6 +143,20 @@ _MATERIALS = {"pelvis": "trousers", "thigh_r": "trousers", "thigh_l": "trousers"
 def segment_mass(name: str, height: float) -> float:
     """Mass of segment ``name`` for a body of ``height`` m, kg."""
     return MASS_FRACTION[name] * BMI * height * height
+
+
+def contact_timeconst(segment: int) -> float:
+    """MuJoCo contact time constant of a segment's geoms, s (see ``CONTACT_MASS``)."""
+    k_iso = ISO_REGIONS[SEGMENTS[segment].region][0] * 1000.0
+    return math.sqrt(CONTACT_MASS / k_iso)
+
+
+def target_stiffness(segment: int) -> float:
+    """The quasi-static stiffness a segment is held with, N/m (see the module docstring)."""
+    s = SEGMENTS[segment]
+    if s.region in ARM_REGIONS:
+        return ARM_POSTURE_STIFFNESS
+    return ISO_REGIONS[s.region][0] * 1000.0
 
 
 def weld_solref(segment: int, height: float) -> tuple[float, float]:
@@ -132,10 +168,9 @@ def weld_solref(segment: int, height: float) -> tuple[float, float]:
     correct by the measured :data:`WELD_GAIN` (the segments are coupled through their joints).
     """
     s = SEGMENTS[segment]
-    k_iso = ISO_REGIONS[s.region][0] * 1000.0  # N/m
     m = segment_mass(s.name, height)
     d = WELD_IMPEDANCE
-    k = WELD_GAIN[s.name] * k_iso * (1.0 - d) / (d * m)
+    k = WELD_GAIN[s.name] * target_stiffness(segment) * (1.0 - d) / (d * m)
     b = 2.0 * WELD_DAMPING_RATIO * math.sqrt(k / d)
     return -k, -b
 
@@ -217,7 +252,8 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
         bodies[i].add_geom(name=PREFIX + name, type=kind, pos=pos.tolist(), quat=quat.tolist(),
                            size=[r, max(half, 1e-6), 0.0], contype=contype, conaffinity=conaffinity,
                            mass=float(geo.mass[i] * vol / seg_vol[i]), material=_MATERIALS.get(seg, "shirt"),
-                           solref=list(CONTACT_SOLREF), solimp=list(CONTACT_SOLIMP), solmix=CONTACT_SOLMIX)
+                           solref=[contact_timeconst(i), 1.0], solimp=list(CONTACT_SOLIMP),
+                           solmix=CONTACT_SOLMIX)
     # The right hand's grip point: where it holds the object.
     hand = SEG["hand_r"]
     bodies[hand].add_site(name=PREFIX + "grip_r", pos=dims.grip("r").tolist(),
@@ -236,15 +272,16 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
                            data=[*com, *com, 1, 0, 0, 0, 1, 0])
 
 
-def weld_lag_times(model: mujoco.MjModel, ids: BodyIds) -> np.ndarray:
-    """(S,) how long each segment lags a target moving at constant velocity, s.
+def weld_lag_times(model: mujoco.MjModel, ids: BodyIds) -> tuple[np.ndarray, np.ndarray]:
+    """(S,) feed-forward gains of each segment's target: (b / k, 1 / k).
 
-    In steady motion the weld's reference acceleration -b v - k r vanishes, so the segment trails
-    its target by r = (b / k) v: the receiver puts each target that far ahead.
+    The weld's reference acceleration is -b v - k r; a segment that moves with its target at
+    velocity v and acceleration a therefore trails it by r = (b v + a) / k. The receiver puts each
+    target that far ahead, so the segment itself sits on its nominal motion.
     """
     k = -model.eq_solref[ids.welds, 0]
     b = -model.eq_solref[ids.welds, 1]
-    return b / k
+    return b / k, 1.0 / k
 
 
 @dataclass
@@ -388,7 +425,9 @@ def measure_stiffness(model: mujoco.MjModel, data: mujoco.MjData, ids: BodyIds, 
 
 def calibrate_weld_gains(iterations: int = 6) -> dict[str, float]:
     """Find :data:`WELD_GAIN` so that every segment's measured stiffness (mean over the two
-    horizontal axes) is its region's ISO value; how the committed gains were made."""
+    horizontal axes) is its :func:`target_stiffness`; how the committed gains were made. The upper
+    arms keep their gain: their stiffness is bounded below by their neighbours (see
+    :data:`WELD_GAIN`), so the iteration would only drive their own weld towards zero."""
     gains = dict(WELD_GAIN)
     for _ in range(iterations):
         WELD_GAIN.update(gains)
@@ -402,8 +441,10 @@ def calibrate_weld_gains(iterations: int = 6) -> dict[str, float]:
         data = mujoco.MjData(model)
         ids = body_ids(model)
         for i, s in enumerate(SEGMENTS):
+            if s.name.startswith("upper_arm"):
+                continue
             k = 0.5 * sum(measure_stiffness(model, data, ids, i, axis=a) for a in (0, 1))
-            gains[s.name] *= (ISO_REGIONS[s.region][0] * 1000.0 / k) ** 0.8
+            gains[s.name] *= (target_stiffness(i) / k) ** 0.8
     for left, right in (("upper_arm_l", "upper_arm_r"), ("forearm_l", "forearm_r"), ("hand_l", "hand_r"),
                         ("thigh_l", "thigh_r"), ("shank_l", "shank_r")):
         gains[left] = gains[right] = 0.5 * (gains[left] + gains[right])

@@ -64,6 +64,11 @@ TRUNK_MAX_TURN = math.radians(20.0)
 _UPPER_BODY = tuple(i for i in range(len(SEGMENTS)) if i == SEG["torso"] or SEGMENTS[i].parent in (
     SEG["torso"], SEG["upper_arm_r"], SEG["forearm_r"], SEG["upper_arm_l"], SEG["forearm_l"]))
 _CONJ = np.array([1.0, -1.0, -1.0, -1.0])
+#: Speed and acceleration up to which a segment's target is led by the feed-forward, m/s and
+#: m/s^2 (peak hand speeds of fast human reaches are about 2-3 m/s).
+MAX_SEGMENT_SPEED = 3.0
+MAX_SEGMENT_ACCEL = 30.0
+
 #: A hand drawing an object out keeps it this far from the pelvis axis (horizontally), m: the
 #: held bottle stays clear of the torso.
 CARRY_CLEARANCE = 0.35
@@ -183,6 +188,12 @@ def _quat_to_mat(q: np.ndarray) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
+def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
+    """Rows of ``v`` scaled down to norm ``limit`` where longer."""
+    norm = np.linalg.norm(v, axis=1, keepdims=True)
+    return v * np.minimum(1.0, limit / np.maximum(norm, 1e-12))
+
+
 class Receiver:
     """Drives the simulated person in a compiled handover scene.
 
@@ -248,7 +259,7 @@ class Receiver:
         self.height = motion.dims.height
         self.present_after_walk = stop_x is not None
         apply_dims(self.model, self.body, motion.dims)
-        self._lag = weld_lag_times(self.model, self.body)
+        self._lag, self._acc_gain = weld_lag_times(self.model, self.body)
         dims = motion.dims
         self._shoulder_local = dims.local(J["RIGHT_SHOULDER"], SEG["torso"])
         self._grip_local = dims.grip("r")
@@ -337,6 +348,7 @@ class Receiver:
         self._t = 0.0
         pose = self._pose_at(0.0, None)
         self._key0 = self._key1 = pose
+        self._vel = np.zeros((len(pose[0]), 3))
         b = self.body
         data.qpos[b.root_qpos:b.root_qpos + 3] = pose[0][0]
         data.qpos[b.root_qpos + 3:b.root_qpos + 7] = pose[1][0]
@@ -669,7 +681,14 @@ class Receiver:
         # constant over the step, so it is applied to both keyframes once here.
         lag = self._lag[:, None]
         ff_q = np.concatenate([np.ones((len(lag), 1)), dq[:, 1:] * (lag / dt)], axis=1)
-        self._pos0 = o0 + (o1 - o0) * (lag / dt)
+        vel = (o1 - o0) / dt
+        acc = (vel - self._vel) / dt
+        self._vel = vel
+        # The feed-forward assumes human speeds and accelerations (a recorded arm can be tracked
+        # at several m/s for a frame or two): beyond them a segment lags its recorded motion
+        # instead of being pulled by a target far ahead of it.
+        self._pos0 = (o0 + _clip_norm(vel, MAX_SEGMENT_SPEED) * lag
+                      + _clip_norm(acc, MAX_SEGMENT_ACCEL) * self._acc_gain[:, None])
         self._dpos = o1 - o0
         self._quat0 = _quat_mul(ff_q, q0)
         self._dquat = _quat_mul(ff_q, q1) - self._quat0

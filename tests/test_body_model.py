@@ -7,14 +7,19 @@ import numpy as np
 import pytest
 
 from handover_env.body_model import (
+    ARM_POSTURE_STIFFNESS,
+    ARM_REGIONS,
+    CONTACT_MASS,
     GEOM_NAMES,
     ISO_REGIONS,
     PARK_XY,
     add_receiver,
     apply_dims,
     body_ids,
+    contact_timeconst,
     measure_stiffness,
     segment_mass,
+    target_stiffness,
     weld_lag_times,
 )
 from handover_env.skeleton import SEG, SEGMENTS, BodyDims, J
@@ -52,27 +57,40 @@ def test_parked_away_and_upright(body):
     assert np.abs(data.qvel[ids.dofs]).max() < 1e-6  # at rest under gravity (compensated)
 
 
-@pytest.mark.parametrize("segment", ["torso", "head", "forearm_r", "hand_r", "upper_arm_l", "thigh_l"])
-def test_quasi_static_stiffness_is_the_iso_value(body, segment):
-    """A horizontal push at a segment's centre of mass deflects it by force / K_ISO: within 10 %
+@pytest.mark.parametrize("segment", ["pelvis", "torso", "head", "thigh_l", "forearm_r", "hand_r", "upper_arm_l"])
+def test_quasi_static_stiffness_is_the_documented_value(body, segment):
+    """A horizontal push at a segment's centre of mass deflects it by force / K: within 10 %
     averaged over the two horizontal directions (what the weld gains are calibrated to); each
     direction alone within a factor 2 (the joints couple a segment to its neighbours: a forward
-    push leans the torso about its lumbar joint, 0.56 K_ISO; a sideways one meets the shoulders
-    too, 1.43 K_ISO)."""
+    push leans the torso about its lumbar joint, a sideways one meets the shoulders too). The push
+    is the calibration's 40 N: the arm chain is not linear over large deflections.
+    K is the ISO/TS 15066 value of the region for the trunk, head and legs, and the hand's
+    endpoint stiffness (1 N/mm) for the arms, which give way at the shoulder and elbow."""
     model, data, ids = body
     i = SEG[segment]
-    k_iso = ISO_REGIONS[SEGMENTS[i].region][0] * 1000.0
-    kx, ky = (measure_stiffness(model, data, ids, i, axis=a) for a in (0, 1))
-    assert 0.5 * (kx + ky) == pytest.approx(k_iso, rel=0.10)
-    assert k_iso / 2.0 < min(kx, ky) and max(kx, ky) < 2.0 * k_iso
-    assert 40.0 / min(kx, ky) < 0.005  # 40 N deflects a few mm: the body yields, but is no ghost
+    k = target_stiffness(i)
+    if SEGMENTS[i].region in ARM_REGIONS:
+        assert k == ARM_POSTURE_STIFFNESS
+    else:
+        assert k == ISO_REGIONS[SEGMENTS[i].region][0] * 1000.0
+    kx, ky = (measure_stiffness(model, data, ids, i, axis=a, force=40.0) for a in (0, 1))
+    # The upper arm is held by the shoulder and the forearm chain (WELD_GAIN's note): ~1.1 kN/m.
+    assert 0.5 * (kx + ky) == pytest.approx(k, rel=0.20 if segment.startswith("upper_arm") else 0.10)
+    assert k / 2.0 < min(kx, ky) and max(kx, ky) < 2.0 * k
+
+
+def test_contacts_carry_the_tissue_stiffness():
+    """Contact time constants: sqrt(m / K_ISO) for the robot-side mass, so a contact compresses
+    the body like its tissue (chest 25 N/mm: 13 ms; hand 75 N/mm: 7 ms)."""
+    for name, k in (("torso", 25e3), ("hand_r", 75e3), ("head", 150e3)):
+        assert contact_timeconst(SEG[name]) == pytest.approx((CONTACT_MASS / k) ** 0.5)
 
 
 def test_segments_follow_moving_targets_with_the_velocity_feed_forward(body):
     model, data, ids = body
     _settle(model, data, ids)
     p0, q0 = data.xpos[ids.bodies].copy(), data.xquat[ids.bodies].copy()
-    lag = weld_lag_times(model, ids)[:, None]
+    lag = weld_lag_times(model, ids)[0][:, None]
     v = np.array([-1.0, 0.2, 0.0])
     dt = model.opt.timestep
     for k in range(900):
@@ -80,7 +98,11 @@ def test_segments_follow_moving_targets_with_the_velocity_feed_forward(body):
         data.mocap_quat[ids.mocap] = q0
         mujoco.mj_step(model, data)
     err = np.linalg.norm(data.xpos[ids.bodies] - (p0 + v * (900 * dt)), axis=1)
-    assert err.max() < 0.003  # within 3 mm at 1 m/s
+    arm = np.array([s.region in ARM_REGIONS and not s.name.startswith("hand") for s in SEGMENTS])
+    assert err[~arm].max() < 0.003  # within 3 mm at 1 m/s (one step, 1.7 mm, is the target's age)
+    # The arm chain's welds differ in strength (WELD_GAIN's note), and the joints make each segment
+    # split the difference between its own lead and its neighbours': the forearms trail ~5 mm.
+    assert err[arm].max() < 0.01
 
 
 def test_resizing_changes_lengths_masses_and_keeps_contacts_found():

@@ -99,13 +99,16 @@ def test_an_object_out_of_reach_slows_the_person_then_is_missed(env):
     assert info["transfer_time"] is None and not info["released"]
 
 
-def test_the_null_agent_makes_the_person_reach_further_than_the_reactive_one(env):
-    reach = {}
+def test_the_null_agent_makes_the_handover_slower_than_the_reactive_one(env):
+    """Holding the object still, the robot leaves the person to come and take it: it happens, later.
+    (Both make the person reach with a straight arm, ~0.6 m: the reach distance does not tell them
+    apart on this walker; the time does, by about 0.5 s on seeds 0-5.)"""
+    info = {}
     for name, agent in (("reactive", ReactiveAgent()), ("null", NullAgent())):
-        info, *_ = _run(env, agent, seed=3)
-        assert info["outcome"] == "success", (name, info["outcome"])
-        reach[name] = info["reach_distance"]
-    assert reach["null"] > reach["reactive"]
+        info[name], *_ = _run(env, agent, seed=3)
+        assert info[name]["outcome"] == "success", (name, info[name]["outcome"])
+    assert info["null"]["handover_time"] > info["reactive"]["handover_time"] + 0.3
+    assert info["null"]["transfer_time"] > info["reactive"]["transfer_time"]
 
 
 def test_a_delayed_agent_acts_half_a_second_late():
