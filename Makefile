@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m handover_env.demo
+	$(PY) -m handover_eval.demo
 
 test: $(STAMP)
 	$(PY) -m pytest -q

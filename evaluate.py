@@ -8,7 +8,7 @@
 
 PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
 omitted for the embedded synthetic default. Every method is scored by the same open-loop protocol
-(``handover_env/evaluation/openloop.py``, summarised in the README). Results go to ``--out``
+(``handover_eval/openloop.py``, summarised in the README). Results go to ``--out``
 (default ``results/<command>/``): Markdown and CSV tables, per-fold and per-episode CSVs, PNG plots.
 Trained BC-MLP / ACT checkpoints are kept under ``<out>/checkpoints`` and reused when the method
 configuration and the training set match (``--no-reuse`` retrains).
@@ -25,7 +25,7 @@ from pathlib import Path
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 
-from handover_env.evaluation.methods import (  # noqa: E402
+from handover_eval.methods import (  # noqa: E402
     ACT_EVAL_STEPS,
     METHODS,
     QUICK_ACT_STEPS,
@@ -33,8 +33,8 @@ from handover_env.evaluation.methods import (  # noqa: E402
     check_methods,
     default_workers,
 )
-from handover_env.evaluation.reporting import METHOD_LABELS, markdown_table, mean_std  # noqa: E402
-from handover_env.evaluation import user_study_cli  # noqa: E402,I001
+from handover_eval.reporting import METHOD_LABELS, markdown_table, mean_std  # noqa: E402
+from handover_eval import user_study_cli  # noqa: E402,I001
 
 QUICK_EPISODES = 30
 
@@ -126,8 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "user-study":
         return user_study_cli.run(args)
-    from handover_env.evaluation import experiments
-    from handover_env.evaluation.openloop import OpenLoopProtocol
+    from handover_eval import experiments
+    from handover_eval.openloop import OpenLoopProtocol
 
     try:
         methods = check_methods(args.methods)

@@ -16,7 +16,7 @@ public dataset's pickles, or omitted for the embedded synthetic default. The che
 overwritten: pass ``--resume`` or ``--overwrite``; a folder of other files is refused. Bad input
 gives a one-line error naming the file or option (exit status 2). ``--test-fold K``
 holds out fold K of a stratified ``--folds``-fold split (by ID/OOD) from training and reports the
-open-loop RMS on it at the end. Features: see ``baselines/features.py``.
+open-loop RMS on it at the end. Features: see ``handover_env/data/features.py``.
 """
 
 from __future__ import annotations
@@ -83,10 +83,10 @@ def split_test(data: HandoverDataset, folds: int, test_fold: int | None, seed: i
 # ---------------------------------------------------------------------------- evaluation
 def openloop_rms(agent, test: HandoverDataset) -> dict:
     """Open-loop RMS (mm, 3D and per axis; mean +- std over episodes, ID and OOD apart) on ``test``
-    by the shared protocol (``handover_env.evaluation.openloop``: a query at every frame from
+    by the shared protocol (``handover_eval.openloop``: a query at every frame from
     frame 5, horizon 30, row 0 = the current frame). The protocol calls ``predict_episode``, through
     which the baselines also read the giver position at the query frame (their ``observation.state``)."""
-    from handover_env.evaluation.openloop import OpenLoopProtocol, evaluate_openloop, summarise
+    from handover_eval.openloop import OpenLoopProtocol, evaluate_openloop, summarise
 
     return summarise(evaluate_openloop(agent, test, OpenLoopProtocol(horizon=agent.horizon), progress=False))
 
@@ -251,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "or refused without --overwrite)")
     act.set_defaults(func=train_act)
 
-    from handover_env.evaluation import preference_cli as pref
+    from handover_eval import preference_cli as pref
 
     sp = sub.add_parser("preference", help="CoSpar tunes Θ = {K, B, t_f, f_r} from simulated participants "
                         "who judge real handovers in the env", description=pref.PREFERENCE_HELP)

@@ -16,7 +16,7 @@ learns it from pairwise preferences:
   the ``buffer_size`` most recent earlier ones; every stated pair is added to D.
 
 Nothing here knows about robots: the simulated participants of :mod:`agents.participants` judge
-real handovers in the env and answer the queries (:mod:`handover_env.evaluation.preference` runs
+real handovers in the env and answer the queries (:mod:`handover_eval.preference` runs
 the loop), standing in for the study's participants.
 """
 

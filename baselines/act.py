@@ -2,7 +2,7 @@
 
 State-only ACT: no camera, no vision backbone, no pretrained weights, no network.
 
-| ACT input / output                | feature type | shape  | content (:mod:`baselines.features`)            |
+| ACT input / output                | feature type | shape  | content (:mod:`handover_env.data.features`)            |
 |-----------------------------------|--------------|--------|------------------------------------------------|
 | ``observation.environment_state`` | ENV          | (2 W,) | receiver base xy history (current xy + offsets) |
 | ``observation.state``             | STATE        | (3,)   | current giver xyz (robot TCP in the env)        |
@@ -15,7 +15,7 @@ statistics (``get_feature_stats``) of the training episodes for all three featur
 ACTION all MEAN_STD), and optimised with ``ACTPolicy.forward`` (L1 + KL loss) under AdamW with the
 gradient clipping of LeRobot's ACT preset. ``fit_lerobot(..., episodes=...)`` trains on a subset of
 an export's episodes (split and statistics from that subset only), so k-fold evaluations export
-the whole dataset once (:mod:`handover_env.evaluation.act_folds`).
+the whole dataset once (:mod:`handover_eval.act_folds`).
 
 CPU cost (receiver-only default model, batch 64, one thread, 2-core AMD EPYC VM): a step is
 ~5.4 GFLOP of forward + backward, ~117 ms (8.6 steps/s). Besides the model itself, training
@@ -88,7 +88,7 @@ from baselines.checkpoint_io import (  # noqa: E402
     staged_write,
     write_json,
 )
-from baselines.features import (  # noqa: E402
+from handover_env.data.features import (  # noqa: E402
     ACTION,
     ACTION_DIM,
     OBS_ENV_STATE,
@@ -819,7 +819,7 @@ class ACTAgent(GiverConditionedAgent):
         Every file is validated before it is used (:mod:`baselines.act_files`); LeRobot never
         parses the checkpoint's JSON: the policy and the processors are built from our validated
         config and only their tensors are loaded. Any problem raises
-        :class:`~baselines.features.CheckpointError` naming the file (and the processor step).
+        :class:`~handover_env.data.features.CheckpointError` naming the file (and the processor step).
         ``closed_loop_kwargs`` (params, closed_loop, layout) go to ``PredictiveAgent``.
         """
         from lerobot.policies.act.modeling_act import ACTPolicy

@@ -32,7 +32,7 @@ from typing import Any
 import torch
 
 from baselines.checkpoint_io import load_tensors, read_json
-from baselines.features import CheckpointError
+from handover_env.data.features import CheckpointError
 
 PREPROCESSOR_JSON = "policy_preprocessor.json"
 POSTPROCESSOR_JSON = "policy_postprocessor.json"

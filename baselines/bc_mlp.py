@@ -1,6 +1,6 @@
 """BC-MLP: behaviour cloning with a multi-layer perceptron (the paper's Table I baseline).
 
-A torch MLP maps the shared baseline features of one frame (:mod:`baselines.features`: the W-frame
+A torch MLP maps the shared baseline features of one frame (:mod:`handover_env.data.features`: the W-frame
 receiver base-xy history and the current giver xyz) to the giver xyz chunk of the next H = 30
 frames. Inputs and outputs are standardised with mean/std statistics of the training frames, kept
 as buffers of the module so they are saved with the weights (``model.safetensors``). Training uses
@@ -52,7 +52,7 @@ from baselines.checkpoint_io import (
     staged_write,
     write_json,
 )
-from baselines.features import (
+from handover_env.data.features import (
     CheckpointError,
     FeatureSpec,
     FrameArrays,
@@ -76,7 +76,7 @@ class BCMLPConfig:
     """Configuration of the BC-MLP baseline.
 
     Args:
-        history: W, frames of receiver history in the input (see :mod:`baselines.features`).
+        history: W, frames of receiver history in the input (see :mod:`handover_env.data.features`).
         horizon: H, frames of future giver xyz predicted (30 = 1 s, the paper's chunk).
         hidden: widths of the hidden layers.
         dropout: dropout after each hidden layer (0 keeps training fully deterministic).
@@ -211,7 +211,7 @@ class BCMLPAgent(GiverConditionedAgent):
     """The BC-MLP baseline behind the common agent interface.
 
     ``predict`` and ``predict_sequence`` need the current giver position (see
-    :mod:`baselines.features`); ``predict_episode`` (the open-loop protocol) takes it from the
+    :mod:`handover_env.data.features`); ``predict_episode`` (the open-loop protocol) takes it from the
     episode at the query frame, ``act`` from the robot's ``ee_pos``.
 
     Args:
@@ -433,7 +433,7 @@ class BCMLPAgent(GiverConditionedAgent):
         """Load a checkpoint written by :meth:`save` or by ``train.py bc-mlp``.
 
         Every file is validated first (see the module docstring); any problem raises
-        :class:`~baselines.features.CheckpointError` naming the file. ``closed_loop_kwargs``
+        :class:`~handover_env.data.features.CheckpointError` naming the file. ``closed_loop_kwargs``
         (params, closed_loop, layout) go to the constructor.
         """
         path = Path(path)

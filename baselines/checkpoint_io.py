@@ -13,7 +13,7 @@ new checkpoint, never files of two different epochs.
 :func:`load_tensors` (keys, shapes, dtypes and finiteness against what the model expects),
 :func:`config_from_dict` (every field present, of its exact JSON type: ``"no"`` is not a bool, a
 float is not an int) and :func:`load_optimizer` (LeRobot's optimizer format, checked against the
-optimizer being resumed) raise :class:`~baselines.features.CheckpointError` naming the file and
+optimizer being resumed) raise :class:`~handover_env.data.features.CheckpointError` naming the file and
 the problem; nothing raw (``SafetensorError``, ``JSONDecodeError``, ``KeyError``...) escapes.
 
 **Output folders.** :func:`check_out_dir` decides whether ``train.py`` may write into ``--out``.
@@ -35,7 +35,7 @@ from typing import Any
 
 import torch
 
-from baselines.features import CheckpointError
+from handover_env.data.features import CheckpointError
 
 STAGING = ".staging"
 COMMIT = "COMMIT.json"

@@ -1,7 +1,7 @@
 """What BC-MLP and ACT share: turning feature rows into open-loop and closed-loop predictions.
 
 Both baselines map (receiver history features, current giver xyz) rows to (H, 3) giver chunks
-through ``predict_batch`` (see :mod:`baselines.features`). This base class builds those rows for
+through ``predict_batch`` (see :mod:`handover_env.data.features`). This base class builds those rows for
 one history (``predict``), for a recorded episode at many query frames (``predict_episode``, what
 the open-loop protocol calls) and from raw arrays (``predict_sequence``), and reads the robot's
 TCP (``ee_pos``) as the giver state in the env (``act``).
@@ -15,7 +15,7 @@ import numpy as np
 
 from agents.base import validate_history
 from agents.predictive import PredictiveAgent
-from baselines.features import encode_history, episode_frames, validate_giver
+from handover_env.data.features import encode_history, episode_frames, validate_giver
 from handover_env.data.dataset import Episode
 
 

@@ -29,7 +29,7 @@ from baselines.act import (  # noqa: E402
     normalise_samples,
     open_export,
 )
-from baselines.features import CheckpointError, FeatureSpec  # noqa: E402
+from handover_env.data.features import CheckpointError, FeatureSpec  # noqa: E402
 from handover_env.data.lerobot_export import export_lerobot  # noqa: E402
 
 TINY = dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4,

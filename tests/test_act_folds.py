@@ -17,13 +17,13 @@ torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
 
 from baselines_toy import toy_dataset  # noqa: E402
 
-from handover_env.evaluation.act_folds import (  # noqa: E402
+from handover_eval.act_folds import (  # noqa: E402
     EXPORT_PREFIX,
     ensure_export,
     episode_indices,
     pretrain_act,
 )
-from handover_env.evaluation.methods import (  # noqa: E402
+from handover_eval.methods import (  # noqa: E402
     ACT_EVAL_STEPS,
     COMPLETE,
     MethodOptions,
@@ -135,7 +135,7 @@ def test_workers_option_and_eval_budget():
 
 
 def test_a_failing_worker_stops_the_pretraining(tmp_path):
-    from handover_env.evaluation.act_folds import ACTJob, _run_jobs
+    from handover_eval.act_folds import ACTJob, _run_jobs
 
     config = asdict(build_agent("act", OPTIONS).config)
     jobs = [ACTJob(f"job {i}", config, (0, 1, 2), str(tmp_path / f"ck{i}"), "{}", str(tmp_path / "no-export"))
@@ -147,8 +147,8 @@ def test_a_failing_worker_stops_the_pretraining(tmp_path):
 
 def test_sample_efficiency_pretrains_every_fold_and_ratio(tmp_path):
     from handover_env.data import generate_synthetic
-    from handover_env.evaluation.experiments import run_sample_efficiency
-    from handover_env.evaluation.openloop import OpenLoopProtocol
+    from handover_eval.experiments import run_sample_efficiency
+    from handover_eval.openloop import OpenLoopProtocol
 
     data = generate_synthetic(n=16, ood_fraction=0.25, seed=5)
     protocol = OpenLoopProtocol(stride=5)

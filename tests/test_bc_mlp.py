@@ -15,7 +15,7 @@ _torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
 from baselines_toy import toy_dataset
 
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
-from baselines.features import (
+from handover_env.data.features import (
     CheckpointError,
     FeatureSpec,
     encode_history,
@@ -153,7 +153,7 @@ REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "dynamic
 @pytest.mark.skipif(not REAL.is_dir(), reason="the development copy of the public dataset is absent")
 def test_learns_real_recordings_by_the_shared_protocol():
     from handover_env.data.public import load_public_dataset
-    from handover_env.evaluation.openloop import evaluate_openloop, summarise
+    from handover_eval.openloop import evaluate_openloop, summarise
 
     real = load_public_dataset(REAL, progress=False)
     train_idx, test_idx = real.stratified_kfold(10, seed=0)[0]

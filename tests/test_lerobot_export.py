@@ -16,7 +16,7 @@ _torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
 
 from baselines_toy import toy_dataset  # noqa: E402
 
-from baselines.features import FeatureSpec, episode_frames  # noqa: E402
+from handover_env.data.features import FeatureSpec, episode_frames  # noqa: E402
 from handover_env.data.lerobot_export import (  # noqa: E402
     TASK,
     action_delta_timestamps,

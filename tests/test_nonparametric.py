@@ -200,7 +200,7 @@ REAL = __import__("pathlib").Path(__file__).resolve().parents[1] / ".." / "share
 def test_real_recordings_sparse_matches_iaal():
     from agents.gp import GPHyperparameters, exact_gp_reference, fitc_gp
     from handover_env.data import load_any
-    from handover_env.evaluation import OpenLoopProtocol, evaluate_openloop, summarise
+    from handover_eval import OpenLoopProtocol, evaluate_openloop, summarise
 
     ds = load_any(str(REAL))
     train, test = ds.subset(np.arange(0, len(ds), 12)), ds.subset(np.arange(3, len(ds), 120))

@@ -1,4 +1,4 @@
-"""The shared open-loop RMS protocol (handover_env/evaluation/openloop.py)."""
+"""The shared open-loop RMS protocol (handover_eval/openloop.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from agents.base import Agent
 from handover_env.data.dataset import Episode, HandoverDataset
-from handover_env.evaluation import (
+from handover_eval import (
     OpenLoopProtocol,
     episode_errors,
     episode_rms,

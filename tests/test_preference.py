@@ -1,4 +1,4 @@
-"""CoSpar on the env (handover_env/evaluation/preference.py), train.py preference and the check."""
+"""CoSpar on the env (handover_eval/preference.py), train.py preference and the check."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 
 from agents.cospar import CoSparConfig, action_grid
 from agents.participants import sample_participant, sample_population
-from handover_env.evaluation.preference import (
+from handover_eval.preference import (
     EpisodeRunner,
     PreferenceConfig,
     lived,
@@ -108,7 +108,7 @@ def test_train_preference_rejects_bad_input(argv: list[str], capsys) -> None:
 
 
 def test_brute_force_check_scores_cospar_against_the_grid_optimum(tmp_path: Path) -> None:
-    from handover_env.evaluation.preference_check import CheckConfig, run_check
+    from handover_eval.preference_check import CheckConfig, run_check
 
     class FakeRunner(EpisodeRunner):
         """Outcomes that depend on Θ (pull grows with f_r, failures at t_f = 1) without physics."""

@@ -22,7 +22,7 @@ from safetensors.torch import load_file, save_file  # noqa: E402
 
 from baselines.act import ACTAgent, ACTAgentConfig  # noqa: E402
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig  # noqa: E402
-from baselines.features import CheckpointError  # noqa: E402
+from handover_env.data.features import CheckpointError  # noqa: E402
 
 ACT_TINY = {"dim_model": 16, "n_heads": 2, "dim_feedforward": 32, "n_encoder_layers": 1, "latent_dim": 4,
             "batch_size": 8, "steps": 2, "eval_every": 1}
@@ -94,7 +94,7 @@ def test_processor_json_is_allow_listed_before_lerobot_sees_it(act_dir, tmp_path
 
 def test_evaluate_does_not_run_a_tampered_cached_checkpoint(data, tmp_path, monkeypatch):
     """evaluate.py reuses checkpoints from <out>/checkpoints: a tampered one is retrained, not run."""
-    from handover_env.evaluation.methods import (
+    from handover_eval.methods import (
         MethodOptions,
         build_agent,
         checkpoint_slot,

@@ -18,7 +18,7 @@ torch.set_num_threads(1)
 
 from baselines_toy import toy_dataset  # noqa: E402
 
-from baselines.features import CheckpointError  # noqa: E402
+from handover_env.data.features import CheckpointError  # noqa: E402
 from handover_env.data.__main__ import main  # noqa: E402
 from handover_env.data.lerobot_export import export_lerobot, read_sidecar  # noqa: E402
 from handover_env.paths import UnsafePathError  # noqa: E402

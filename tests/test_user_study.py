@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 
 from handover_env.config import THETA_RANGES
-from handover_env.evaluation.user_study import binomial_stats, paired_stats, random_theta
+from handover_eval.user_study import binomial_stats, paired_stats, random_theta
 
 
 def test_paired_stats_closed_forms() -> None:

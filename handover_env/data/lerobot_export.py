@@ -1,7 +1,7 @@
 """Export a :class:`HandoverDataset` to a local LeRobotDataset (lerobot 0.4.x, no network).
 
 One LeRobot frame per dataset frame, with the baselines' shared features
-(:mod:`baselines.features`):
+(:mod:`handover_env.data.features`):
 
 | key                              | dtype   | shape   | content                                         |
 |----------------------------------|---------|---------|-------------------------------------------------|
@@ -38,7 +38,7 @@ import numpy as np
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 
-from baselines.features import (  # noqa: E402
+from handover_env.data.features import (  # noqa: E402
     ACTION,
     ACTION_DIM,
     OBS_ENV_STATE,

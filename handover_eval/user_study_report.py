@@ -11,10 +11,10 @@ import numpy as np
 
 from agents.cospar import THETA_NAMES
 from handover_env.config import HandoverParams
-from handover_env.evaluation.preference import PAPER_THETA, theta_line, write_csv
+from handover_eval.preference import PAPER_THETA, theta_line, write_csv
 
 if TYPE_CHECKING:
-    from handover_env.evaluation.user_study import StudyResult
+    from handover_eval.user_study import StudyResult
 
 SOURCE = ("**Simulated participants** (`agents/participants.py`: a documented model of how people judge "
           "a handover from its measured outcomes), **not people**. The paper's figures come from 8 real "
@@ -38,7 +38,7 @@ def markdown(result: StudyResult) -> str:
     """The report's text."""
     c, cfg = result.h1_h2, result.config
     com, tim, h3 = c["comfort"], c["time"], result.h3
-    from handover_env.evaluation.user_study import PAPER
+    from handover_eval.user_study import PAPER
 
     pd, ps = PAPER["comfort_dynamic"], PAPER["comfort_static"]
     td, ts = PAPER["time_dynamic"], PAPER["time_static"]
@@ -134,7 +134,7 @@ def _figure(result: StudyResult, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from handover_env.evaluation.user_study import PAPER
+    from handover_eval.user_study import PAPER
 
     c = result.h1_h2
     fig, axes = plt.subplots(1, 3 if result.personal else 2, figsize=(13 if result.personal else 8.5, 3.6))

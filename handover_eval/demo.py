@@ -7,7 +7,7 @@ time, release force, and the person's effort (how far they reached, how long the
 peak body contact). The first dynamic episode is written as an mp4 and a still strip (PNG) to
 ``outputs/demo/`` when offscreen rendering works (``MUJOCO_GL=egl`` or ``osmesa``).
 
-Usage: ``python -m handover_env.demo [--episodes-id 3] [--episodes-ood 2] [--out outputs/demo]``.
+Usage: ``python -m handover_eval.demo [--episodes-id 3] [--episodes-ood 2] [--out outputs/demo]``.
 """
 
 from __future__ import annotations

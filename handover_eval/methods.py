@@ -5,7 +5,7 @@ exact GPs, ``bc_mlp`` and ``act`` the learned baselines. The learned baselines a
 (method, configuration, training set, seed) and their checkpoints are reused when a matching one
 exists under the cache folder; the nonparametric methods fit in seconds and are never cached.
 The experiments pre-train ACT's models for all folds in parallel worker processes into that same
-cache (:mod:`handover_env.evaluation.act_folds`), so :func:`fit_agent` then only loads them.
+cache (:mod:`handover_eval.act_folds`), so :func:`fit_agent` then only loads them.
 """
 
 from __future__ import annotations
@@ -64,10 +64,10 @@ class MethodOptions:
             (``observation.state``). Off by default: the paper's modules all receive the
             receiver base pose alone (Sec. V-A), and the nonparametric methods never see it.
         workers: processes that pre-train the ACT fold models in parallel (each with one torch
-            thread) and then run the folds (:mod:`handover_env.evaluation.fold_pool`); default
+            thread) and then run the folds (:mod:`handover_eval.fold_pool`); default
             one per core, at most 2. 1 runs everything in this process. Either way every ACT
             fold trains on its episodes of one shared LeRobot export
-            (:mod:`handover_env.evaluation.act_folds`), and the results are the same.
+            (:mod:`handover_eval.act_folds`), and the results are the same.
     """
 
     seed: int = 0

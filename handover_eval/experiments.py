@@ -17,10 +17,10 @@ import numpy as np
 from tqdm import tqdm
 
 from handover_env.data.dataset import HandoverDataset
-from handover_env.evaluation.fold_pool import map_folds
-from handover_env.evaluation.methods import MethodOptions, build_agent, check_methods, fit_agent
-from handover_env.evaluation.openloop import OpenLoopProtocol, evaluate_openloop, summarise
-from handover_env.evaluation.reporting import (
+from handover_eval.fold_pool import map_folds
+from handover_eval.methods import MethodOptions, build_agent, check_methods, fit_agent
+from handover_eval.openloop import OpenLoopProtocol, evaluate_openloop, summarise
+from handover_eval.reporting import (
     METHOD_LABELS,
     PAPER_TABLE1,
     markdown_table,
@@ -30,7 +30,7 @@ from handover_env.evaluation.reporting import (
 )
 
 if TYPE_CHECKING:
-    from handover_env.evaluation.act_folds import ACTRun
+    from handover_eval.act_folds import ACTRun
 
 SQRT3 = math.sqrt(3.0)
 
@@ -63,7 +63,7 @@ def _pretrain_act(
     """ACT's models for ``train_sets`` trained up front (None when ACT is not among ``methods``)."""
     if "act" not in methods:
         return None
-    from handover_env.evaluation.act_folds import pretrain_act
+    from handover_eval.act_folds import pretrain_act
 
     return pretrain_act(dataset, train_sets, options, out_dir / "checkpoints", reuse=reuse, workers=workers,
                         labels=labels, progress=progress)
@@ -148,7 +148,7 @@ def run_table1(
 
     ACT's fold models are trained first, all from one LeRobot export of ``dataset`` and in
     ``workers`` processes (default ``options.workers``), into the checkpoint cache the fold loop
-    then loads from (:func:`handover_env.evaluation.act_folds.pretrain_act`). ACT's
+    then loads from (:func:`handover_eval.act_folds.pretrain_act`). ACT's
     ``fit_seconds`` is that training time (measured in its worker, beside the other workers).
     """
     methods = check_methods(list(methods))
@@ -285,7 +285,7 @@ def run_sample_efficiency(
     splits = _splits(dataset, folds, seed)
     train_sets = {(f, ratio): dataset.subset(train_idx).subsample(ratio, seed=seed + f)
                   for f, (train_idx, _) in enumerate(splits) for ratio in ratios}
-    from handover_env.evaluation.act_folds import episode_indices
+    from handover_eval.act_folds import episode_indices
 
     train_idx = {key: episode_indices(dataset, t) for key, t in train_sets.items()}
     _pretrain_act(dataset, methods, list(train_idx.values()), [f"fold {f} ratio {r:g}" for f, r in train_sets],

@@ -13,7 +13,7 @@ episodes/s, ~3.5 min a fold) and then train on one core while the second core id
    just those episodes would give (``tests/test_act_folds.py``).
 3. :func:`pretrain_act` trains the missing fold models in ``workers`` spawned processes with one
    torch thread each and writes them to the same checkpoint folders, with the same completion
-   marker, that :func:`handover_env.evaluation.methods.fit_agent` looks up, so the fold loop of
+   marker, that :func:`handover_eval.methods.fit_agent` looks up, so the fold loop of
    the experiments only loads them.
 """
 
@@ -34,7 +34,7 @@ import numpy as np
 from tqdm import tqdm
 
 from handover_env.data.dataset import HandoverDataset
-from handover_env.evaluation.methods import (
+from handover_eval.methods import (
     MethodOptions,
     build_agent,
     checkpoint_slot,

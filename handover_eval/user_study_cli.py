@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from handover_env.evaluation.preference_cli import _grid, _int_at_least
+from handover_eval.preference_cli import _grid, _int_at_least
 
 #: --quick: a seconds-long run for ``make test``; never for reported numbers.
 QUICK = {"participants": 2, "trials": 2, "iterations": 2, "walks": 1, "grid": (3, 3, 3, 3)}
@@ -14,7 +14,7 @@ QUICK = {"participants": 2, "trials": 2, "iterations": 2, "walks": 1, "grid": (3
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``user-study`` on ``evaluate.py``'s subcommands."""
-    from handover_env.evaluation import user_study
+    from handover_eval import user_study
 
     p = sub.add_parser("user-study", help="the paper's user study (H1, H2, H3) and personalised Θ with simulated "
                        "participants", description=user_study.__doc__,
@@ -40,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study from parsed arguments; 0 on success, 2 with a one-line error on bad input."""
-    from handover_env.evaluation.user_study import StudyConfig, run_study
+    from handover_eval.user_study import StudyConfig, run_study
 
     try:
         settings = {"participants": args.participants, "trials": args.trials, "iterations": args.iterations,

@@ -1,6 +1,6 @@
 """Evaluation: the open-loop RMS protocol every method shares (:mod:`.openloop`) and result tables."""
 
-from handover_env.evaluation.openloop import (
+from handover_eval.openloop import (
     EpisodeRecord,
     OpenLoopProtocol,
     episode_errors,
