@@ -67,16 +67,13 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-os.environ.setdefault("HF_HUB_OFFLINE", "1")
-os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+import numpy as np
+import torch
+from safetensors.torch import save_file
 
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from safetensors.torch import save_file  # noqa: E402
-
-from agents.predictive import ClosedLoopConfig  # noqa: E402
-from baselines import act_files  # noqa: E402
-from baselines.checkpoint_io import (  # noqa: E402
+from agents.predictive import ClosedLoopConfig
+from baselines import act_files
+from baselines.checkpoint_io import (
     check_training_state,
     config_from_dict,
     expected_of,
@@ -88,7 +85,7 @@ from baselines.checkpoint_io import (  # noqa: E402
     staged_write,
     write_json,
 )
-from handover_env.data.features import (  # noqa: E402
+from handover_env.data.features import (
     ACTION,
     ACTION_DIM,
     OBS_ENV_STATE,
@@ -100,10 +97,10 @@ from handover_env.data.features import (  # noqa: E402
     split_train_val,
     validate_giver,
 )
-from baselines.giver_conditioned import GiverConditionedAgent  # noqa: E402
-from handover_env.config import HandoverParams  # noqa: E402
-from handover_env.data.dataset import Episode, HandoverDataset  # noqa: E402
-from handover_env.envs.observation import ObsLayout  # noqa: E402
+from baselines.giver_conditioned import GiverConditionedAgent
+from handover_env.config import HandoverParams
+from handover_env.data.dataset import Episode, HandoverDataset
+from handover_env.envs.observation import ObsLayout
 
 CHECKPOINT_TYPE = "act"
 CHECKPOINT_FORMAT = 1

@@ -155,9 +155,7 @@ def ensure_export(
 
 
 def _init_worker() -> None:
-    """Worker start-up: one torch thread (the 2 cores are shared by 2 workers), offline hub."""
-    os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+    """Worker start-up: one torch thread (the 2 cores are shared by 2 workers)."""
     import torch
 
     torch.set_num_threads(1)

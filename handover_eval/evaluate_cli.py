@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Reproduce the paper's simulation results (Kim et al., ICRA 2025, Sec. V-A) with one command each.
 
     python evaluate.py table1 --data PATH --folds 10 --seed 0     # Table I: RMS (mm), ID / OOD
@@ -22,10 +21,9 @@ import sys
 import time
 from pathlib import Path
 
-os.environ.setdefault("HF_HUB_OFFLINE", "1")
-os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
-
-from handover_eval.methods import (  # noqa: E402
+from handover_env.offline import hub_offline
+from handover_eval import user_study_cli
+from handover_eval.methods import (
     ACT_EVAL_STEPS,
     METHODS,
     QUICK_ACT_STEPS,
@@ -33,8 +31,7 @@ from handover_eval.methods import (  # noqa: E402
     check_methods,
     default_workers,
 )
-from handover_eval.reporting import METHOD_LABELS, markdown_table, mean_std  # noqa: E402
-from handover_eval import user_study_cli  # noqa: E402,I001
+from handover_eval.reporting import METHOD_LABELS, markdown_table, mean_std
 
 QUICK_EPISODES = 30
 
@@ -123,6 +120,7 @@ def load_dataset(path: str | None, quick: bool, seed: int):
 
 
 def main(argv: list[str] | None = None) -> int:
+    hub_offline()
     args = build_parser().parse_args(argv)
     if args.command == "user-study":
         return user_study_cli.run(args)

@@ -27,11 +27,10 @@ _DATASET: HandoverDataset | None = None  # the worker's copy, set once by _init_
 
 
 def _init_worker(dataset: HandoverDataset) -> None:
-    """Worker start-up: keep the dataset, one torch thread per process, offline hub."""
+    """Worker start-up: keep the dataset, one torch thread per process (the environment, and so
+    the entry point's Hugging Face offline setting, is inherited from the parent)."""
     global _DATASET
     _DATASET = dataset
-    os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
     import torch
 
     torch.set_num_threads(1)

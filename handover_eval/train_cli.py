@@ -1,4 +1,3 @@
-#!/usr/bin/env python
 """Train the learned baselines: BC-MLP (torch) and ACT (LeRobot's ACTPolicy).
 
     python train.py bc-mlp --data PATH --out runs/bc_mlp
@@ -27,11 +26,9 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-os.environ.setdefault("HF_HUB_OFFLINE", "1")
-os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
-
-from typing import TYPE_CHECKING  # noqa: E402
+from handover_env.offline import hub_offline
 
 if TYPE_CHECKING:  # heavy imports happen after argument parsing, so --help is instant
     from handover_env.data.dataset import HandoverDataset
@@ -280,6 +277,7 @@ def _check_device(name: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit status (2 for bad input, 130 when interrupted)."""
+    hub_offline()
     args = build_parser().parse_args(argv)
     import torch
 

@@ -79,7 +79,7 @@ def test_runner_caches_episodes_and_runs_static_too() -> None:
 
 
 def test_train_preference_cli_writes_theta_history_and_plot(tmp_path: Path, capsys) -> None:
-    import train
+    from handover_eval import train_cli as train
 
     out = tmp_path / "run"
     code = train.main(["preference", "--participant", "3", "--iterations", "2", "--walks", "1",
@@ -99,7 +99,7 @@ def test_train_preference_cli_writes_theta_history_and_plot(tmp_path: Path, caps
 @pytest.mark.parametrize("argv", [["--grid", "1,2,2,2"], ["--participant", "-1"], ["--iterations", "0"],
                                   ["--participant", "1", "--participants", "2"]])
 def test_train_preference_rejects_bad_input(argv: list[str], capsys) -> None:
-    import train
+    from handover_eval import train_cli as train
 
     with pytest.raises(SystemExit) as exc:
         train.main(["preference", *argv])

@@ -45,7 +45,7 @@ def test_random_theta_is_uniform_in_the_papers_ranges() -> None:
 
 
 def test_user_study_quick_end_to_end(tmp_path: Path) -> None:
-    import evaluate
+    from handover_eval import evaluate_cli as evaluate
 
     out = tmp_path / "us"
     assert evaluate.main(["user-study", "--quick", "--out", str(out), "--no-progress"]) == 0
@@ -73,7 +73,7 @@ def test_user_study_quick_end_to_end(tmp_path: Path) -> None:
 
 
 def test_user_study_rejects_bad_input(capsys) -> None:
-    import evaluate
+    from handover_eval import evaluate_cli as evaluate
 
     with pytest.raises(SystemExit) as exc:
         evaluate.main(["user-study", "--participants", "1"])

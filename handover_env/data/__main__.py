@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from handover_env.data.dataset import DatasetError, HandoverDataset
+from handover_env.offline import hub_offline
 
 DEFAULT_KEYWORD = "synthetic"
 
@@ -360,6 +361,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit status (2 for a dataset or file error)."""
+    hub_offline()
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args))

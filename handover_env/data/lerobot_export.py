@@ -35,10 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-os.environ.setdefault("HF_HUB_OFFLINE", "1")
-os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
-
-from handover_env.data.features import (  # noqa: E402
+from handover_env.data.features import (
     ACTION,
     ACTION_DIM,
     OBS_ENV_STATE,
@@ -48,8 +45,8 @@ from handover_env.data.features import (  # noqa: E402
     check_dataset,
     episode_frames,
 )
-from handover_env.data.dataset import HandoverDataset  # noqa: E402
-from handover_env.paths import (  # noqa: E402
+from handover_env.data.dataset import HandoverDataset
+from handover_env.paths import (
     check_replaceable_root,
     remove_stale_siblings,
     replace_dir,
