@@ -63,58 +63,91 @@ import os
 import random
 import tempfile
 import time
+import typing
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-import torch
-from safetensors.torch import save_file
+
+from handover_env.extras import missing_extra
+
+try:
+    import lerobot  # noqa: F401 - ACT is LeRobot's ACTPolicy
+    import torch
+except ModuleNotFoundError as _exc:
+    raise missing_extra("baselines", _exc, __name__) from None
 
 from agents.predictive import ClosedLoopConfig
-from baselines import act_files
-from baselines.checkpoint_io import (
-    check_training_state,
-    config_from_dict,
-    expected_of,
-    load_optimizer,
-    load_tensors,
-    read_json,
-    recover,
-    save_optimizer,
-    staged_write,
-    write_json,
-)
+from baselines import act_files, trainer
+from baselines.checkpoint_io import CheckpointError, config_from_dict, expected_of, load_tensors, staged_write, write_json
+from baselines.giver_conditioned import GiverConditionedAgent
+from handover_env.config import HandoverParams
+from handover_env.data.dataset import Episode, HandoverDataset
 from handover_env.data.features import (
     ACTION,
     ACTION_DIM,
     OBS_ENV_STATE,
     OBS_STATE,
     STATE_DIM,
-    CheckpointError,
     FeatureSpec,
     encode_history,
     split_train_val,
     validate_giver,
 )
-from baselines.giver_conditioned import GiverConditionedAgent
-from handover_env.config import HandoverParams
-from handover_env.data.dataset import Episode, HandoverDataset
 from handover_env.envs.observation import ObsLayout
 
 CHECKPOINT_TYPE = "act"
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2
 HANDOVER_JSON = "handover_act.json"
-PAPER_SCALE = dict(
-    dim_model=512, n_heads=8, dim_feedforward=3200, n_encoder_layers=4, n_decoder_layers=1,
-    n_vae_encoder_layers=4, latent_dim=32,
+#: The CPU-sized model: LeRobot ``ACTConfig`` fields set unless ``paper_scale`` (which keeps
+#: ACTConfig's own sizes, the paper's: dim 512, 8 heads, ffn 3200, 4 encoder layers, VAE 4, latent 32).
+CPU_SCALE: dict[str, int] = dict(
+    dim_model=128, n_heads=4, dim_feedforward=512, n_encoder_layers=2, n_decoder_layers=1,
+    n_vae_encoder_layers=1, latent_dim=16,
 )
+#: ``ACTConfig`` fields this baseline sets differently from LeRobot's defaults, whatever the size:
+#: a higher learning rate for the small state-only model, and the paper's temporal ensembling.
+ACT_DEFAULTS: dict[str, Any] = dict(optimizer_lr=1e-4, temporal_ensemble_coeff=0.01)
+#: ``ACTConfig`` fields the agent owns (features, chunking, normalisation, device, no backbone
+#: weights, no hub): they follow from ``history``, ``horizon``, ``use_giver_state`` and ``device``.
+OWNED_FIELDS = frozenset({
+    "input_features", "output_features", "normalization_mapping", "chunk_size", "n_action_steps",
+    "n_obs_steps", "device", "use_amp", "push_to_hub", "repo_id", "private", "tags", "license",
+    "pretrained_path", "pretrained_backbone_weights", "vision_backbone", "replace_final_stride_with_dilation",
+    "optimizer_lr_backbone", "use_peft",
+})
 #: torch intra-op threads while ACT trains. Summation order, hence the last bits of every step,
 #: depends on the thread count; one thread makes a seed reproducible in any process (and is also
 #: the fast setting on the project's shared 2-core machine; parallelism comes from processes).
 TRAIN_THREADS = 1
 #: Config fields a resumed run may change (a longer run, another validation cadence or device).
 RESUMABLE_CHANGES = frozenset({"steps", "eval_every", "device"})
+
+
+def _settable_fields() -> dict[str, Any]:
+    """{name: type hint} of the ``ACTConfig`` fields an :class:`ACTAgentConfig` may override."""
+    from lerobot.policies.act.configuration_act import ACTConfig
+
+    hints = typing.get_type_hints(ACTConfig)
+    return {f.name: hints[f.name] for f in fields(ACTConfig) if f.init and f.name not in OWNED_FIELDS}
+
+
+def _json_value_ok(value: Any, hint: Any) -> bool:
+    """Is ``value`` (from JSON) of the scalar type ``hint`` (int, float, bool, str, or X | None)?"""
+    args = typing.get_args(hint)
+    if type(None) in args:
+        return value is None or any(_json_value_ok(value, a) for a in args if a is not type(None))
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    if hint is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if hint is str:
+        return isinstance(value, str)
+    return False
 
 
 @contextlib.contextmanager
@@ -140,36 +173,30 @@ def reproducible(seed: int) -> Iterator[None]:
 
 @dataclass
 class ACTAgentConfig:
-    """Configuration of the ACT baseline (the model part maps onto LeRobot's ``ACTConfig``).
+    """Configuration of the ACT baseline: LeRobot's ``ACTConfig`` plus what the agent adds.
+
+    The model is LeRobot's own ``ACTConfig`` (:meth:`policy_config`): its defaults, then
+    :data:`ACT_DEFAULTS`, then :data:`CPU_SCALE` unless ``paper_scale``, then ``policy``. The
+    optimiser is its ``get_optimizer_preset()`` (AdamW, ``optimizer_lr``,
+    ``optimizer_weight_decay``, gradient clip 10).
 
     Args:
         history: W, frames of receiver history in ``observation.environment_state``.
         horizon: H, ACT's ``chunk_size`` (30 = 1 s, the paper's chunk).
-        dim_model: transformer width.
-        n_heads: attention heads.
-        dim_feedforward: feed-forward width.
-        n_encoder_layers: transformer encoder layers.
-        n_decoder_layers: transformer decoder layers.
-        use_vae: train with ACT's conditional-VAE objective (zero latent at inference).
-        latent_dim: VAE latent size.
-        n_vae_encoder_layers: VAE encoder layers.
-        kl_weight: weight of the KL term.
-        dropout: transformer dropout.
-        paper_scale: use ACT's default (paper) size instead; overrides the size fields above.
-        lr: AdamW learning rate.
-        weight_decay: AdamW weight decay.
-        grad_clip_norm: gradient norm clip (LeRobot's ACT preset uses 10).
+        paper_scale: keep ``ACTConfig``'s own (the paper's) model size instead of :data:`CPU_SCALE`.
+        policy: ``ACTConfig`` fields to override, e.g. ``{"dim_model": 256, "use_vae": False,
+            "optimizer_lr": 3e-4, "kl_weight": 10.0}``; the fields the agent owns
+            (:data:`OWNED_FIELDS`) cannot be set, and every value must have its field's type.
         batch_size: samples per step.
         steps: optimisation steps.
         eval_every: steps between validation passes (and checkpoints).
         val_fraction: fraction of episodes held out for validation (best checkpoint kept).
         seed: seeds initialisation, sampling and the split.
         device: torch device.
-        temporal_ensemble_coeff: LeRobot ``ACTTemporalEnsembler`` coefficient used by ``act``.
-        use_giver_state: give ACT ``observation.state`` (the current giver/robot xyz) as an input
-            feature (default). False drops it from ``input_features`` (receiver history only,
-            exactly what the planner sees); the batch still carries the key because LeRobot's
-            ``ACT.forward`` reads its device.
+        use_giver_state: also give ACT ``observation.state`` (the current giver/robot xyz) as an
+            input feature. Off by default: the receiver history alone, exactly what the planner
+            sees and the input that works in the env (the batch still carries the key because
+            LeRobot's ``ACT.forward`` reads its device).
         fast_dropout: during CPU training, draw the masks of the policy's ``nn.Dropout`` modules
             from :class:`DropoutMasks` (same p and scaling, ~1/8 of the step time saved on one core)
             instead of ``torch.bernoulli_``. False trains with PyTorch's own dropout everywhere.
@@ -177,46 +204,43 @@ class ACTAgentConfig:
 
     history: int = 10
     horizon: int = 30
-    dim_model: int = 128
-    n_heads: int = 4
-    dim_feedforward: int = 512
-    n_encoder_layers: int = 2
-    n_decoder_layers: int = 1
-    use_vae: bool = True
-    latent_dim: int = 16
-    n_vae_encoder_layers: int = 1
-    kl_weight: float = 10.0
-    dropout: float = 0.1
     paper_scale: bool = False
-    lr: float = 1e-4
-    weight_decay: float = 1e-4
-    grad_clip_norm: float = 10.0
+    policy: dict[str, Any] = field(default_factory=dict)
     batch_size: int = 64
     steps: int = 8_000
     eval_every: int = 1_000
     val_fraction: float = 0.1
     seed: int = 0
     device: str = "cpu"
-    temporal_ensemble_coeff: float = 0.01
-    use_giver_state: bool = True
+    use_giver_state: bool = False
     fast_dropout: bool = True
 
     def __post_init__(self) -> None:
-        if self.paper_scale:
-            for key, value in PAPER_SCALE.items():
-                setattr(self, key, value)
         FeatureSpec(history=self.history, horizon=self.horizon)
+        if not isinstance(self.policy, dict):
+            raise ValueError(f"policy must be a dict of ACTConfig fields, got {type(self.policy).__name__}")
+        settable = _settable_fields()
+        for key, value in self.policy.items():
+            if key not in settable:
+                why = "set by the agent" if key in OWNED_FIELDS else "not an ACTConfig field"
+                raise ValueError(f"policy[{key!r}]: {why}")
+            if not _json_value_ok(value, settable[key]):
+                raise ValueError(f"policy[{key!r}] = {value!r} is not a {settable[key]}")
+        model = self.model()
         for name in ("dim_model", "n_heads", "dim_feedforward", "n_encoder_layers", "n_decoder_layers",
-                     "latent_dim", "n_vae_encoder_layers", "batch_size", "steps", "eval_every"):
+                     "latent_dim", "n_vae_encoder_layers"):
+            if model[name] < 1:
+                raise ValueError(f"{name} must be a positive integer, got {model[name]!r}")
+        for name in ("batch_size", "steps", "eval_every"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if self.dim_model % self.n_heads:
-            raise ValueError(f"dim_model ({self.dim_model}) must be divisible by n_heads ({self.n_heads})")
-        if self.lr <= 0 or self.weight_decay < 0 or self.grad_clip_norm <= 0 or self.kl_weight < 0:
-            raise ValueError("lr and grad_clip_norm must be positive, weight_decay and kl_weight >= 0")
-        if not 0.0 <= self.dropout < 1.0:
-            raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
+        if model["dim_model"] % model["n_heads"]:
+            raise ValueError(f"dim_model ({model['dim_model']}) must be divisible by n_heads ({model['n_heads']})")
+        if model["optimizer_lr"] <= 0 or model["optimizer_weight_decay"] < 0 or model["kl_weight"] < 0:
+            raise ValueError("optimizer_lr must be positive, optimizer_weight_decay and kl_weight >= 0")
+        if not 0.0 <= model["dropout"] < 1.0:
+            raise ValueError(f"dropout must be in [0, 1), got {model['dropout']}")
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
 
@@ -224,8 +248,17 @@ class ACTAgentConfig:
     def spec(self) -> FeatureSpec:
         return FeatureSpec(history=self.history, horizon=self.horizon)
 
+    def model(self) -> dict[str, Any]:
+        """Every settable ``ACTConfig`` field as :meth:`policy_config` resolves it."""
+        from lerobot.policies.act.configuration_act import ACTConfig
+
+        defaults = {f.name: getattr(ACTConfig, f.name) for f in fields(ACTConfig)
+                    if f.name in _settable_fields() and not callable(getattr(ACTConfig, f.name, None))
+                    and hasattr(ACTConfig, f.name)}
+        return {**defaults, **ACT_DEFAULTS, **({} if self.paper_scale else CPU_SCALE), **self.policy}
+
     def policy_config(self):
-        """LeRobot's ``ACTConfig`` for this agent (state-only, no backbone weights)."""
+        """LeRobot's ``ACTConfig`` for this agent (state-only, no backbone weights, no hub)."""
         from lerobot.configs.types import FeatureType, NormalizationMode, PolicyFeature
         from lerobot.policies.act.configuration_act import ACTConfig
 
@@ -244,22 +277,10 @@ class ACTAgentConfig:
             },
             chunk_size=self.horizon,
             n_action_steps=1,
-            temporal_ensemble_coeff=self.temporal_ensemble_coeff,
             pretrained_backbone_weights=None,
-            dim_model=self.dim_model,
-            n_heads=self.n_heads,
-            dim_feedforward=self.dim_feedforward,
-            n_encoder_layers=self.n_encoder_layers,
-            n_decoder_layers=self.n_decoder_layers,
-            use_vae=self.use_vae,
-            latent_dim=self.latent_dim,
-            n_vae_encoder_layers=self.n_vae_encoder_layers,
-            kl_weight=self.kl_weight,
-            dropout=self.dropout,
-            optimizer_lr=self.lr,
-            optimizer_weight_decay=self.weight_decay,
             device=self.device,
             push_to_hub=False,
+            **{**ACT_DEFAULTS, **({} if self.paper_scale else CPU_SCALE), **self.policy},
         )
 
     @classmethod
@@ -606,78 +627,76 @@ class ACTAgent(GiverConditionedAgent):
         from lerobot.policies.act.processor_act import make_act_pre_post_processors
 
         cfg = self.config
-        self.policy = ACTPolicy(cfg.policy_config())
+        policy_cfg = cfg.policy_config()
+        self.policy = ACTPolicy(policy_cfg)
         self.preprocessor, self.postprocessor = make_act_pre_post_processors(self.policy.config, stats)
         train = normalise_samples(self.preprocessor, train)  # once, not per batch: same tensors
         val = normalise_samples(self.preprocessor, val)
-        opt = torch.optim.AdamW(self.policy.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay,
-                                fused=cfg.device == "cpu")
-        state = {
-            "step": 0, "best_val": math.inf, "best_step": -1, "train_loss": [], "val_loss": [],
-            "wall_time_s": 0.0,
-            "split": {"train": [sidecar["source_id"][i] for i in train_ep],
-                      "val": [sidecar["source_id"][i] for i in val_ep]},
-        }
-        best = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
+        preset = policy_cfg.get_optimizer_preset()  # LeRobot's ACT optimiser: AdamW, grad clip 10
+        opt = torch.optim.AdamW(self.policy.parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
+                                weight_decay=preset.weight_decay, fused=cfg.device == "cpu")
+        split = {"train": [sidecar["source_id"][i] for i in train_ep],
+                 "val": [sidecar["source_id"][i] for i in val_ep]}
+        state = trainer.new_state("step", split)
+        best = trainer.clone_weights(self.policy)
+        out = trainer.out_path(out_dir)
         if resume:
-            if out_dir is None:
+            if out is None:
                 raise CheckpointError("resume needs the checkpoint folder (out_dir)")
-            state, best = self._load_training_state(Path(out_dir), opt, state["split"])
+            state, best = trainer.load_training_state(
+                out, self.policy, opt, split=split, config=asdict(cfg),
+                saved_config=lambda o: _read_handover_json(o)["config"], resumable=RESUMABLE_CHANGES,
+                check_state=_check_state, rng=True)
 
         n = train[ACTION].shape[0]
         per_epoch = max(1, n // cfg.batch_size)
         t_start = time.perf_counter() - state["wall_time_s"]
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=total_steps, initial=state["step"], desc="act", unit="step")
+        report = trainer.TrainingProgress("act", total_steps, state["step"], "step", progress, log,
+                                          trainer.previous_log(out) if resume and out is not None else "")
         running, count = 0.0, 0
         perm = None
         masks = DropoutMasks(cfg.seed)
         use_fast = cfg.fast_dropout and torch.device(cfg.device).type == "cpu"
-        with fast_dropout(self.policy, masks) if use_fast else contextlib.nullcontext():
-            while state["step"] < total_steps:
-                step = state["step"]
-                epoch, pos = divmod(step, per_epoch)
-                if perm is None or pos == 0:  # the permutation depends only on (seed, epoch): resumable
-                    perm = torch.randperm(n, generator=torch.Generator().manual_seed(cfg.seed * 100_003 + epoch))
-                idx = perm[pos * cfg.batch_size : (pos + 1) * cfg.batch_size]
-                self.policy.train()
-                masks.reseed(step)
-                loss, _ = self.policy.forward({k: v[idx] for k, v in train.items()})
-                if not torch.isfinite(loss):
-                    raise FloatingPointError(
-                        f"ACT training diverged at step {step + 1} (loss {float(loss)}); check the data's "
-                        f"coordinates and the learning rate"
-                    )
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(self.policy.parameters(), cfg.grad_clip_norm)
-                opt.step()
-                running += loss.item()
-                count += 1
-                state["step"] = step + 1
-                if bar is not None:
-                    bar.update(1)
-                    if count % 25 == 0:
-                        bar.set_postfix(loss=f"{running / count:.4f}")
-                if state["step"] % cfg.eval_every == 0 or state["step"] == total_steps:
-                    val_l1 = self._val_l1(val)
-                    state["train_loss"].append(running / max(count, 1))
-                    state["val_loss"].append(val_l1)
-                    running, count = 0.0, 0
-                    if val_l1 < state["best_val"]:
-                        state["best_val"], state["best_step"] = val_l1, state["step"]
-                        best = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
-                    state["wall_time_s"] = time.perf_counter() - t_start
-                    if log is not None:
-                        log(f"step {state['step']:6d}  train {state['train_loss'][-1]:.4f}  val L1 {val_l1:.4f}  "
-                            f"best {state['best_val']:.4f} @ {state['best_step']}")
-                    if out_dir is not None:
-                        self._save_checkpoint(Path(out_dir), best, opt, state)
-        if bar is not None:
-            bar.close()
+        try:
+            with fast_dropout(self.policy, masks) if use_fast else contextlib.nullcontext():
+                while state["step"] < total_steps:
+                    step = state["step"]
+                    epoch, pos = divmod(step, per_epoch)
+                    if perm is None or pos == 0:  # the permutation depends only on (seed, epoch): resumable
+                        gen = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)
+                        perm = torch.randperm(n, generator=gen)
+                    idx = perm[pos * cfg.batch_size : (pos + 1) * cfg.batch_size]
+                    self.policy.train()
+                    masks.reseed(step)
+                    loss, _ = self.policy.forward({k: v[idx] for k, v in train.items()})
+                    if not torch.isfinite(loss):
+                        raise FloatingPointError(
+                            f"ACT training diverged at step {step + 1} (loss {float(loss)}); check the "
+                            f"data's coordinates and the learning rate"
+                        )
+                    opt.zero_grad(set_to_none=True)
+                    loss.backward()
+                    torch.nn.utils.clip_grad_norm_(self.policy.parameters(), preset.grad_clip_norm)
+                    opt.step()
+                    running += loss.item()
+                    count += 1
+                    state["step"] = step + 1
+                    report.advance(1, running / count if count % 25 == 0 else None)
+                    if state["step"] % cfg.eval_every == 0 or state["step"] == total_steps:
+                        val_l1 = self._val_l1(val)
+                        if trainer.record_validation(state, "step", running / max(count, 1), val_l1):
+                            best = trainer.clone_weights(self.policy)
+                        running, count = 0.0, 0
+                        state["wall_time_s"] = time.perf_counter() - t_start
+                        report.validation(state, f"step {state['step']:6d}  train {state['train_loss'][-1]:.4f}  "
+                                                 f"val L1 {val_l1:.4f}  best {state['best_val']:.4f} @ "
+                                                 f"{state['best_step']}")
+                        if out is not None:
+                            trainer.save_checkpoint(
+                                out, lambda stage, best=best, state=state: self._write_model(stage, best, state),
+                                self.policy, opt, state, report, rng=True)
+        finally:
+            report.close()
         self.policy.load_state_dict(best)
         self.policy.eval()
         self.fitted = True
@@ -746,13 +765,6 @@ class ACTAgent(GiverConditionedAgent):
         return self.postprocessor(rows).numpy()[0].astype(np.float64)
 
     # ------------------------------------------------------------------ checkpoints
-    def _handover_json(self, state: dict | None) -> dict:
-        d = {"type": CHECKPOINT_TYPE, "format": CHECKPOINT_FORMAT, "config": asdict(self.config),
-             "features": self.config.spec.to_dict()}
-        if state:
-            d["training"] = {k: state[k] for k in ("step", "best_step", "best_val", "wall_time_s") if k in state}
-        return d
-
     def _write_model(self, out: Path, weights: dict | None, state: dict | None) -> None:
         """The policy, its processors and ``handover_act.json`` into the (staging) folder ``out``."""
         current = None
@@ -764,43 +776,7 @@ class ACTAgent(GiverConditionedAgent):
             self.policy.load_state_dict(current)
         self.preprocessor.save_pretrained(out)
         self.postprocessor.save_pretrained(out)
-        write_json(out / HANDOVER_JSON, self._handover_json(state))
-
-    def _save_checkpoint(self, out: Path, best: dict, opt: torch.optim.Optimizer, state: dict) -> None:
-        """One training checkpoint (best model, last weights, optimizer, RNG, state), as a unit."""
-        with staged_write(out) as stage:
-            self._write_model(stage, best, state)
-            ts = stage / "training_state"
-            ts.mkdir()
-            save_file({k: v.contiguous() for k, v in self.policy.state_dict().items()}, ts / "last.safetensors")
-            save_file({"torch_rng": torch.get_rng_state()}, ts / "rng.safetensors")
-            save_optimizer(opt, ts)
-            write_json(ts / "state.json", state)
-
-    def _load_training_state(self, out: Path, opt: torch.optim.Optimizer, split: dict) -> tuple[dict, dict]:
-        """Validated (state, best weights) of ``out``; loads the last weights, optimizer and RNG."""
-        recover(out)
-        ts = out / "training_state"
-        if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
-            raise CheckpointError(f"cannot resume: no training state in {ts}")
-        saved = _read_handover_json(out)["config"]
-        mine = asdict(self.config)
-        diff = sorted(k for k in mine if k not in RESUMABLE_CHANGES and saved.get(k) != mine[k])
-        if diff:
-            raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
-        state = _check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
-        if state["split"] != split:
-            raise CheckpointError(f"cannot resume from {out}: it was trained on a different dataset/split")
-        expected = expected_of(self.policy.state_dict())
-        self.policy.load_state_dict(load_tensors(ts / "last.safetensors", expected))
-        load_optimizer(opt, ts)
-        rng = load_tensors(ts / "rng.safetensors", {"torch_rng": (tuple(torch.get_rng_state().shape), torch.uint8)})
-        try:
-            torch.set_rng_state(rng["torch_rng"])
-        except (RuntimeError, ValueError) as exc:
-            raise CheckpointError(f"{ts / 'rng.safetensors'}: not a torch RNG state ({exc})") from None
-        best = load_tensors(out / "model.safetensors", expected)
-        return state, best
+        write_json(out / HANDOVER_JSON, trainer.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state))
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the policy (``config.json``, ``model.safetensors``), processors and ``handover_act.json``, as a unit."""
@@ -816,17 +792,14 @@ class ACTAgent(GiverConditionedAgent):
         Every file is validated before it is used (:mod:`baselines.act_files`); LeRobot never
         parses the checkpoint's JSON: the policy and the processors are built from our validated
         config and only their tensors are loaded. Any problem raises
-        :class:`~handover_env.data.features.CheckpointError` naming the file (and the processor step).
+        :class:`~baselines.checkpoint_io.CheckpointError` naming the file (and the processor step).
         ``closed_loop_kwargs`` (params, closed_loop, layout) go to ``PredictiveAgent``.
         """
         from lerobot.policies.act.modeling_act import ACTPolicy
         from lerobot.policies.act.processor_act import make_act_pre_post_processors
 
         path = Path(path)
-        try:
-            recover(path)
-        except OSError as exc:
-            raise CheckpointError(f"{path}: cannot finish an interrupted checkpoint write ({exc})") from None
+        trainer.recover_checkpoint(path)
         saved = _read_handover_json(path)
         trained = ACTAgentConfig.from_dict(saved["config"], str(path / HANDOVER_JSON))
         cfg = ACTAgentConfig.from_dict({**saved["config"], "device": device}, str(path / HANDOVER_JSON))
@@ -863,26 +836,9 @@ class ACTAgent(GiverConditionedAgent):
 
 def _check_state(state: object, source: Path) -> dict:
     """An ACT ``state.json`` whose fields have their types and agree with each other, or CheckpointError."""
-    return check_training_state(state, source, "step", "best_step", {})
+    return trainer.check_state(state, source, "step")
 
 
 def _read_handover_json(path: Path) -> dict:
     """``handover_act.json``, validated: type, format, a complete config and matching features."""
-    if not path.is_dir():
-        raise CheckpointError(f"no ACT checkpoint folder at {path}")
-    f = path / HANDOVER_JSON
-    if not f.is_file():
-        raise CheckpointError(f"{path}: missing {HANDOVER_JSON} (not an ACT checkpoint of this project)")
-    saved = read_json(f, HANDOVER_JSON)
-    if not isinstance(saved, dict):
-        raise CheckpointError(f"{f}: expected a JSON object")
-    if saved.get("type") != CHECKPOINT_TYPE:
-        raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {CHECKPOINT_TYPE!r}")
-    if saved.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"{path}: checkpoint format {saved.get('format')}, this code reads {CHECKPOINT_FORMAT}")
-    cfg = config_from_dict(ACTAgentConfig, saved.get("config"), str(f))
-    if saved.get("features") != cfg.spec.to_dict():
-        raise CheckpointError(f"{f}: features {saved.get('features')!r} disagree with its config")
-    if not isinstance(saved.get("training", {}), dict):
-        raise CheckpointError(f"{f}: training must be a JSON object")
-    return saved
+    return trainer.read_checkpoint_json(path, HANDOVER_JSON, CHECKPOINT_TYPE, CHECKPOINT_FORMAT, ACTAgentConfig, "ACT")

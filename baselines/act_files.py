@@ -29,10 +29,14 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-import torch
+from handover_env.extras import missing_extra
 
-from baselines.checkpoint_io import load_tensors, read_json
-from handover_env.data.features import CheckpointError
+try:
+    import torch
+except ModuleNotFoundError as _exc:
+    raise missing_extra("baselines", _exc, __name__) from None
+
+from baselines.checkpoint_io import CheckpointError, load_tensors, read_json
 
 PREPROCESSOR_JSON = "policy_preprocessor.json"
 POSTPROCESSOR_JSON = "policy_postprocessor.json"

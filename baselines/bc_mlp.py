@@ -15,10 +15,13 @@ Checkpoint folder (``save``/``load``):
 * ``training_state/``    -- last weights, optimizer state (LeRobot's safetensors format) and
   ``state.json`` (epoch, best validation loss, patience counter, loss curves, split) for resuming
 
-Every checkpoint is written as one unit (:func:`baselines.checkpoint_io.staged_write`), and
-:meth:`BCMLPAgent.load` / ``--resume`` validate every file before using it: all config fields
-present and of their JSON type, weights of the model's shapes and dtypes, finite, positive
-normalisation scales, a ``state.json`` consistent with its loss curves.
+* ``train_log.jsonl``   -- one JSON line per epoch (losses, best so far, wall time)
+
+Training state, checkpoints, resume and progress are the shared :mod:`baselines.trainer`'s: every
+checkpoint is written as one unit, and :meth:`BCMLPAgent.load` / ``--resume`` validate every file
+before using it: all config fields present and of their JSON type, weights of the model's shapes
+and dtypes, finite, positive normalisation scales, a ``state.json`` consistent with its loss
+curves. Plain torch: no LeRobot import.
 
 In an env (``reset``/``act``) it is a :class:`agents.predictive.PredictiveAgent`, exactly like the
 planner: one chunk per new camera frame, ACT-style temporal ensembling, the target at t_f of Theta,
@@ -35,33 +38,23 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
-from safetensors.torch import save_file
-from torch import nn
+
+from handover_env.extras import missing_extra
+
+try:
+    import torch
+    from safetensors.torch import save_file
+    from torch import nn
+except ModuleNotFoundError as _exc:
+    raise missing_extra("baselines", _exc, __name__) from None
 
 from agents.predictive import ClosedLoopConfig
-from baselines.checkpoint_io import (
-    check_training_state,
-    config_from_dict,
-    expected_of,
-    load_optimizer,
-    load_tensors,
-    read_json,
-    recover,
-    save_optimizer,
-    staged_write,
-    write_json,
-)
-from handover_env.data.features import (
-    CheckpointError,
-    FeatureSpec,
-    FrameArrays,
-    dataset_frames,
-    split_train_val,
-)
+from baselines import trainer
+from baselines.checkpoint_io import CheckpointError, config_from_dict, expected_of, load_tensors, staged_write, write_json
 from baselines.giver_conditioned import GiverConditionedAgent
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
+from handover_env.data.features import FeatureSpec, FrameArrays, dataset_frames, split_train_val
 from handover_env.envs.observation import ObsLayout
 
 CHECKPOINT_TYPE = "bc_mlp"
@@ -88,9 +81,10 @@ class BCMLPConfig:
         val_fraction: fraction of episodes held out for validation / early stopping.
         seed: seeds initialisation, shuffling and the split.
         device: torch device (the baselines are meant to run on ``cpu``).
-        use_giver_state: condition on the current giver/robot xyz (default, like ACT's
-            ``observation.state``); False gives a receiver-history-only BC-MLP that needs exactly
-            what the planner sees.
+        use_giver_state: also condition on the current giver/robot xyz (like ACT's
+            ``observation.state``). Off by default: the receiver history alone, exactly what the
+            planner sees, and the input that works in the env (where the "giver" is the robot's
+            own TCP, so the model would learn to copy it and never move toward the person).
     """
 
     history: int = 10
@@ -105,7 +99,7 @@ class BCMLPConfig:
     val_fraction: float = 0.1
     seed: int = 0
     device: str = "cpu"
-    use_giver_state: bool = True
+    use_giver_state: bool = False
 
     def __post_init__(self) -> None:
         self.hidden = tuple(int(h) for h in self.hidden)
@@ -270,78 +264,61 @@ class BCMLPAgent(GiverConditionedAgent):
         self.net.to(cfg.device)
         self.net.set_stats(train)
         opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-        state = {
-            "epoch": 0,
-            "best_val": math.inf,
-            "best_epoch": -1,
-            "bad_epochs": 0,
-            "train_loss": [],
-            "val_loss": [],
-            "stopped_early": False,
-            "wall_time_s": 0.0,
-            "split": {
-                "train": [dataset[i].source_id for i in train_idx],
-                "val": [dataset[i].source_id for i in val_idx],
-            },
-        }
-        best = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
+        split = {"train": [dataset[i].source_id for i in train_idx], "val": [dataset[i].source_id for i in val_idx]}
+        state = trainer.new_state("epoch", split, bad_epochs=0, stopped_early=False)
+        best = trainer.clone_weights(self.net)
+        out = trainer.out_path(out_dir)
         if resume:
-            if out_dir is None:
+            if out is None:
                 raise CheckpointError("resume needs the checkpoint folder (out_dir)")
-            state, best = self._load_training_state(Path(out_dir), opt, state["split"])
+            state, best = trainer.load_training_state(
+                out, self.net, opt, split=split, config=self._config_dict(), saved_config=lambda o: _read_config(o)["config"],
+                resumable=RESUMABLE_CHANGES, check_state=_check_state, check_best=_check_scales)
 
         tr = _tensors(train, cfg.device)
         va = _tensors(val, cfg.device)
         n = len(train)
+        batches_per_epoch = max(1, math.ceil(n / cfg.batch_size))
+        report = trainer.TrainingProgress("bc-mlp", max_epochs, state["epoch"], "epoch", progress, log,
+                                          trainer.previous_log(out) if resume and out is not None else "")
         t_start = time.perf_counter() - state["wall_time_s"]
-        while state["epoch"] < max_epochs and state["bad_epochs"] < cfg.patience:
-            epoch = state["epoch"]
-            self.net.train()
-            gen = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)  # resumable shuffling
-            perm = torch.randperm(n, generator=gen)
-            batches = range(0, n, cfg.batch_size)
-            bar = None
-            if progress:
-                from tqdm import tqdm
-
-                bar = tqdm(batches, desc=f"bc-mlp epoch {epoch + 1}/{max_epochs}", leave=False)
-                batches = bar
-            running = 0.0
-            for j, i in enumerate(batches):
-                idx = perm[i : i + cfg.batch_size]
-                loss = self.net.loss({k: v[idx] for k, v in tr.items()})
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                running += loss.item()
-                if bar is not None and j % 20 == 0:
-                    bar.set_postfix(loss=f"{running / (j + 1):.4f}")
-            if bar is not None:
-                bar.close()
-            train_loss = running / max(1, math.ceil(n / cfg.batch_size))
-            val_loss = _eval_loss(self.net, va)
-            if not (math.isfinite(train_loss) and math.isfinite(val_loss)):
-                raise FloatingPointError(
-                    f"BC-MLP training diverged at epoch {epoch + 1} (train loss {train_loss}, validation "
-                    f"loss {val_loss}); check the data's coordinates and the learning rate"
-                )
-            state["epoch"] = epoch + 1
-            state["train_loss"].append(train_loss)
-            state["val_loss"].append(val_loss)
-            if val_loss < state["best_val"]:
-                state["best_val"], state["best_epoch"], state["bad_epochs"] = val_loss, epoch + 1, 0
-                best = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
-            else:
-                state["bad_epochs"] += 1
-            state["stopped_early"] = state["bad_epochs"] >= cfg.patience
-            state["wall_time_s"] = time.perf_counter() - t_start
-            if log is not None:
-                log(
-                    f"epoch {epoch + 1:3d}  train {train_loss:.5f}  val {val_loss:.5f}  "
-                    f"best {state['best_val']:.5f} @ {state['best_epoch']}"
-                )
-            if out_dir is not None:
-                self._save(Path(out_dir), best, opt, state)
+        try:
+            while state["epoch"] < max_epochs and state["bad_epochs"] < cfg.patience:
+                epoch = state["epoch"]
+                self.net.train()
+                gen = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)  # resumable shuffling
+                perm = torch.randperm(n, generator=gen)
+                running = 0.0
+                for i in range(0, n, cfg.batch_size):
+                    idx = perm[i : i + cfg.batch_size]
+                    loss = self.net.loss({k: v[idx] for k, v in tr.items()})
+                    opt.zero_grad(set_to_none=True)
+                    loss.backward()
+                    opt.step()
+                    running += loss.item()
+                train_loss = running / batches_per_epoch
+                val_loss = _eval_loss(self.net, va)
+                if not (math.isfinite(train_loss) and math.isfinite(val_loss)):
+                    raise FloatingPointError(
+                        f"BC-MLP training diverged at epoch {epoch + 1} (train loss {train_loss}, validation "
+                        f"loss {val_loss}); check the data's coordinates and the learning rate"
+                    )
+                state["epoch"] = epoch + 1
+                if trainer.record_validation(state, "epoch", train_loss, val_loss):
+                    state["bad_epochs"] = 0
+                    best = trainer.clone_weights(self.net)
+                else:
+                    state["bad_epochs"] += 1
+                state["stopped_early"] = state["bad_epochs"] >= cfg.patience
+                state["wall_time_s"] = time.perf_counter() - t_start
+                report.advance(1, train_loss)
+                report.validation(state, f"epoch {epoch + 1:3d}  train {train_loss:.5f}  val {val_loss:.5f}  "
+                                         f"best {state['best_val']:.5f} @ {state['best_epoch']}")
+                if out is not None:
+                    trainer.save_checkpoint(out, lambda stage, best=best, state=state: self._write_model(stage, best, state),
+                                            self.net, opt, state, report)
+        finally:
+            report.close()
 
         self.net.load_state_dict(best)
         self.net.eval()
@@ -374,58 +351,21 @@ class BCMLPAgent(GiverConditionedAgent):
         return self.predict(np.asarray(self._history), self._giver_now)
 
     # ------------------------------------------------------------------ checkpoints
-    def _save(self, out: Path, best: dict, opt: torch.optim.Optimizer, state: dict) -> None:
-        """One training checkpoint, written as a unit (best weights, last weights, optimizer, state)."""
-        with staged_write(out) as stage:
-            ts = stage / "training_state"
-            ts.mkdir()
-            save_file({k: v.contiguous().cpu() for k, v in best.items()}, stage / "model.safetensors")
-            save_file({k: v.contiguous().cpu() for k, v in self.net.state_dict().items()}, ts / "last.safetensors")
-            save_optimizer(opt, ts)
-            write_json(ts / "state.json", state)
-            write_json(stage / "config.json", self._config_json(state))
+    def _config_dict(self) -> dict:
+        """The config as JSON (what ``config.json`` holds under ``"config"``)."""
+        return {**asdict(self.config), "hidden": list(self.config.hidden)}
 
-    def _config_json(self, state: dict | None = None) -> dict:
-        d = {
-            "type": CHECKPOINT_TYPE,
-            "format": CHECKPOINT_FORMAT,
-            "config": {**asdict(self.config), "hidden": list(self.config.hidden)},
-            "features": self.config.spec.to_dict(),
-        }
-        if state:
-            d["training"] = {k: state[k] for k in ("epoch", "best_epoch", "best_val", "stopped_early", "wall_time_s")}
-        return d
-
-    def _load_training_state(self, out: Path, opt: torch.optim.Optimizer, split: dict) -> tuple[dict, dict]:
-        """Validated (state, best weights) of ``out``; loads the last weights and the optimizer."""
-        recover(out)
-        ts = out / "training_state"
-        if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
-            raise CheckpointError(f"cannot resume: no training state in {ts}")
-        saved = _read_config(out)
-        mine = {**asdict(self.config), "hidden": list(self.config.hidden)}
-        theirs = saved["config"]
-        diff = sorted(k for k in mine if k not in RESUMABLE_CHANGES and theirs.get(k) != mine[k])
-        if diff:
-            raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
-        state = _check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
-        if state["split"] != split:
-            raise CheckpointError(f"cannot resume from {out}: it was trained on a different dataset/split")
-        expected = expected_of(self.net.state_dict())
-        self.net.load_state_dict(load_tensors(ts / "last.safetensors", expected))
-        best = load_tensors(out / "model.safetensors", expected)
-        _check_scales(best, out / "model.safetensors")
-        load_optimizer(opt, ts)
-        return state, best
+    def _write_model(self, stage: Path, weights: dict[str, torch.Tensor], state: dict | None) -> None:
+        """``model.safetensors`` (``weights``) and ``config.json`` into the staging folder."""
+        save_file({k: v.contiguous().cpu() for k, v in weights.items()}, stage / "model.safetensors")
+        write_json(stage / "config.json", trainer.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state))
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write ``config.json`` + ``model.safetensors`` (weights and normalisation) to ``path``, as a unit."""
         self._require_fitted()
         out = Path(path)
         with staged_write(out) as stage:
-            save_file({k: v.contiguous().cpu() for k, v in self.net.state_dict().items()},
-                      stage / "model.safetensors")
-            write_json(stage / "config.json", self._config_json(self.train_log))
+            self._write_model(stage, self.net.state_dict(), self.train_log)
         return out
 
     @classmethod
@@ -433,14 +373,11 @@ class BCMLPAgent(GiverConditionedAgent):
         """Load a checkpoint written by :meth:`save` or by ``train.py bc-mlp``.
 
         Every file is validated first (see the module docstring); any problem raises
-        :class:`~handover_env.data.features.CheckpointError` naming the file. ``closed_loop_kwargs``
+        :class:`~baselines.checkpoint_io.CheckpointError` naming the file. ``closed_loop_kwargs``
         (params, closed_loop, layout) go to the constructor.
         """
         path = Path(path)
-        try:
-            recover(path)
-        except OSError as exc:
-            raise CheckpointError(f"{path}: cannot finish an interrupted checkpoint write ({exc})") from None
+        trainer.recover_checkpoint(path)
         saved = _read_config(path)
         cfg = BCMLPConfig.from_dict({**saved["config"], "device": device}, str(path / "config.json"))
         agent = cls(cfg, **closed_loop_kwargs)
@@ -463,31 +400,12 @@ def _check_scales(tensors: dict[str, torch.Tensor], source: Path) -> None:
 
 def _check_state(state: object, source: Path) -> dict:
     """A ``state.json`` whose fields have their types and agree with each other, or CheckpointError."""
-    return check_training_state(state, source, "epoch", "best_epoch",
-                                {"bad_epochs": int, "stopped_early": bool})
+    return trainer.check_state(state, source, "epoch", {"bad_epochs": int, "stopped_early": bool})
 
 
 def _read_config(path: Path) -> dict:
-    if not path.is_dir():
-        raise CheckpointError(f"no BC-MLP checkpoint folder at {path}")
-    cfg_file = path / "config.json"
-    if not cfg_file.is_file():
-        raise CheckpointError(f"{path}: missing config.json (not a BC-MLP checkpoint)")
-    saved = read_json(cfg_file, "config.json")
-    if not isinstance(saved, dict):
-        raise CheckpointError(f"{cfg_file}: expected a JSON object")
-    if saved.get("type") != CHECKPOINT_TYPE:
-        raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {CHECKPOINT_TYPE!r}")
-    if saved.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"{path}: checkpoint format {saved.get('format')}, this code reads {CHECKPOINT_FORMAT}")
-    if not isinstance(saved.get("config"), dict):
-        raise CheckpointError(f"{cfg_file}: no config object")
-    cfg = config_from_dict(BCMLPConfig, saved["config"], str(cfg_file))
-    if saved.get("features") != cfg.spec.to_dict():
-        raise CheckpointError(f"{cfg_file}: features {saved.get('features')!r} disagree with its config")
-    if not isinstance(saved.get("training", {}), dict):
-        raise CheckpointError(f"{cfg_file}: training must be a JSON object")
-    return saved
+    """``config.json`` of a BC-MLP checkpoint folder, validated."""
+    return trainer.read_checkpoint_json(path, "config.json", CHECKPOINT_TYPE, CHECKPOINT_FORMAT, BCMLPConfig, "BC-MLP")
 
 
 __all__ = ["BCMLPAgent", "BCMLPConfig", "BCMLPNet"]

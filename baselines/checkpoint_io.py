@@ -13,7 +13,7 @@ new checkpoint, never files of two different epochs.
 :func:`load_tensors` (keys, shapes, dtypes and finiteness against what the model expects),
 :func:`config_from_dict` (every field present, of its exact JSON type: ``"no"`` is not a bool, a
 float is not an int) and :func:`load_optimizer` (LeRobot's optimizer format, checked against the
-optimizer being resumed) raise :class:`~handover_env.data.features.CheckpointError` naming the file and
+optimizer being resumed) raise :class:`CheckpointError` naming the file and
 the problem; nothing raw (``SafetensorError``, ``JSONDecodeError``, ``KeyError``...) escapes.
 
 **Output folders.** :func:`check_out_dir` decides whether ``train.py`` may write into ``--out``.
@@ -33,9 +33,18 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-import torch
+from handover_env.extras import missing_extra
 
-from handover_env.data.features import CheckpointError
+try:
+    import torch
+except ModuleNotFoundError as _exc:
+    raise missing_extra("baselines", _exc, __name__) from None
+
+
+
+class CheckpointError(ValueError):
+    """A checkpoint folder is missing, incomplete or does not match what is asked of it."""
+
 
 STAGING = ".staging"
 COMMIT = "COMMIT.json"
@@ -187,6 +196,8 @@ def _type_ok(value: Any, hint: Any) -> bool:
         return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
     if hint is str:
         return isinstance(value, str)
+    if origin is dict or hint is dict:  # a JSON object; its contents are the config's to check
+        return isinstance(value, dict) and all(isinstance(k, str) for k in value)
     if origin is tuple:  # tuple[int, ...] stored as a JSON list
         args = typing.get_args(hint)
         return isinstance(value, (list, tuple)) and all(_type_ok(v, args[0]) for v in value)
@@ -331,8 +342,8 @@ def load_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
 #: What each kind of checkpoint writes into its folder (besides ``.staging``).
 CHECKPOINT_FILES = {
     "act": ("config.json", "model.safetensors", "handover_act.json", "policy_preprocessor.json",
-            "policy_postprocessor.json", "training_state", "train_summary.json"),
-    "bc_mlp": ("config.json", "model.safetensors", "training_state", "train_summary.json"),
+            "policy_postprocessor.json", "training_state", "train_summary.json", "train_log.jsonl"),
+    "bc_mlp": ("config.json", "model.safetensors", "training_state", "train_summary.json", "train_log.jsonl"),
 }
 _ACT_STATE_FILE = re.compile(r"policy_(pre|post)processor_step_[0-9]+_[a-z_]+\.safetensors", re.ASCII)
 #: Entries train.py may find in an --out that holds no checkpoint yet (an export made before the

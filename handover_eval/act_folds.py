@@ -27,7 +27,7 @@ import shutil
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +58,8 @@ class ACTJob:
         folder: the checkpoint folder ``fit_agent`` reuses.
         key_src: the checkpoint key source written to the completion marker.
         export_root: the LeRobot export of the whole dataset.
+        progress: show the per-step tqdm bar of the training (the in-process path; workers
+            write their validation passes to the checkpoint's ``train_log.jsonl`` only).
     """
 
     label: str
@@ -66,6 +68,7 @@ class ACTJob:
     folder: str
     key_src: str
     export_root: str
+    progress: bool = False
 
 
 @dataclass(frozen=True)
@@ -172,7 +175,8 @@ def train_job(job: ACTJob) -> dict:
     folder = fresh_folder(job.folder)
     t0 = time.perf_counter()
     agent = ACTAgent(ACTAgentConfig.from_dict(job.config))
-    agent.fit_lerobot(job.export_root, out_dir=folder, episodes=np.asarray(job.episodes, dtype=np.int64))
+    agent.fit_lerobot(job.export_root, out_dir=folder, episodes=np.asarray(job.episodes, dtype=np.int64),
+                      progress=job.progress)
     agent.save(folder)
     mark_complete(folder, job.key_src)
     return {"label": job.label, "folder": str(folder), "seconds": time.perf_counter() - t0,
@@ -259,7 +263,7 @@ def _run_jobs(jobs: list[ACTJob], workers: int, progress: bool, log: Callable[[s
             torch.set_num_threads(1)  # as in a worker; restored afterwards
             try:
                 for job in jobs:
-                    res = train_job(job)
+                    res = train_job(replace(job, progress=progress))
                     results[Path(res["folder"])] = res
                     report(res)
             finally:

@@ -121,7 +121,7 @@ def build_agent(name: str, options: MethodOptions, inducing_ratio: float | None 
     kwargs["steps"] = steps
     kwargs["eval_every"] = max(1, steps // 8)  # 8 validation passes pick the best checkpoint
     if options.quick:
-        kwargs.update(dim_model=32, dim_feedforward=64, n_heads=2, n_encoder_layers=1, batch_size=32)
+        kwargs.update(policy=dict(dim_model=32, dim_feedforward=64, n_heads=2, n_encoder_layers=1), batch_size=32)
     return ACTAgent(ACTAgentConfig(**kwargs))
 
 

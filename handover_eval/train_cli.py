@@ -118,7 +118,7 @@ def train_bc_mlp(args: argparse.Namespace) -> None:
         lr=_default(args.lr, 1e-3), batch_size=_default(args.batch_size, 256),
         max_epochs=_default(args.epochs, 3 if args.smoke else 50), patience=args.patience,
         val_fraction=args.val_fraction, seed=args.seed, device=args.device,
-        use_giver_state=not args.no_giver_state,
+        use_giver_state=args.giver_state,
     )
     check_out_dir(args.out, "bc_mlp", args.resume, args.overwrite)
     data = load_data(args.data, args.smoke, args.seed)
@@ -134,17 +134,21 @@ def train_act(args: argparse.Namespace) -> None:
     from baselines.act import ACTAgent, ACTAgentConfig
     from baselines.checkpoint_io import check_out_dir
 
-    size = dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4) if args.smoke else {}
+    policy = dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4) if args.smoke else {}
     for key in ("dim_model", "n_heads", "dim_feedforward", "n_encoder_layers", "n_decoder_layers"):
         if getattr(args, key) is not None:
-            size[key] = getattr(args, key)
+            policy[key] = getattr(args, key)
+    if args.no_vae:
+        policy["use_vae"] = False
+    if args.lr is not None:
+        policy["optimizer_lr"] = args.lr
     cfg = ACTAgentConfig(
-        history=args.history, horizon=args.horizon, paper_scale=args.paper_scale, use_vae=not args.no_vae,
-        lr=_default(args.lr, 1e-4), batch_size=_default(args.batch_size, 16 if args.smoke else 64),
+        history=args.history, horizon=args.horizon, paper_scale=args.paper_scale, policy=policy,
+        batch_size=_default(args.batch_size, 16 if args.smoke else 64),
         steps=_default(args.steps, 20 if args.smoke else 8_000),
         eval_every=_default(args.eval_every, 10 if args.smoke else 1_000),
         val_fraction=args.val_fraction, seed=args.seed, device=args.device,
-        use_giver_state=not args.no_giver_state, **size,
+        use_giver_state=args.giver_state,
     )
     check_out_dir(args.out, "act", args.resume, args.overwrite)
     data = load_data(args.data, args.smoke, args.seed)
@@ -221,8 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
     bc.add_argument("--patience", type=_positive(int), default=5, help="early-stopping patience in epochs (default 5)")
     bc.add_argument("--hidden", type=_positive(int), nargs="+", default=None,
                     help="hidden widths (default 256 256 256; 64 64 with --smoke)")
-    bc.add_argument("--no-giver-state", action="store_true", help="do not condition on the current giver/robot "
-                    "xyz: the receiver history alone, exactly what the planner sees")
+    bc.add_argument("--giver-state", action="store_true", help="also condition on the current giver/robot "
+                    "xyz; off by default (the receiver history alone, exactly what the planner sees: in the "
+                    "env the giver is the robot's own TCP, and a model trained with it copies it)")
     bc.set_defaults(func=train_bc_mlp)
 
     act = sub.add_parser("act", help="ACT: LeRobot's ACTPolicy, state-only, trained on a LeRobot export",
@@ -236,8 +241,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "ffn 3200, 4 enc layers, VAE 4 layers, latent 32) instead of the CPU default "
                      "(dim 128, 4 heads, ffn 512, 2 enc / 1 dec layers, VAE 1 layer, latent 16)")
     act.add_argument("--no-vae", action="store_true", help="train without ACT's CVAE objective")
-    act.add_argument("--no-giver-state", action="store_true", help="no observation.state input feature: the "
-                     "receiver history alone, exactly what the planner sees")
+    act.add_argument("--giver-state", action="store_true", help="also give ACT observation.state (the "
+                     "current giver/robot xyz); off by default: the receiver history alone, as in evaluate.py")
     act.add_argument("--dim-model", type=_positive(int), default=None, help="override the transformer width")
     act.add_argument("--n-heads", type=_positive(int), default=None, help="override the attention heads")
     act.add_argument("--dim-feedforward", type=_positive(int), default=None, help="override the feed-forward width")

@@ -29,11 +29,14 @@ from baselines.act import (  # noqa: E402
     normalise_samples,
     open_export,
 )
-from handover_env.data.features import CheckpointError, FeatureSpec  # noqa: E402
+from baselines.checkpoint_io import CheckpointError  # noqa: E402
+from handover_env.data.features import FeatureSpec  # noqa: E402
 from handover_env.data.lerobot_export import export_lerobot  # noqa: E402
 
-TINY = dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4,
-            batch_size=16, steps=40, eval_every=20, lr=1e-3)
+TINY = dict(policy=dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4,
+                        optimizer_lr=1e-3),
+            batch_size=16, steps=40, eval_every=20,
+            use_giver_state=True)  # on this 8-episode toy set, receiver-only needs ~80 steps to improve
 
 
 @pytest.fixture(scope="module")
@@ -56,6 +59,7 @@ def test_policy_is_lerobots_state_only_act():
     from lerobot.configs.types import FeatureType, NormalizationMode
     from lerobot.policies.act.modeling_act import ACTPolicy
 
+    assert ACTAgentConfig().use_giver_state is False  # receiver-only by default, as in evaluate.py
     agent = ACTAgent(ACTAgentConfig(**TINY))
     pc = agent.policy.config
     assert isinstance(agent.policy, ACTPolicy)
@@ -65,7 +69,9 @@ def test_policy_is_lerobots_state_only_act():
     assert pc.normalization_mapping["ENV"] is NormalizationMode.MEAN_STD
     assert pc.pretrained_backbone_weights is None and not hasattr(agent.policy.model, "backbone")
     paper = ACTAgentConfig(paper_scale=True)
-    assert (paper.dim_model, paper.dim_feedforward, paper.n_encoder_layers) == (512, 3200, 4)
+    model = paper.model()
+    assert (model["dim_model"], model["dim_feedforward"], model["n_encoder_layers"]) == (512, 3200, 4)
+    assert paper.policy_config().dim_model == 512 and ACTAgentConfig().policy_config().dim_model == 128
 
 
 def test_vectorised_samples_equal_lerobot_getitem(export):
@@ -82,6 +88,8 @@ def test_training_lowers_validation_loss_and_normalises_env(trained):
     agent, out = trained
     val = agent.train_log["val_loss"]
     assert len(val) == 2 and val[-1] < val[0]
+    log = [json.loads(line) for line in (out / "train_log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in log] == [20, 40] and [r["val_loss"] for r in log] == val
     stats = agent.preprocessor.steps[-1].stats
     assert "observation.environment_state" in stats  # the ENV feature is normalised too
     saved = json.loads((out / "handover_act.json").read_text())
@@ -146,11 +154,17 @@ def test_clear_errors(data, export, trained, tmp_path):
     with pytest.raises(ValueError, match="horizon H=90 frames is longer than"):
         ACTAgent(ACTAgentConfig(**dict(TINY, horizon=90))).fit(data)
     with pytest.raises(ValueError, match="divisible"):
-        ACTAgentConfig(dim_model=30, n_heads=4)
+        ACTAgentConfig(policy=dict(dim_model=30, n_heads=4))
+    with pytest.raises(ValueError, match="set by the agent"):
+        ACTAgentConfig(policy=dict(chunk_size=5))
+    with pytest.raises(ValueError, match="not an ACTConfig field"):
+        ACTAgentConfig(policy=dict(lr=1e-3))
+    with pytest.raises(ValueError, match="is not a"):
+        ACTAgentConfig(policy=dict(use_vae="no"))
 
 
 def test_receiver_only_variant_drops_the_state_feature(export, data):
-    agent = ACTAgent(ACTAgentConfig(**dict(TINY, steps=4, eval_every=4), use_giver_state=False)).fit_lerobot(export)
+    agent = ACTAgent(ACTAgentConfig(**dict(TINY, steps=4, eval_every=4, use_giver_state=False))).fit_lerobot(export)
     assert agent.policy.config.robot_state_feature is None
     ep = data[1]
     pred = agent.predict(ep.receiver_xy[:15])
@@ -164,7 +178,7 @@ def test_normalising_once_equals_the_per_batch_preprocessor(export):
     ds, _ = open_export(export, "local/handover", FeatureSpec(history=10))
     samples = lerobot_samples(ds, np.arange(ds.num_episodes))
     for giver in (True, False):
-        agent = ACTAgent(ACTAgentConfig(**TINY, use_giver_state=giver))
+        agent = ACTAgent(ACTAgentConfig(**dict(TINY, use_giver_state=giver)))
         pre, _ = make_act_pre_post_processors(agent.policy.config, feature_stats(samples))
         whole = normalise_samples(pre, samples, chunk=50)  # several chunks
         assert set(whole) == set(samples)

@@ -26,8 +26,8 @@ import numpy as np, torch
 torch.set_num_threads(int(sys.argv[3]))
 torch.rand(int(sys.argv[4])); np.random.rand(int(sys.argv[4])); random.random()
 from baselines.act import ACTAgent, ACTAgentConfig
-config = ACTAgentConfig(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4,
-                        batch_size=16, steps=6, eval_every=3, lr=1e-3, seed=7)
+config = ACTAgentConfig(policy=dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4,
+                                   optimizer_lr=1e-3), batch_size=16, steps=6, eval_every=3, seed=7)
 agent = ACTAgent(config).fit_lerobot(sys.argv[1], out_dir=sys.argv[2])
 assert torch.get_num_threads() == int(sys.argv[3])  # the caller's setting is restored
 """

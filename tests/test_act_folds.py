@@ -130,7 +130,7 @@ def test_workers_option_and_eval_budget():
     assert (cfg.steps, cfg.eval_every) == (ACT_EVAL_STEPS, ACT_EVAL_STEPS // 8)
     assert not cfg.use_giver_state
     quick = build_agent("act", MethodOptions(quick=True)).config
-    assert quick.steps == 40 and quick.dim_model == 32
+    assert quick.steps == 40 and quick.model()["dim_model"] == 32
     assert build_agent("act", MethodOptions(act_steps=800)).config.eval_every == 100
 
 

@@ -15,15 +15,15 @@ _torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
 from baselines_toy import toy_dataset
 
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
+from baselines.checkpoint_io import CheckpointError
 from handover_env.data.features import (
-    CheckpointError,
     FeatureSpec,
     encode_history,
     encode_receiver,
     episode_frames,
 )
 
-SMALL = dict(hidden=(32, 32), batch_size=64, max_epochs=4, patience=50)
+SMALL = dict(hidden=(32, 32), batch_size=64, max_epochs=4, patience=50, use_giver_state=True)
 
 
 @pytest.fixture(scope="module")
@@ -136,10 +136,11 @@ def test_clear_errors(data, trained, tmp_path):
         BCMLPAgent(BCMLPConfig(**SMALL)).predict(data[0].receiver_xy, np.zeros(3))
     with pytest.raises(ValueError, match="history"):
         BCMLPConfig(history=1)
+    assert BCMLPConfig().use_giver_state is False  # receiver-only by default, as in evaluate.py
 
 
 def test_receiver_only_variant_needs_no_giver(data):
-    agent = BCMLPAgent(BCMLPConfig(**dict(SMALL, max_epochs=2), use_giver_state=False)).fit(data)
+    agent = BCMLPAgent(BCMLPConfig(**dict(SMALL, max_epochs=2, use_giver_state=False))).fit(data)
     ep = data[1]
     pred = agent.predict(ep.receiver_xy[:15])
     assert pred.shape == (30, 3)

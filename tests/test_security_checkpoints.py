@@ -22,10 +22,12 @@ from safetensors.torch import load_file, save_file  # noqa: E402
 
 from baselines.act import ACTAgent, ACTAgentConfig  # noqa: E402
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig  # noqa: E402
-from handover_env.data.features import CheckpointError  # noqa: E402
+from baselines.checkpoint_io import CheckpointError  # noqa: E402
 
-ACT_TINY = {"dim_model": 16, "n_heads": 2, "dim_feedforward": 32, "n_encoder_layers": 1, "latent_dim": 4,
-            "batch_size": 8, "steps": 2, "eval_every": 1}
+ACT_TINY = {"policy": {"dim_model": 16, "n_heads": 2, "dim_feedforward": 32, "n_encoder_layers": 1,
+                       "latent_dim": 4},
+            "batch_size": 8, "steps": 2, "eval_every": 1,
+            "use_giver_state": True}  # with observation.state, so its tampering is covered too
 PRE, POST = "policy_preprocessor.json", "policy_postprocessor.json"
 PRE_STATS = "policy_preprocessor_step_3_normalizer_processor.safetensors"
 POST_STATS = "policy_postprocessor_step_0_unnormalizer_processor.safetensors"
@@ -46,7 +48,7 @@ def act_dir(data, tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def bc_dir(data, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("bc") / "ckpt"
-    BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=2)).fit(data, out_dir=out).save(out)
+    BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=2, use_giver_state=True)).fit(data, out_dir=out).save(out)
     return out
 
 
@@ -163,7 +165,12 @@ ACT_TAMPER = {
     **COMMON,
     "handover-garbage": ("handover_act.json", lambda p: p.write_text("\x00\x01")),
     "handover-bool-string": ("handover_act.json", lambda p: _edit_json(p, lambda d: d["config"].update(use_vae="no"))),
-    "handover-missing-key": ("handover_act.json", lambda p: _edit_json(p, lambda d: d["config"].pop("dropout"))),
+    "handover-missing-key": ("handover_act.json", lambda p: _edit_json(p, lambda d: d["config"].pop("batch_size"))),
+    "handover-policy-owned": ("handover_act.json",
+                              lambda p: _edit_json(p, lambda d: d["config"]["policy"].update(chunk_size=5))),
+    "handover-policy-type": ("handover_act.json",
+                             lambda p: _edit_json(p, lambda d: d["config"]["policy"].update(dim_model="16"))),
+    "handover-policy-list": ("handover_act.json", lambda p: _edit_json(p, lambda d: d["config"].update(policy=[1]))),
     "handover-giver-state": ("handover_act.json",
                              lambda p: _edit_json(p, lambda d: d["config"].update(use_giver_state=False))),
     "config-json-garbage": ("config.json", lambda p: p.write_text("{")),

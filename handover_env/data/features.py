@@ -191,10 +191,6 @@ def validate_giver(giver_xyz: np.ndarray | None) -> np.ndarray:
     return arr
 
 
-class CheckpointError(ValueError):
-    """A checkpoint folder is missing, incomplete or does not match what is asked of it."""
-
-
 def split_train_val(dataset: HandoverDataset, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Episode indices (train, val), stratified by ID/OOD; val is one of round(1/val_fraction) folds.
 

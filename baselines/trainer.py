@@ -1,0 +1,283 @@
+"""The training machinery BC-MLP and ACT share: state, best validation, checkpoints, resume, progress.
+
+Each baseline keeps its own optimisation loop (BC-MLP runs epochs with early stopping, ACT runs
+steps through LeRobot's ``ACTPolicy.forward``); everything around the loop is here:
+
+* **Training state** (:func:`new_state`): a JSON-able dict with a progress counter (``"epoch"``
+  or ``"step"``), the loss curves, the best validation loss and when it was reached, the wall
+  time and the train/validation split (episode ids). :func:`record_validation` appends one
+  validation pass and says whether it is the new best.
+* **Checkpoint** (:func:`save_checkpoint`): written as one unit by
+  :func:`~baselines.checkpoint_io.staged_write`: the model files (the caller's ``write_model``:
+  best weights and configs), ``training_state/`` (last weights, optimizer in LeRobot's format,
+  optionally the torch RNG, ``state.json``) and the JSON-lines log :data:`LOG_FILE`.
+* **Resume** (:func:`load_training_state`): every file validated before it is used (a config
+  that differs in a field the run may not change, a state inconsistent with its loss curves, a
+  different split, weights of other shapes, a foreign optimizer state: each a
+  :class:`~baselines.checkpoint_io.CheckpointError` naming the file).
+* **Checkpoint JSON** (:func:`checkpoint_json`, :func:`read_checkpoint_json`): the
+  ``{"type", "format", "config", "features", "training"}`` record both baselines write, read back
+  with every config field present and of its JSON type.
+* **Progress** (:class:`TrainingProgress`): one tqdm bar, the caller's ``log`` line per validation
+  pass, and the same record as a JSON line (``train_log.jsonl``: ``{"epoch"|"step", "train_loss",
+  "val_loss", "best_val", "best_epoch"|"best_step", "wall_time_s"}``), the TensorBoard-style scalar
+  log a plotting script reads line by line.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from handover_env.extras import missing_extra
+
+try:
+    import torch
+    from safetensors.torch import save_file
+except ModuleNotFoundError as _exc:
+    raise missing_extra("baselines", _exc, __name__) from None
+
+from baselines.checkpoint_io import (
+    MAX_JSON_BYTES,
+    CheckpointError,
+    check_training_state,
+    config_from_dict,
+    expected_of,
+    load_optimizer,
+    load_tensors,
+    read_json,
+    recover,
+    save_optimizer,
+    staged_write,
+    write_json,
+)
+
+TRAINING_STATE = "training_state"
+LOG_FILE = "train_log.jsonl"
+#: The summary of a run kept in the checkpoint JSON (``"training"``), when present in the state.
+SUMMARY_KEYS = ("epoch", "step", "best_epoch", "best_step", "best_val", "stopped_early", "wall_time_s")
+
+
+def clone_weights(module: torch.nn.Module) -> dict[str, torch.Tensor]:
+    """A detached copy of ``module``'s state dict (the best weights so far)."""
+    return {k: v.detach().clone() for k, v in module.state_dict().items()}
+
+
+def new_state(counter: str, split: dict[str, list[str]], **extra: Any) -> dict:
+    """A fresh training state; ``counter`` is ``"epoch"`` or ``"step"``, ``extra`` adds fields."""
+    return {counter: 0, "best_val": math.inf, f"best_{counter}": -1, "train_loss": [], "val_loss": [],
+            "wall_time_s": 0.0, "split": split, **extra}
+
+
+def record_validation(state: dict, counter: str, train_loss: float, val_loss: float) -> bool:
+    """Append one validation pass at the state's current ``counter``; True if it is the best so far."""
+    state["train_loss"].append(train_loss)
+    state["val_loss"].append(val_loss)
+    if val_loss < state["best_val"]:
+        state["best_val"], state[f"best_{counter}"] = val_loss, state[counter]
+        return True
+    return False
+
+
+class TrainingProgress:
+    """A tqdm bar (when ``enabled``), a log line and a JSON record per validation pass.
+
+    Args:
+        desc: the bar's label (``"bc-mlp"``, ``"act"``).
+        total: the counter's final value; initial: its value now (a resumed run).
+        unit: ``"epoch"`` or ``"step"``.
+        enabled: show the bar.
+        log: called with one line per validation pass (e.g. ``print``).
+        previous: the JSON-lines log of the run being resumed (its text, kept as it is).
+    """
+
+    def __init__(self, desc: str, total: int, initial: int, unit: str, enabled: bool,
+                 log: Callable[[str], None] | None = None, previous: str = "") -> None:
+        self.unit = unit
+        self.log = log
+        self.lines = [line for line in previous.splitlines() if line.strip()]
+        self.bar = None
+        if enabled:
+            from tqdm.auto import tqdm
+
+            self.bar = tqdm(total=total, initial=initial, desc=desc, unit=unit, dynamic_ncols=True)
+
+    def advance(self, n: int = 1, loss: float | None = None) -> None:
+        """``n`` more epochs or steps; ``loss`` is shown beside the bar."""
+        if self.bar is not None:
+            self.bar.update(n)
+            if loss is not None:
+                self.bar.set_postfix(loss=f"{loss:.4f}", refresh=False)
+
+    def validation(self, state: dict, text: str) -> None:
+        """Record the validation pass just appended to ``state``; ``text`` is the log line."""
+        best = f"best_{self.unit}"
+        record = {self.unit: state[self.unit], "train_loss": state["train_loss"][-1],
+                  "val_loss": state["val_loss"][-1], "best_val": state["best_val"], best: state[best],
+                  "wall_time_s": round(state["wall_time_s"], 3)}
+        self.lines.append(json.dumps(record))
+        if self.log is not None:
+            if self.bar is not None and self.log is print:
+                self.bar.write(text)
+            else:
+                self.log(text)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def previous_log(out: Path) -> str:
+    """The JSON-lines log of the checkpoint in ``out`` (as text, never parsed), or ``""``."""
+    path = out / LOG_FILE
+    if not path.is_file() or path.stat().st_size > MAX_JSON_BYTES:
+        return ""
+    return path.read_text(encoding="utf-8", errors="replace")
+
+
+def save_checkpoint(
+    out: Path,
+    write_model: Callable[[Path], None],
+    module: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    state: dict,
+    progress: TrainingProgress | None = None,
+    rng: bool = False,
+) -> None:
+    """One training checkpoint, written as a unit.
+
+    Args:
+        out: the checkpoint folder.
+        write_model: writes the model files (best weights, configs) into the staging folder it is given.
+        module: the model being trained (its current weights go to ``training_state/last.safetensors``).
+        opt: its optimizer (LeRobot's safetensors + JSON format).
+        state: the training state (``training_state/state.json``).
+        progress: its JSON lines become :data:`LOG_FILE`.
+        rng: also save the torch RNG (``training_state/rng.safetensors``).
+    """
+    with staged_write(out) as stage:
+        write_model(stage)
+        ts = stage / TRAINING_STATE
+        ts.mkdir()
+        save_file({k: v.contiguous().cpu() for k, v in module.state_dict().items()}, ts / "last.safetensors")
+        if rng:
+            save_file({"torch_rng": torch.get_rng_state()}, ts / "rng.safetensors")
+        save_optimizer(opt, ts)
+        write_json(ts / "state.json", state)
+        if progress is not None:
+            (stage / LOG_FILE).write_text("".join(line + "\n" for line in progress.lines), encoding="utf-8")
+
+
+def load_training_state(
+    out: Path,
+    module: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    *,
+    split: dict,
+    config: dict,
+    saved_config: Callable[[Path], dict],
+    resumable: frozenset[str],
+    check_state: Callable[[Any, Path], dict],
+    check_best: Callable[[dict[str, torch.Tensor], Path], None] | None = None,
+    rng: bool = False,
+) -> tuple[dict, dict[str, torch.Tensor]]:
+    """Validated (state, best weights) of the checkpoint in ``out``; restores ``module``, ``opt`` (and the RNG).
+
+    Args:
+        out: the checkpoint folder.
+        module, opt: built from ``config``; they receive the last weights and the optimizer state.
+        split: the train/validation split of this run (must equal the checkpoint's).
+        config: this run's config as JSON; saved_config: reads the checkpoint's (validated).
+        resumable: config fields a resumed run may change.
+        check_state: validates ``state.json``.
+        check_best: further checks of the best weights (e.g. positive normalisation scales).
+        rng: restore the torch RNG saved by :func:`save_checkpoint`.
+    """
+    recover(out)
+    ts = out / TRAINING_STATE
+    if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
+        raise CheckpointError(f"cannot resume: no training state in {ts}")
+    theirs = saved_config(out)
+    diff = sorted(k for k in config if k not in resumable and theirs.get(k) != config[k])
+    if diff:
+        raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
+    state = check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
+    if state["split"] != split:
+        raise CheckpointError(f"cannot resume from {out}: it was trained on a different dataset/split")
+    expected = expected_of(module.state_dict())
+    module.load_state_dict(load_tensors(ts / "last.safetensors", expected))
+    best = load_tensors(out / "model.safetensors", expected)
+    if check_best is not None:
+        check_best(best, out / "model.safetensors")
+    load_optimizer(opt, ts)
+    if rng:
+        saved = load_tensors(ts / "rng.safetensors",
+                             {"torch_rng": (tuple(torch.get_rng_state().shape), torch.uint8)})
+        try:
+            torch.set_rng_state(saved["torch_rng"])
+        except (RuntimeError, ValueError) as exc:
+            raise CheckpointError(f"{ts / 'rng.safetensors'}: not a torch RNG state ({exc})") from None
+    return state, best
+
+
+def check_state(state: Any, source: Path, counter: str, extra: dict[str, type] | None = None) -> dict:
+    """A ``state.json`` of :func:`new_state`'s fields (plus ``extra``), consistent with itself."""
+    return check_training_state(state, source, counter, f"best_{counter}", extra or {})
+
+
+# ---------------------------------------------------------------------- checkpoint JSON
+def checkpoint_json(kind: str, fmt: int, config: Any, state: dict | None) -> dict:
+    """The record a checkpoint carries: type, format, config (a dataclass), features, run summary."""
+    d = {"type": kind, "format": fmt, "config": json.loads(json.dumps(asdict(config))),
+         "features": config.spec.to_dict()}
+    if state:
+        d["training"] = {k: state[k] for k in SUMMARY_KEYS if k in state}
+    return d
+
+
+def read_checkpoint_json(path: Path, file: str, kind: str, fmt: int, config_cls: type, label: str) -> dict:
+    """``path/file`` as written by :func:`checkpoint_json`, validated; raises CheckpointError naming the file.
+
+    Args:
+        path: the checkpoint folder.
+        file: the record's file name in it.
+        kind, fmt: the checkpoint type and format this code reads.
+        config_cls: the config dataclass (every field present and of its JSON type).
+        label: the baseline's name, for messages.
+    """
+    if not path.is_dir():
+        raise CheckpointError(f"no {label} checkpoint folder at {path}")
+    f = path / file
+    if not f.is_file():
+        raise CheckpointError(f"{path}: missing {file} (not a {label} checkpoint of this project)")
+    saved = read_json(f, file)
+    if not isinstance(saved, dict):
+        raise CheckpointError(f"{f}: expected a JSON object")
+    if saved.get("type") != kind:
+        raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {kind!r}")
+    if saved.get("format") != fmt:
+        raise CheckpointError(f"{path}: checkpoint format {saved.get('format')}, this code reads {fmt}")
+    cfg = config_from_dict(config_cls, saved.get("config"), str(f))
+    if saved.get("features") != cfg.spec.to_dict():
+        raise CheckpointError(f"{f}: features {saved.get('features')!r} disagree with its config")
+    if not isinstance(saved.get("training", {}), dict):
+        raise CheckpointError(f"{f}: training must be a JSON object")
+    return saved
+
+
+def recover_checkpoint(path: Path) -> None:
+    """Finish or discard an interrupted checkpoint write in ``path`` before it is read."""
+    try:
+        recover(path)
+    except OSError as exc:
+        raise CheckpointError(f"{path}: cannot finish an interrupted checkpoint write ({exc})") from None
+
+
+def out_path(out_dir: str | os.PathLike | None) -> Path | None:
+    """``out_dir`` as a Path (None stays None)."""
+    return None if out_dir is None else Path(out_dir)
