@@ -77,6 +77,7 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
         else:
             assert r["model_fold"] == ""
         assert (float(r["K"]), float(r["B"]), float(r["t_f"]), float(r["f_r"])) == (114.3, 17.1, 0.14, 7.1)
+        assert (r["body_contact"] == "True") == (float(r["body_contact_force"]) > 0)
     agg = _rows(quick_run / "closed_loop.csv")
     for a in agg:  # the table's success rate is the episodes' one
         mine = [r for r in rows if (r["agent"], r["set"]) == (a["agent"], a["set"])]
@@ -88,10 +89,11 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
     assert {p["agent"] for p in pairs} == set(AGENTS) - {"reactive"}
     assert {p["metric"] for p in pairs} >= {"success", "handover_time", "time_lost", "arm_extended_time",
                                             "reach_distance", "pull_force", "body_contact_force",
-                                            "robot_jerk_rms"}
+                                            "body_contact", "robot_jerk_rms"}
     for p in pairs:
         if int(p["n_pairs"]):
             assert float(p["diff_low"]) <= float(p["diff"]) <= float(p["diff_high"])
+            assert float(p["mean_low"]) <= float(p["mean_diff"]) <= float(p["mean_high"])
     md = (quick_run / "closed_loop.md").read_text()
     assert "simulated person" in md and "No ghosts" in md and "start of the recording" in md
     assert "Paired against the reactive agent" in md

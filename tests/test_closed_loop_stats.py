@@ -131,6 +131,8 @@ def test_paired_rows_match_receivers_not_row_order() -> None:
     assert by[("ood", "success")]["diff"] == -1.0
     assert by[("ood", "handover_time")]["n_pairs"] == 0  # no receiver where both succeeded
     assert by[("ood", "time_lost")]["diff"] == pytest.approx(1.0)
+    assert by[("ood", "time_lost")]["mean_diff"] == pytest.approx(1.0)
+    assert by[("id", "time_lost")]["mean_excludes_zero"]
     assert stable_seed("a", 1) == stable_seed("a", 1) != stable_seed("a", 2)
 
 

@@ -248,6 +248,7 @@ def episode_row(job: EpisodeJob, spec: ReceiverSpec, info: dict, steps: int, wal
             row[key] = _num(value)
         else:
             row[key] = value
+    row["body_contact"] = _num(info.get("body_contact_force")) > 0  # any robot-body contact
     t_release, t_grasp = _num(info.get("release_time")), _num(info.get("transfer_time"))
     row["release_before_grasp"] = bool(info.get("released")) and not (t_grasp <= t_release)
     if spec.set == "replay":

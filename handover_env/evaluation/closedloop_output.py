@@ -73,6 +73,7 @@ def _header(
 
 
 def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, out: Path) -> None:
+    from handover_env.evaluation import closedloop_markdown as md
     from handover_env.evaluation import closedloop_report as rep
     from handover_env.evaluation.closedloop_plot import plot_closed_loop
 
@@ -105,7 +106,7 @@ def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, 
     write_csv([dataclasses.asdict(m) for m in run.models], out / "closed_loop_models.csv")
     write_csv(timing, out / "closed_loop_timing.csv")
     write_text(
-        rep.markdown(
+        md.markdown(
             agg, pairs, ghost, _header("Closed-loop evaluation", dataset, cfg, args, n_rec), footer
         ),
         out / "closed_loop.md",
@@ -133,10 +134,10 @@ def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, 
                     LABELS.get(r["agent"], r["agent"]),
                     r["set"],
                     r["n"],
-                    rep.success_cell(r),
-                    rep.outcomes_cell(r),
-                    rep.med_iqr(r, "handover_time", 2),
-                    rep.med_iqr(r, "time_lost", 2),
+                    md.success_cell(r),
+                    md.outcomes_cell(r),
+                    md.med_iqr(r, "handover_time", 2),
+                    md.med_iqr(r, "time_lost", 2),
                 ]
                 for r in agg
             ],

@@ -16,7 +16,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from handover_env.evaluation.closedloop_agents import LABELS
+from handover_env.evaluation.closedloop_agents import AGENTS
+from handover_env.evaluation.closedloop_receivers import SETS
 from handover_env.evaluation.closedloop_stats import (
     N_BOOTSTRAP,
     median_iqr,
@@ -26,7 +27,6 @@ from handover_env.evaluation.closedloop_stats import (
     stable_seed,
     wilson_interval,
 )
-from handover_env.evaluation.reporting import markdown_table
 
 OUTCOMES = ("success", "premature_release", "dropped", "unsafe_force", "missed", "timeout")
 EFFORT = (
@@ -60,20 +60,10 @@ PAIRED: dict[str, tuple[str, str]] = {
     "handover_time": ("handover_time", "median"),
     **{m: (m, "median") for m in EFFORT},
     "peak_contact_force": ("peak_contact_force", "median"),
+    "body_contact": ("body_contact", "mean"),
     "body_contact_force": ("body_contact_force", "median"),
     "robot_jerk_rms": ("robot_jerk_rms", "median"),
 }
-NOTE_SIMULATED = (
-    "These results come from the **simulated person** (an articulated, compliant body whose "
-    "reaching and grasping are calibrated to the recorded human-human handovers), not from people."
-)
-NOTE_TIME = (
-    "Handover time is the paper's (Sec. V-C): from when the receiver leaves the start point to the "
-    "gripper release, successes only; the static baseline's 2 s stabilisation delay is excluded "
-    "(`handover_time_with_delay` in the CSV includes it). Scripted walkers start at rest. "
-    "Recordings start mid-walk, so on replays it runs from the start of the recording (the "
-    "receiver is already moving: departure = 0) to the release."
-)
 
 
 def _value(row: dict, column: str) -> float:
@@ -86,15 +76,21 @@ def _value(row: dict, column: str) -> float:
         return math.nan
 
 
+def _order(agent: str, rset: str = "") -> tuple[int, int]:
+    """Table order: the agents as listed in AGENTS, then ID, OOD, replay."""
+    a = AGENTS.index(agent) if agent in AGENTS else len(AGENTS)
+    return a, SETS.index(rset) if rset in SETS else len(SETS)
+
+
 def _group(rows: Sequence[dict]) -> dict[tuple[str, str], list[dict]]:
     groups: dict[tuple[str, str], list[dict]] = {}
     for r in rows:
         groups.setdefault((r["agent"], r["set"]), []).append(r)
-    return groups
+    return dict(sorted(groups.items(), key=lambda kv: _order(*kv[0])))
 
 
 def aggregate(rows: Sequence[dict]) -> list[dict]:
-    """One row per (agent, receiver set), in first-seen order (module docstring)."""
+    """One row per (agent, receiver set), agents in AGENTS order (module docstring)."""
     out = []
     for (agent, rset), mine in _group(rows).items():
         n = len(mine)
@@ -159,13 +155,20 @@ def paired_metrics(
     seed: int = 0,
     metrics: dict[str, tuple[str, str]] = PAIRED,
 ) -> list[dict]:
-    """Paired differences ``rows - ref_rows`` matched on (set, receiver), one dict per metric."""
+    """Paired differences ``rows - ref_rows`` matched on (set, receiver), one dict per metric.
+
+    Besides the metric's own statistic (``diff``), every row has the mean paired difference and
+    its CI (``mean_*``): the medians of zero-inflated measures (time lost, contact force) are
+    often 0 even when the agent changes how often they occur.
+    """
     out = []
     for metric, (column, stat) in metrics.items():
         a = {(r["set"], r["receiver"]): _value(r, column) for r in rows}
         b = {(r["set"], r["receiver"]): _value(r, column) for r in ref_rows}
         _, x, y = pair_up(a, b)
-        d = paired_difference(x, y, stat, n_boot, stable_seed(*head.values(), metric, base=seed))
+        seed_k = stable_seed(*head.values(), metric, base=seed)
+        d = paired_difference(x, y, stat, n_boot, seed_k)
+        m = d if stat == "mean" else paired_difference(x, y, "mean", n_boot, seed_k)
         out.append(
             {
                 **head,
@@ -178,6 +181,10 @@ def paired_metrics(
                 "diff_low": d.low,
                 "diff_high": d.high,
                 "ci_excludes_zero": d.excludes_zero,
+                "mean_diff": m.diff,
+                "mean_low": m.low,
+                "mean_high": m.high,
+                "mean_excludes_zero": m.excludes_zero,
             }
         )
     return out
@@ -186,7 +193,7 @@ def paired_metrics(
 def ghosts(rows: Sequence[dict]) -> list[dict]:
     """The "no ghosts" summary, over all episodes and per agent."""
     out = []
-    for agent in ["all", *dict.fromkeys(r["agent"] for r in rows)]:
+    for agent in ["all", *sorted(dict.fromkeys(r["agent"] for r in rows), key=_order)]:
         mine = [r for r in rows if agent in ("all", r["agent"])]
         pen = np.array([_value(r, "penetration") for r in mine])
         body = np.array([_value(r, "body_contact_force") for r in mine])
@@ -206,199 +213,3 @@ def ghosts(rows: Sequence[dict]) -> list[dict]:
                 row[f"{name}_{q}"] = v
         out.append(row)
     return out
-
-
-# ------------------------------------------------------------------------------------ markdown
-def _f(v: float, digits: int) -> str:
-    return "–" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
-
-
-def med_iqr(row: dict, col: str, digits: int) -> str:
-    """'1.23 [1.01, 1.50]' from an aggregate row, '–' when undefined."""
-    m = row.get(f"{col}_median", math.nan)
-    if not math.isfinite(m):
-        return "–"
-    return f"{_f(m, digits)} [{_f(row[f'{col}_q25'], digits)}, {_f(row[f'{col}_q75'], digits)}]"
-
-
-def success_cell(row: dict) -> str:
-    """'95 % [88, 98]': the success rate of an aggregate row with its Wilson CI."""
-    return (
-        f"{100 * row['success_rate']:.0f} % "
-        f"[{100 * row['success_low']:.0f}, {100 * row['success_high']:.0f}]"
-    )
-
-
-def outcomes_cell(row: dict) -> str:
-    short = {"premature_release": "premature", "unsafe_force": "unsafe"}
-    parts = [f"{short.get(o, o)} {row[f'n_{o}']}" for o in OUTCOMES[1:] if row[f"n_{o}"]]
-    return ", ".join(parts) or "–"
-
-
-def _diff_cell(d: dict, digits: int) -> str:
-    if not d["n_pairs"]:
-        return "–"
-    star = " *" if d["ci_excludes_zero"] else ""
-    return (
-        f"{d['diff']:+.{digits}f} [{d['diff_low']:+.{digits}f}, {d['diff_high']:+.{digits}f}]{star}"
-    )
-
-
-def markdown(
-    agg: list[dict], pairs: list[dict], ghost: list[dict], header: str, footer: str = ""
-) -> str:
-    """The whole closed_loop.md."""
-
-    def lab(r: dict) -> str:
-        return LABELS.get(r["agent"], r["agent"])
-
-    t1 = markdown_table(
-        [
-            "agent",
-            "set",
-            "n",
-            "success [95 % CI]",
-            "other outcomes",
-            "handover time (s)",
-            "grasp pelvis x (m)",
-            "release force (N)",
-            "peak body contact (N)",
-            "max penetration (mm)",
-        ],
-        [
-            [
-                lab(r),
-                r["set"],
-                r["n"],
-                success_cell(r),
-                outcomes_cell(r),
-                med_iqr(r, "handover_time", 2),
-                med_iqr(r, "transfer_pelvis_x", 2),
-                med_iqr(r, "release_force", 1),
-                med_iqr(r, "body_contact_force", 1),
-                _f(1000 * r["penetration_max"], 1),
-            ]
-            for r in agg
-        ],
-    )
-    t2 = markdown_table(
-        [
-            "agent",
-            "set",
-            "reach (m)",
-            "arm extended (s)",
-            "time lost (s)",
-            "slowest speed",
-            "path dev. (m)",
-            "pull (N)",
-            "jerk RMS (m/s³)",
-        ],
-        [
-            [
-                lab(r),
-                r["set"],
-                *(med_iqr(r, c, QUANTITIES[c][2]) for c in EFFORT),
-                med_iqr(r, "robot_jerk_rms", 0),
-            ]
-            for r in agg
-        ],
-    )
-    text = header + "\n" + NOTE_SIMULATED + "\n\n## Success, outcomes, timing and forces\n\n" + t1
-    text += (
-        "\nMedian [25 %, 75 %]. "
-        + NOTE_TIME
-        + "\n\n## Receiver effort and robot smoothness\n\n"
-        + t2
-    )
-    text += (
-        "\nAll episodes (a failed handover's effort counts too). Reach: the largest grip-shoulder "
-        "distance; arm extended: time with the arm out before the release; time lost: walking "
-        "time lost to slowing down; slowest speed: the lowest walking-speed factor (1 = never "
-        "slowed); path deviation: how far contact pushed the pelvis off its path; pull: the "
-        "largest pull while both held the object; jerk: the robot TCP's jerk at 30 Hz.\n"
-    )
-    reps = [r for r in agg if r["set"] == "replay" and r.get("n_delta")]
-    if reps:
-        text += "\n## Simulated vs recorded transfer (replays)\n\n" + markdown_table(
-            [
-                "agent",
-                "recordings with a detected transfer",
-                "median |Δt| (s)",
-                "median |Δx| (m)",
-                "median Δt (s)",
-                "median Δx (m)",
-            ],
-            [
-                [
-                    lab(r),
-                    r["n_delta"],
-                    med_iqr(r, "abs_delta_t", 2),
-                    med_iqr(r, "abs_delta_x", 2),
-                    _f(r["delta_t_median"], 2),
-                    _f(r["delta_x_median"], 2),
-                ]
-                for r in reps
-            ],
-        )
-        text += (
-            "\nΔt = simulated grasp time - recorded transfer time (both from the start of the "
-            "recording); Δx = simulated - recorded pelvis x at the grasp. The giver-replay agent "
-            "moves the object along the recorded giver's path, so its Δ says whether the "
-            "simulated person takes the object when and where the recorded one did.\n"
-        )
-    if pairs:
-        cols = ["success", "handover_time", *EFFORT, "body_contact_force", "robot_jerk_rms"]
-        digits = {
-            "success": 2,
-            "handover_time": 2,
-            "pull_force": 1,
-            "body_contact_force": 1,
-            "robot_jerk_rms": 0,
-            "path_deviation": 3,
-        }
-        by = {(d["agent"], d["set"], d["metric"]): d for d in pairs}
-        keys = list(dict.fromkeys((d["agent"], d["set"]) for d in pairs))
-        text += "\n## Paired against the reactive agent (agent - reactive, same receivers)\n\n"
-        text += markdown_table(
-            ["agent", "set", "n", *[c.replace("_", " ") for c in cols]],
-            [
-                [
-                    LABELS.get(a, a),
-                    s,
-                    by[(a, s, "success")]["n_pairs"],
-                    *(_diff_cell(by[(a, s, c)], digits.get(c, 2)) for c in cols),
-                ]
-                for a, s in keys
-            ],
-        )
-        text += (
-            "\nSuccess: difference in success rate; the others: median paired difference (handover "
-            "time over the receivers both handed over to); [95 % bootstrap CI over receivers]; "
-            "* = the CI excludes 0. Full table with n per metric: `closed_loop_paired.csv`.\n"
-        )
-    text += "\n## No ghosts\n\n" + markdown_table(
-        [
-            "agent",
-            "episodes",
-            "max penetration (mm)",
-            "> 1 cm",
-            "successes released before the grasp",
-            "with body contact",
-            "body contact q50/q90/q99/max (N)",
-            "peak contact q50/q90/q99/max (N)",
-        ],
-        [
-            [
-                LABELS.get(g["agent"], g["agent"]),
-                g["n"],
-                _f(1000 * g["max_penetration_m"], 1),
-                g["episodes_penetration_over_1cm"],
-                g["successes_release_before_grasp"],
-                g["episodes_with_body_contact"],
-                "/".join(_f(g[f"body_contact_force_{q}"], 0) for q in ("q50", "q90", "q99", "max")),
-                "/".join(_f(g[f"peak_contact_force_{q}"], 0) for q in ("q50", "q90", "q99", "max")),
-            ]
-            for g in ghost
-        ],
-    )
-    return text + "\n" + footer
