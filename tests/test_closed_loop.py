@@ -209,6 +209,7 @@ def test_quick_theta_sweep_f_r_moves_the_release_force(tmp_path: Path) -> None:
         (["closed-loop", "--quick", "--hand-mode", "recorded"], "recorded"),
         (["closed-loop", "--quick", "--replay-folds", "7"], "replay-folds"),
         (["closed-loop", "--sets", "id", "bogus"], "receiver set"),
+        (["closed-loop", "--quick", "--agents", "giver-replay", "--sets", "id"], "replays only"),
         (["closed-loop", "--workers", "0"], "workers"),
         (["theta-sweep", "--params", "stiffness", "mass"], "Θ parameter"),
         (["theta-sweep", "--values", "1"], "--values"),

@@ -388,13 +388,15 @@ def run_closed_loop(
     splits = dataset.stratified_kfold(config.folds, config.seed)
     walker_folds = {config.walker_fold} if any(s.set != "replay" for s in specs) else set()
     needed = sorted(walker_folds | {s.fold for s in specs if s.fold is not None})
+    token = f"{os.getpid()}-{uuid.uuid4().hex}"
+    jobs = plan_jobs(config, specs, splits, options, cache_dir, token)
+    if not jobs:
+        raise ValueError("nothing to run: giver-replay meets replays only (add --sets replay)")
     t0 = time.perf_counter()
     models = prepare_models(
         dataset, list(config.agents), splits, needed, options, cache_dir, progress
     )
     prepared = time.perf_counter() - t0
-    token = f"{os.getpid()}-{uuid.uuid4().hex}"
-    jobs = plan_jobs(config, specs, splits, options, cache_dir, token)
     t0 = time.perf_counter()
     rows, fits = run_jobs(dataset, jobs, config.workers, progress)
     return ClosedLoopRun(
