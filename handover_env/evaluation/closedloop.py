@@ -251,6 +251,7 @@ def episode_row(job: EpisodeJob, spec: ReceiverSpec, info: dict, steps: int, wal
     row["body_contact"] = _num(info.get("body_contact_force")) > 0  # any robot-body contact
     t_release, t_grasp = _num(info.get("release_time")), _num(info.get("transfer_time"))
     row["release_before_grasp"] = bool(info.get("released")) and not (t_grasp <= t_release)
+    row["hold_time"] = t_release - t_grasp  # the shared hold: grasp to release (NaN without both)
     if spec.set == "replay":
         row["recorded_transfer_time"] = spec.recorded_transfer_time
         row["recorded_pelvis_x"] = spec.recorded_pelvis_x

@@ -18,7 +18,9 @@ NOTE_TIME = (
     "gripper release, successes only; the static baseline's 2 s stabilisation delay is excluded "
     "(`handover_time_with_delay` in the CSV includes it). Scripted walkers start at rest. "
     "Recordings start mid-walk, so on replays it runs from the start of the recording (the "
-    "receiver is already moving: departure = 0) to the release."
+    "receiver is already moving: departure = 0) to the release. Grasp to release: the shared "
+    "hold, from the person's grasp to the gripper opening (in the recordings the giver lets go "
+    "about 1.0 s after the transfer, median; see docs/calibration)."
 )
 
 
@@ -73,6 +75,7 @@ def markdown(
             "success [95 % CI]",
             "other outcomes",
             "handover time (s)",
+            "grasp to release (s)",
             "grasp pelvis x (m)",
             "release force (N)",
             "peak body contact (N)",
@@ -86,6 +89,7 @@ def markdown(
                 success_cell(r),
                 outcomes_cell(r),
                 med_iqr(r, "handover_time", 2),
+                med_iqr(r, "hold_time", 3),
                 med_iqr(r, "transfer_pelvis_x", 2),
                 med_iqr(r, "release_force", 1),
                 med_iqr(r, "body_contact_force", 1),

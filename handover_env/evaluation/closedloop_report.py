@@ -41,6 +41,7 @@ EFFORT = (
 QUANTITIES: dict[str, tuple[str, str, int]] = {
     "handover_time": ("handover time", "s", 2),
     "transfer_time": ("transfer (grasp) time", "s", 2),
+    "hold_time": ("shared hold (grasp to release)", "s", 3),
     "transfer_pelvis_x": ("pelvis x at the grasp", "m", 2),
     "release_force": ("release force", "N", 1),
     "peak_contact_force": ("peak contact force (wrist or body)", "N", 1),

@@ -48,6 +48,7 @@ METRICS: dict[str, tuple[str, str, int]] = {
     "success": ("is_success", "mean", 2),
     "handover_time": ("handover_time", "median", 2),
     "transfer_time": ("transfer_time", "median", 2),
+    "hold_time": ("hold_time", "median", 3),
     "release_force": ("release_force", "median", 1),
     "pull_force": ("pull_force", "median", 1),
     "peak_contact_force": ("peak_contact_force", "median", 1),
@@ -192,6 +193,18 @@ def summarise(
     return per_value, extremes
 
 
+def _moved(e: dict) -> str:
+    """'pull_force +0.158 (+0.6 %) [+0.051, +0.235]': a difference, relative to the low end."""
+    if e["metric"] == "success":
+        return (
+            f"success {100 * e['diff']:+.0f} pp [{100 * e['diff_low']:+.0f}, "
+            f"{100 * e['diff_high']:+.0f}]"
+        )
+    ref = e["reference_value"]
+    rel = f" ({100 * e['diff'] / abs(ref):+.1f} %)" if ref and math.isfinite(ref) else ""
+    return f"{e['metric']} {e['diff']:+.3g}{rel} [{e['diff_low']:+.3g}, {e['diff_high']:+.3g}]"
+
+
 def verdicts(extremes: Sequence[dict]) -> list[dict]:
     """Per parameter: whether some outcome moves beyond its noise, and which."""
     out = []
@@ -201,10 +214,7 @@ def verdicts(extremes: Sequence[dict]) -> list[dict]:
             {
                 "param": param,
                 "moves": bool(moved),
-                "outcomes_moved": "; ".join(
-                    f"{e['metric']} {e['diff']:+.3g} [{e['diff_low']:+.3g}, {e['diff_high']:+.3g}]"
-                    for e in moved
-                ),
+                "outcomes_moved": "; ".join(_moved(e) for e in moved),
             }
         )
     return out
