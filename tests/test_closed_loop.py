@@ -78,6 +78,7 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
             assert r["model_fold"] == ""
         assert (float(r["K"]), float(r["B"]), float(r["t_f"]), float(r["f_r"])) == (114.3, 17.1, 0.14, 7.1)
         assert (r["body_contact"] == "True") == (float(r["body_contact_force"]) > 0)
+        assert int(r["steps"]) >= 1 and int(r["sim_unstable"]) >= 0
     agg = _rows(quick_run / "closed_loop.csv")
     for a in agg:  # the table's success rate is the episodes' one
         mine = [r for r in rows if (r["agent"], r["set"]) == (a["agent"], a["set"])]
@@ -100,6 +101,7 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
     assert (quick_run / "closed_loop.png").stat().st_size > 20_000
     ghosts = _rows(quick_run / "closed_loop_ghosts.csv")
     assert ghosts[0]["agent"] == "all" and int(ghosts[0]["n"]) == len(rows)
+    assert int(ghosts[0]["episodes_sim_unstable"]) == sum(int(r["sim_unstable"]) > 0 for r in rows)
     assert int(ghosts[0]["successes_release_before_grasp"]) == 0
     timing = _rows(quick_run / "closed_loop_timing.csv")
     assert sum(int(t["episodes"]) for t in timing) == len(rows)
@@ -253,3 +255,19 @@ def test_giver_replay_on_recordings_is_compared_with_the_recorded_transfer(tmp_p
         if math.isfinite(t_rec) and math.isfinite(t_sim):
             assert float(r["delta_t"]) == pytest.approx(t_sim - t_rec, abs=1e-4)
     assert any(math.isfinite(float(r["recorded_transfer_time"])) for r in rows)
+
+
+def test_mujoco_auto_resets_are_counted() -> None:
+    """A NaN velocity makes MuJoCo reset the state mid-step; the row's sim_unstable counts it."""
+    import mujoco
+
+    from handover_env.evaluation.closedloop_worker import _instabilities
+
+    model = mujoco.MjModel.from_xml_string(
+        "<mujoco><worldbody><body><freejoint/><geom size='.1'/></body></worldbody></mujoco>")
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data)
+    assert _instabilities(data) == 0
+    data.qvel[0] = np.nan
+    mujoco.mj_step(model, data)
+    assert _instabilities(data) == 1 and np.all(np.isfinite(data.qvel))

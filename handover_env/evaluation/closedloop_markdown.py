@@ -205,6 +205,7 @@ def markdown(
             "> 1 cm",
             "successes released before the grasp",
             "with body contact",
+            "MuJoCo instabilities (of them successes)",
             "body contact q50/q90/q99/max (N)",
             "peak contact q50/q90/q99/max (N)",
         ],
@@ -216,10 +217,19 @@ def markdown(
                 g["episodes_penetration_over_1cm"],
                 g["successes_release_before_grasp"],
                 g["episodes_with_body_contact"],
+                f"{g['episodes_sim_unstable']} ({g['successes_sim_unstable']})",
                 "/".join(_f(g[f"body_contact_force_{q}"], 0) for q in ("q50", "q90", "q99", "max")),
                 "/".join(_f(g[f"peak_contact_force_{q}"], 0) for q in ("q50", "q90", "q99", "max")),
             ]
             for g in ghost
         ],
     )
-    return text + "\n" + footer
+    return (
+        text
+        + (
+            "\nMuJoCo instabilities: episodes in which MuJoCo found the simulation unstable (bad "
+            "qpos/qvel/qacc) and reset its state mid-episode; their outcome cannot be trusted.\n"
+        )
+        + "\n"
+        + footer
+    )

@@ -208,6 +208,10 @@ def ghosts(rows: Sequence[dict]) -> list[dict]:
                 1 for r in mine if r["outcome"] == "success" and bool(r.get("release_before_grasp"))
             ),
             "episodes_with_body_contact": int((body > 0).sum()),
+            "episodes_sim_unstable": sum(1 for r in mine if _value(r, "sim_unstable") > 0),
+            "successes_sim_unstable": sum(
+                1 for r in mine if r["outcome"] == "success" and _value(r, "sim_unstable") > 0
+            ),
         }
         for name, vals in (("body_contact_force", body), ("peak_contact_force", peak)):
             for q, v in zip(("q50", "q90", "q99", "max"), quantiles(vals), strict=True):
