@@ -6,6 +6,7 @@
     python evaluate.py tradeoff --data PATH                       # RMS vs per-frame inference time
     python evaluate.py closed-loop --data PATH                    # every agent with the simulated person
     python evaluate.py theta-sweep --data PATH                    # does each of K, B, t_f, f_r matter?
+    python evaluate.py user-study --participants 8 --trials 5     # H1-H3 with simulated participants
 
 PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
 omitted for the embedded synthetic default. Every method is scored by the same open-loop protocol
@@ -37,6 +38,7 @@ from handover_env.evaluation.methods import (  # noqa: E402
     default_workers,
 )
 from handover_env.evaluation.reporting import METHOD_LABELS, markdown_table, mean_std  # noqa: E402
+from handover_env.evaluation import user_study_cli  # noqa: E402,I001
 
 QUICK_EPISODES = 30
 
@@ -101,6 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--timing-episodes", type=int, default=20,
                    help="test episodes streamed frame by frame to time each variant (default: 20)")
     closedloop_cli.add_parsers(sub)
+    user_study_cli.add_parser(sub)
     return parser
 
 
@@ -128,6 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command in closedloop_cli.COMMANDS:
         return closedloop_cli.main(args, load_dataset)
+    if args.command == "user-study":
+        return user_study_cli.run(args)
     from handover_env.evaluation import experiments
     from handover_env.evaluation.openloop import OpenLoopProtocol
 

@@ -4,6 +4,9 @@
     python train.py bc-mlp --data PATH --out runs/bc_mlp
     python train.py act    --data PATH --out runs/act
     python train.py act    --smoke --out /tmp/act_smoke          # seconds, for tests
+    python train.py preference --participant 0 --iterations 20   # CoSpar tunes Theta from a simulated participant
+    python train.py preference --participants 8                  # ... pooled over 8 participants
+    python train.py preference-check                             # CoSpar vs a brute-forced optimum
 
 PATH is a canonical ``.npz`` (``python -m handover_env.data convert``/``synth``), a folder of the
 public dataset's pickles, or omitted for the embedded synthetic default. The checkpoint folder
@@ -181,7 +184,7 @@ def _fraction(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = p.add_subparsers(dest="method", required=True, metavar="{bc-mlp,act}")
+    sub = p.add_subparsers(dest="method", required=True, metavar="{bc-mlp,act,preference,preference-check}")
 
     def common(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("--data", default=None, help="a canonical .npz, a public-dataset folder, or omit for "
@@ -247,6 +250,17 @@ def build_parser() -> argparse.ArgumentParser:
                      "reused only if it holds exactly this training set, else rebuilt (the default folder) "
                      "or refused without --overwrite)")
     act.set_defaults(func=train_act)
+
+    from handover_env.evaluation import preference_cli as pref
+
+    sp = sub.add_parser("preference", help="CoSpar tunes Θ = {K, B, t_f, f_r} from simulated participants "
+                        "who judge real handovers in the env", description=pref.PREFERENCE_HELP)
+    pref.add_preference_arguments(sp)
+    sp.set_defaults(func=pref.run_preference_command, threads=1, device="cpu")
+    sc = sub.add_parser("preference-check", help="acceptance: CoSpar's Θ̂ against the optimum brute-forced "
+                        "over a small grid (episodes cached)", description=pref.CHECK_HELP)
+    pref.add_check_arguments(sc)
+    sc.set_defaults(func=pref.run_check_command, threads=1, device="cpu")
     return p
 
 
@@ -277,6 +291,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"train.py: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        if args.method.startswith("preference"):
+            print("train.py: interrupted", file=sys.stderr)
+            return 130
         print(f"train.py: interrupted; the last checkpoint in {args.out} is intact (continue with --resume)",
               file=sys.stderr)
         return 130

@@ -57,7 +57,7 @@ class DelayedAgent(Agent):
             raise ValueError(f"delay must be a finite number of seconds >= 0, got {delay!r}")
         self.agent = agent
         self.delay = float(delay)
-        self.steps = int(round(delay * RATE))
+        self.steps = round(delay * RATE)
         self.ready = np.asarray(ready, dtype=np.float32)
         self.horizon = agent.horizon
         self._queue: deque[np.ndarray] = deque()

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from handover_env.skeleton import SEG, J, N_SEGMENTS, SEGMENTS, BodyDims, TEMPLATE_HEIGHT
+from handover_env.skeleton import N_SEGMENTS, SEG, SEGMENTS, TEMPLATE_HEIGHT, BodyDims, J
 
 PREFIX = "receiver/"
 #: ISO/TS 15066:2016 Annex A: effective spring constant (N/mm, Table A.3) and maximum permissible
@@ -64,10 +64,19 @@ BMI = 23.0
 #: solver enforces per step.
 WELD_IMPEDANCE = 0.5
 WELD_DAMPING_RATIO = 1.0
+#: Where the body stands in a freshly compiled model (qpos0), well away from the robot: the env
+#: moves it to its start at every reset; scenes used without a person leave it here.
+PARK_XY = (5.0, -3.0)
 #: Contacts with the body are stiffer than MuJoCo's default (time constant 4 ms instead of 20,
 #: the object's own): the body's compliance is in its welds, not in contact penetration.
 CONTACT_SOLREF = (0.004, 1.0)
 CONTACT_SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+#: MuJoCo mixes the two geoms' contact parameters by their solmix weights: the body's dominate
+#: (a robot geom's 20 ms default would otherwise soften every contact with the person).
+CONTACT_SOLMIX = 100.0
+#: The BODY_34 ankles of the recordings sit about 8 cm above the floor for the pelvis height
+#: (the tracker's legs are short for its pelvis); the shank and foot geoms reach down that far.
+FOOT_DROP = 0.08
 #: A geom end point at the hand's grip point (:meth:`BodyDims.grip`) instead of a joint.
 GRIP = -1
 #: Contact geoms: (segment, name, point a, point b, radius), points as (BODY_34 joint or GRIP,
@@ -76,8 +85,8 @@ GRIP = -1
 _GEOMS: tuple[tuple[str, str, tuple[int, tuple], tuple[int, tuple], float], ...] = (
     ("pelvis", "hips", (J["LEFT_HIP"], (-0.01, -0.03, 0.0)), (J["RIGHT_HIP"], (-0.01, 0.03, 0.0)), 0.11),
     ("torso", "abdomen", (J["NAVAL_SPINE"], (0.0, 0.0, -0.02)), (J["CHEST_SPINE"], (0.0, 0.0, 0.0)), 0.12),
-    ("torso", "chest", (J["LEFT_SHOULDER"], (0.02, -0.07, -0.16)), (J["RIGHT_SHOULDER"], (0.02, 0.07, -0.16)),
-     0.11),
+    ("torso", "chest", (J["LEFT_SHOULDER"], (0.02, -0.10, -0.16)), (J["RIGHT_SHOULDER"], (0.02, 0.10, -0.16)),
+     0.10),
     ("torso", "shoulders", (J["LEFT_SHOULDER"], (0.0, 0.0, -0.02)), (J["RIGHT_SHOULDER"], (0.0, 0.0, -0.02)),
      0.055),
     ("head", "neck", (J["NECK"], (0.0, 0.0, 0.0)), (J["HEAD"], (0.0, 0.0, -0.08)), 0.05),
@@ -89,19 +98,21 @@ _GEOMS: tuple[tuple[str, str, tuple[int, tuple], tuple[int, tuple], float], ...]
     ("forearm_l", "forearm_l", (J["LEFT_ELBOW"], (0, 0, 0)), (J["LEFT_WRIST"], (0, 0, 0)), 0.037),
     ("hand_l", "hand_l", (J["LEFT_WRIST"], (0, 0, 0)), (GRIP, (0, 0, 0)), 0.035),
     ("thigh_r", "thigh_r", (J["RIGHT_HIP"], (0, 0, 0)), (J["RIGHT_KNEE"], (0, 0, 0)), 0.07),
-    ("shank_r", "shank_r", (J["RIGHT_KNEE"], (0, 0, 0)), (J["RIGHT_ANKLE"], (0, 0, 0)), 0.05),
-    ("shank_r", "foot_r", (J["RIGHT_ANKLE"], (0, 0, 0)), (J["RIGHT_FOOT"], (0, 0, 0)), 0.035),
+    ("shank_r", "shank_r", (J["RIGHT_KNEE"], (0, 0, 0)), (J["RIGHT_ANKLE"], (0, 0, -FOOT_DROP)), 0.05),
+    ("shank_r", "foot_r", (J["RIGHT_ANKLE"], (0, 0, -FOOT_DROP)), (J["RIGHT_FOOT"], (0, 0, -FOOT_DROP)),
+     0.035),
     ("thigh_l", "thigh_l", (J["LEFT_HIP"], (0, 0, 0)), (J["LEFT_KNEE"], (0, 0, 0)), 0.07),
-    ("shank_l", "shank_l", (J["LEFT_KNEE"], (0, 0, 0)), (J["LEFT_ANKLE"], (0, 0, 0)), 0.05),
-    ("shank_l", "foot_l", (J["LEFT_ANKLE"], (0, 0, 0)), (J["LEFT_FOOT"], (0, 0, 0)), 0.035),
+    ("shank_l", "shank_l", (J["LEFT_KNEE"], (0, 0, 0)), (J["LEFT_ANKLE"], (0, 0, -FOOT_DROP)), 0.05),
+    ("shank_l", "foot_l", (J["LEFT_ANKLE"], (0, 0, -FOOT_DROP)), (J["LEFT_FOOT"], (0, 0, -FOOT_DROP)),
+     0.035),
 )
 GEOM_NAMES = tuple(g[1] for g in _GEOMS)
 #: Calibration of the weld stiffness: measured quasi-static stiffness / ISO value is 1 with this
 #: gain per segment (see the module docstring; ``tests/test_body_model.py`` re-measures it).
 WELD_GAIN = {
-    "pelvis": 0.0714, "torso": 0.1146, "head": 0.2643, "upper_arm_r": 0.0622, "forearm_r": 0.1205,
-    "hand_r": 0.1852, "upper_arm_l": 0.0622, "forearm_l": 0.1205, "hand_l": 0.1852, "thigh_r": 0.2083,
-    "shank_r": 0.2714, "thigh_l": 0.2083, "shank_l": 0.2714,
+    "pelvis": 0.0732, "torso": 0.1188, "head": 0.2642, "upper_arm_r": 0.0599, "forearm_r": 0.116,
+    "hand_r": 0.1663, "upper_arm_l": 0.0599, "forearm_l": 0.116, "hand_l": 0.1663, "thigh_r": 0.216,
+    "shank_r": 0.2744, "thigh_l": 0.216, "shank_l": 0.2744,
 }
 _MATERIALS = {"pelvis": "trousers", "thigh_r": "trousers", "thigh_l": "trousers", "shank_r": "trousers",
               "shank_l": "trousers", "head": "skin", "hand_r": "skin", "hand_l": "skin"}
@@ -188,7 +199,7 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
     bodies: list[mujoco.MjsBody] = []
     for i, s in enumerate(SEGMENTS):
         parent = world.worldbody if s.parent < 0 else bodies[s.parent]
-        pos = [0.0, 0.0, dims.pelvis_z] if s.parent < 0 else offsets[i].tolist()
+        pos = [*PARK_XY, dims.pelvis_z] if s.parent < 0 else offsets[i].tolist()
         body = parent.add_body(name=PREFIX + s.name, pos=pos, gravcomp=1.0)
         if s.parent < 0:
             body.add_freejoint(name=PREFIX + "root")
@@ -206,13 +217,15 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
         bodies[i].add_geom(name=PREFIX + name, type=kind, pos=pos.tolist(), quat=quat.tolist(),
                            size=[r, max(half, 1e-6), 0.0], contype=contype, conaffinity=conaffinity,
                            mass=float(geo.mass[i] * vol / seg_vol[i]), material=_MATERIALS.get(seg, "shirt"),
-                           solref=list(CONTACT_SOLREF), solimp=list(CONTACT_SOLIMP))
+                           solref=list(CONTACT_SOLREF), solimp=list(CONTACT_SOLIMP), solmix=CONTACT_SOLMIX)
     # The right hand's grip point: where it holds the object.
     hand = SEG["hand_r"]
     bodies[hand].add_site(name=PREFIX + "grip_r", pos=dims.grip("r").tolist(),
                           size=[0.01, 0.01, 0.01], group=4)
+    rest = np.zeros((N_SEGMENTS, 3))
     for i, s in enumerate(SEGMENTS):
-        world.worldbody.add_body(name=PREFIX + "target_" + s.name, mocap=True)
+        rest[i] = (np.array([*PARK_XY, dims.pelvis_z]) if s.parent < 0 else rest[s.parent] + offsets[i])
+        world.worldbody.add_body(name=PREFIX + "target_" + s.name, mocap=True, pos=rest[i].tolist())
         k, b = weld_solref(i, dims.height)
         com = geo.com[i].tolist()
         # Anchor at the segment's centre of mass, on both sides (target pose = segment pose).
@@ -313,7 +326,7 @@ def apply_dims(model: mujoco.MjModel, ids: BodyIds, dims: BodyDims) -> None:
     for i, s in enumerate(SEGMENTS):
         if s.parent >= 0:
             model.body_pos[ids.bodies[i]] = offsets[i]
-    model.body_pos[ids.bodies[0]] = (0.0, 0.0, dims.pelvis_z)
+    model.body_pos[ids.bodies[0]] = (*PARK_XY, dims.pelvis_z)
     for g, (_, pos, quat, half, r) in zip(ids.geoms, geo.geoms):
         model.geom_pos[g] = pos
         model.geom_quat[g] = quat
@@ -354,3 +367,44 @@ def _refresh_bvh(model: mujoco.MjModel, ids: BodyIds) -> None:
         box = np.concatenate([(lo + hi) / 2, (hi - lo) / 2])
         for node in range(adr, adr + num):
             model.bvh_aabb[node] = box  # conservative: every node bounds all of the body's geoms
+
+
+def measure_stiffness(model: mujoco.MjModel, data: mujoco.MjData, ids: BodyIds, segment: int,
+                      force: float = 40.0, axis: int = 1, steps: int = 1500) -> float:
+    """Quasi-static stiffness of one segment, N/m: a horizontal force at its centre of mass over
+    the deflection it causes once settled, with every target held still (the body at qpos0)."""
+    mujoco.mj_resetData(model, data)
+    mujoco.mj_forward(model, data)
+    data.mocap_pos[ids.mocap] = data.xpos[ids.bodies]
+    data.mocap_quat[ids.mocap] = data.xquat[ids.bodies]
+    mujoco.mj_step(model, data, 300)
+    base = data.xipos[ids.bodies[segment], axis]
+    data.xfrc_applied[:] = 0.0
+    data.xfrc_applied[ids.bodies[segment], axis] = force
+    mujoco.mj_step(model, data, steps)
+    data.xfrc_applied[:] = 0.0
+    return force / (data.xipos[ids.bodies[segment], axis] - base)
+
+
+def calibrate_weld_gains(iterations: int = 6) -> dict[str, float]:
+    """Find :data:`WELD_GAIN` so that every segment's measured stiffness (mean over the two
+    horizontal axes) is its region's ISO value; how the committed gains were made."""
+    gains = dict(WELD_GAIN)
+    for _ in range(iterations):
+        WELD_GAIN.update(gains)
+        spec = mujoco.MjSpec()
+        spec.option.timestep = 1.0 / 600.0
+        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        for name in set(_MATERIALS.values()) | {"shirt"}:
+            spec.add_material(name=name)
+        add_receiver(spec)
+        model = spec.compile()
+        data = mujoco.MjData(model)
+        ids = body_ids(model)
+        for i, s in enumerate(SEGMENTS):
+            k = 0.5 * sum(measure_stiffness(model, data, ids, i, axis=a) for a in (0, 1))
+            gains[s.name] *= (ISO_REGIONS[s.region][0] * 1000.0 / k) ** 0.8
+    for left, right in (("upper_arm_l", "upper_arm_r"), ("forearm_l", "forearm_r"), ("hand_l", "hand_r"),
+                        ("thigh_l", "thigh_r"), ("shank_l", "shank_r")):
+        gains[left] = gains[right] = 0.5 * (gains[left] + gains[right])
+    return {k: round(v, 4) for k, v in gains.items()}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass
 
 # CoSpar search ranges from the paper (Sec. V-B-1): K in [80, 140], B in [10, 20],
@@ -35,8 +36,9 @@ class HandoverParams:
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
-            if not isinstance(value, (int, float)) or not math.isfinite(value):
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
                 raise ValueError(f"{name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
         if self.stiffness <= 0 or self.damping < 0:
             raise ValueError(f"need stiffness > 0 and damping >= 0, got K={self.stiffness}, B={self.damping}")
         if self.forecast_time < 0:

@@ -9,7 +9,9 @@ object (at its grasp point) and on the hand (at its grip point):
     tau = K_rot e + B_rot (w_hand - w_object)
 
 with e the rotation vector taking the object's orientation to the one it had in the hand at the
-grasp. The translational stiffness and damping are the human hand's endpoint impedance in a
+grasp, about the object's two transverse axes (a bottle spinning about its own axis in the hand
+does not matter to the handover, and that axis's tiny inertia would make the explicit coupling
+unstable). The translational stiffness and damping are the human hand's endpoint impedance in a
 relaxed posture (Mussa-Ivaldi, Hogan & Bizzi 1985: 300-800 N/m; Tsuji et al. 1995: viscosity
 5-15 N s/m); the rotational ones are the wrist's (Formica et al. 2012: about 1-10 N m/rad).
 So the pull on the robot builds up as the person walks on while the robot still holds the object:
@@ -85,11 +87,20 @@ class ArmGrip:
         self.force = np.zeros(3)
         self.offset_local = np.zeros(3)
         self._rel_rot = np.eye(3)
+        # The wrench is applied at every controller tick and held in between: explicit damping is
+        # stable while B dt / I < 1, so the rotational damping per axis is capped accordingly.
+        self._tick = model.opt.timestep * 3
+        self._inertia = model.body_inertia[object_body].copy()
+        self._mass = float(model.body_mass[object_body])
+        self._rot_damping = np.full(3, self.config.rot_damping)
 
     def close(self, data: mujoco.MjData, grasp_local: np.ndarray) -> None:
         """Close the hand: hold the object at its point ``grasp_local`` (object frame), keeping
         the object's current orientation relative to the hand."""
         self.offset_local = np.asarray(grasp_local, dtype=np.float64).copy()
+        # Transverse inertia about the grasp point (the object's principal axes are its frame's).
+        inertia = self._inertia + self._mass * float(self.offset_local @ self.offset_local)
+        self._rot_damping = np.minimum(self.config.rot_damping, 0.5 * inertia / self._tick)
         r_hand = data.xmat[self.hand].reshape(3, 3)
         r_obj = data.xmat[self.obj].reshape(3, 3)
         self._rel_rot = r_hand.T @ r_obj
@@ -116,7 +127,12 @@ class ArmGrip:
         v_grasp = self._v_obj[3:] + np.cross(w_obj, grasp - data.xpos[self.obj])
         force = c.stiffness * (grip - grasp) + c.damping * (self._v_site[3:] - v_grasp)
         r_goal = data.xmat[self.hand].reshape(3, 3) @ self._rel_rot
-        torque = c.rot_stiffness * _rotation_vector(r_goal @ r_obj.T) + c.rot_damping * (self._v_site[:3] - w_obj)
+        # In the object's frame (its z is the bottle's axis): transverse axes only.
+        e = r_obj.T @ _rotation_vector(r_goal @ r_obj.T)
+        w = r_obj.T @ (self._v_site[:3] - w_obj)
+        torque_local = c.rot_stiffness * e + self._rot_damping * w
+        torque_local[2] = 0.0
+        torque = r_obj @ torque_local
         self.force[:] = force
         q = self._qfrc
         q[:] = 0.0

@@ -265,7 +265,7 @@ def stopped(motion: PersonMotion, stop_x: float, decel_time: float = 0.8) -> Per
     k_stop = int(reach[0]) if reach.size else motion.frames - 1
     ramp = decel_time * RATE
     k0 = max(k_stop - 0.5 * ramp, 0.0)
-    n_out = int(math.ceil(k0 + ramp + STAND_TIME * RATE)) + 1
+    n_out = math.ceil(k0 + ramp + STAND_TIME * RATE) + 1
     t = np.arange(n_out, dtype=np.float64)
     # Playback speed 1 until k0, then 0.5 (1 + cos(pi s)) down to 0 over the ramp: tau advances
     # by ramp / 2 frames during it, so it comes to rest at k0 + ramp / 2 = k_stop.

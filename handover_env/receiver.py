@@ -44,19 +44,18 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from handover_env.body_model import BodyIds, apply_dims, weld_lag_times
+from handover_env.body_model import apply_dims, weld_lag_times
 from handover_env.gait import arm_pose
+from handover_env.grip import ArmGrip
 from handover_env.min_jerk import min_jerk_step
 from handover_env.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
-from handover_env.grip import ArmGrip
 from handover_env.scene import SceneIds
 from handover_env.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, mat_to_quat
 
 CAMERA_RATE = RATE
 STATES = ("walking", "reaching", "holding", "presenting", "presented", "passed")
-#: Re-planning horizon of a hand that holds a point fixed to the body (s): it follows within
-#: a few frames.
-HOLD_TRACKING = 0.15
+#: Shortest re-planning horizon of a hand that holds a point fixed to the body, s.
+HOLD_TRACKING = 0.3
 #: The arm counts as straight at this fraction of its full length (the elbow never locks).
 STRAIGHT_ARM = 0.97
 #: The farthest the trunk turns and leans toward a far hand target, rad (20 deg).
@@ -65,6 +64,12 @@ TRUNK_MAX_TURN = math.radians(20.0)
 _UPPER_BODY = tuple(i for i in range(len(SEGMENTS)) if i == SEG["torso"] or SEGMENTS[i].parent in (
     SEG["torso"], SEG["upper_arm_r"], SEG["forearm_r"], SEG["upper_arm_l"], SEG["forearm_l"]))
 _CONJ = np.array([1.0, -1.0, -1.0, -1.0])
+#: A hand drawing an object out keeps it this far from the pelvis axis (horizontally), m: the
+#: held bottle stays clear of the torso.
+CARRY_CLEARANCE = 0.35
+#: A held object counts as out of the (released) gripper once its centre is this far from the
+#: TCP (m): the bottle's radius plus the open fingers' depth.
+CLEAR_OF_GRIPPER = 0.1
 #: An object behind the person counts as walked past only if it is within this distance, m.
 PASS_DISTANCE = 1.2
 #: Where the static receiver holds the raised right hand: forward, right and up from the
@@ -102,8 +107,9 @@ class ReceiverConfig:
             drawing back, s (arm-extended time 1.30 s minus the reach, 0.67; the hand is drawn
             back 0.37 s before the giver lets go, 1.0 s after the grasp: 0.63).
         pull_time: how long drawing the hand back takes, s: first straight toward the body at
-            the height of the hold, by ``pull_distance`` (m), until the robot lets go, then
-            down to the carry pose.
+            the height of the hold, by ``pull_distance`` (m, but no closer than
+            ``CARRY_CLEARANCE`` to the pelvis axis), until the object is clear of the gripper,
+            then down to the carry pose.
         grasp_radius: the hand grasps when its grip point is this close to the grasp point, m,
         grasp_speed: and moves relative to it slower than this, m/s (a hand closes on an object
             it has caught up with; the grip is then :mod:`handover_env.grip`'s spring).
@@ -114,8 +120,9 @@ class ReceiverConfig:
         approach_distance, approach_height: the hand approaches the grasp point from this far
             toward the person and this far above it, closing in over the last ``close_time``, m.
         close_radius: recorded hand: the hand closes onto the object once the recorded grip point
-            is this close to it, m (0.25: within the window -0.2 s .. +0.5 s around the transfer
-            the recorded hand joint comes this close in 95.5 % of the recordings; 0.20 m: 89 %).
+            is this close to the object's centre, m (0.28: p95 of the recorded hand joint's
+            distance from the object at the transfer; the ZED hand joint sits 0.17 m off the
+            object there in the median recording).
         close_time: the closing motion's duration, s.
         carry_forward: the carry pose is this far forward of the hand's walking swing, m.
         present_time: static handover: time to raise the hand, s.
@@ -134,10 +141,10 @@ class ReceiverConfig:
     pull_distance: float = 0.2
     grasp_radius: float = 0.03
     grasp_speed: float = 0.2
-    grasp_offset: float = 0.06
+    grasp_offset: float = 0.075
     approach_distance: float = 0.12
     approach_height: float = 0.04
-    close_radius: float = 0.25
+    close_radius: float = 0.28
     close_time: float = 0.25
     carry_forward: float = 0.15
     present_time: float = 0.8
@@ -282,6 +289,7 @@ class Receiver:
         self._released = False
         self._dt = 1.0 / RATE
         self._gripper: np.ndarray | None = None
+        self._clear = False
         self._gripper_axis: np.ndarray | None = None
 
     # ------------------------------------------------------------------ queries
@@ -355,7 +363,7 @@ class Receiver:
             object_pos, object_vel, object_rot: the object's position, velocity and rotation.
             object_free: the person does not hold the object yet.
             released: the gripper has opened.
-            gripper_pos: the gripper's TCP while it holds the object (the hand avoids it).
+            gripper_pos: the gripper's TCP (the hand avoids it and draws the object clear of it).
             gripper_axis: the gripper's approach axis (toward its fingertips) while it holds.
         """
         cfg = self.config
@@ -363,6 +371,8 @@ class Receiver:
         self._t = t0
         self._released = released
         self._gripper = None if gripper_pos is None else np.asarray(gripper_pos, dtype=np.float64)
+        if self._gripper is not None and self.state == "holding" and released and not self._clear:
+            self._clear = float(np.linalg.norm(object_pos - self._gripper)) > CLEAR_OF_GRIPPER
         self._gripper_axis = None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
         self._object_axis = object_rot[:, 2].copy()
         grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
@@ -548,12 +558,13 @@ class Receiver:
             # The arm stays out, moving with the body (the shared hold of the recordings).
             pelvis, rot, vel = self._pelvis(tau)
             goal, goal_v = pelvis + rot @ self._hold_rel, vel
-        elif state == "holding" and not self._released:
+        elif state == "holding" and not self._clear:
             # Draw the object out toward the body at the height it is held, not down across the
-            # gripper's fingers, until the robot lets go.
+            # gripper's fingers, until it is clear of the gripper.
             pelvis, rot, vel = self._pelvis(tau)
             pull = self._hold_rel.copy()
-            pull[:2] *= max(0.0, 1.0 - cfg.pull_distance / max(float(np.linalg.norm(pull[:2])), 1e-6))
+            reach = float(np.linalg.norm(pull[:2]))
+            pull[:2] *= max(reach - cfg.pull_distance, min(reach, CARRY_CLEARANCE)) / max(reach, 1e-6)
             goal, goal_v = pelvis + rot @ pull, vel
         elif state == "holding":
             swing = self._swing_hand(tau)
@@ -565,7 +576,8 @@ class Receiver:
         else:  # passed: the hand returns to the swing
             goal, goal_v = self._swing_hand(tau)[:2]
         if state == "holding" and self._t < self.t_grasp + cfg.hold_time:
-            remaining = HOLD_TRACKING
+            # Settle onto the body-fixed hold over the hold time (no yank to catch up).
+            remaining = max(self.t_grasp + cfg.hold_time - self._t, HOLD_TRACKING)
         elif state == "passed":
             remaining = max(self._hand_goal_time - self._t, cfg.pull_time)
         else:

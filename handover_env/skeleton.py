@@ -286,6 +286,37 @@ def retarget(joints: np.ndarray, dims: BodyDims) -> BodyPose:
     return BodyPose(origin=forward_kinematics(pelvis, rot, dims), rot=rot)
 
 
+#: The segment that carries each BODY_34 joint (its origin segment's parent for origin joints).
+def _joint_owner() -> np.ndarray:
+    owner = np.zeros(N_JOINTS, dtype=np.int64)
+    for i, s in enumerate(SEGMENTS):
+        owner[s.origin] = i if s.parent < 0 else s.parent
+        if s.tip >= 0:
+            owner[s.tip] = i
+    extra = {"NOSE": "head", "LEFT_EYE": "head", "RIGHT_EYE": "head", "LEFT_EAR": "head", "RIGHT_EAR": "head",
+             "CHEST_SPINE": "torso", "LEFT_CLAVICLE": "torso", "RIGHT_CLAVICLE": "torso",
+             "LEFT_SHOULDER": "torso", "RIGHT_SHOULDER": "torso", "LEFT_HIP": "pelvis", "RIGHT_HIP": "pelvis",
+             "LEFT_HAND": "hand_l", "RIGHT_HAND": "hand_r", "LEFT_THUMB": "hand_l", "RIGHT_THUMB": "hand_r",
+             "LEFT_FOOT": "shank_l", "RIGHT_FOOT": "shank_r", "LEFT_HEEL": "shank_l", "RIGHT_HEEL": "shank_r"}
+    for name, seg in extra.items():
+        owner[J[name]] = SEG[seg]
+    return owner
+
+
+JOINT_OWNER = _joint_owner()
+
+
+def joints_of(pose: BodyPose, dims: BodyDims) -> np.ndarray:
+    """(..., 34, 3) BODY_34 joints of a body pose: every joint rides rigidly on its segment.
+
+    The inverse of :func:`retarget` for poses of the rigid model (e.g. to make a replayable
+    skeleton from the scripted walker).
+    """
+    owner = JOINT_OWNER
+    local = np.stack([dims.local(j, int(owner[j])) for j in range(N_JOINTS)])
+    return pose.origin[..., owner, :] + np.einsum("...jab,jb->...ja", pose.rot[..., owner, :, :], local)
+
+
 def measure_dims(joints: np.ndarray, height: float | None = None) -> BodyDims:
     """Rest geometry of a recorded person: median joint offsets in the pelvis frame.
 

@@ -65,7 +65,7 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
     for r in rows:
         assert r["env"] == ("static" if r["agent"] == "static" else "dynamic")
         assert r["outcome"] in ("success", "premature_release", "dropped", "unsafe_force", "missed",
-                                "timeout")
+                                "unstable", "timeout")
         assert (r["outcome"] == "success") == (r["is_success"] == "True")
         if r["outcome"] == "success":  # the paper's handover time exists exactly for successes
             assert float(r["handover_time"]) > 0 and r["release_before_grasp"] == "False"

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from quadratic_users import QuadraticUser, sample_users
 from scipy.special import log_ndtr
 from scipy.stats import norm
 
 from agents.cospar import CoSpar, CoSparConfig, action_grid, laplace_posterior
-from agents.simulated_users import QuadraticUser, sample_users
-from handover_env.config import THETA_RANGES, HandoverParams
+from handover_env.config import THETA_RANGES
 
 SMALL = CoSparConfig(points_per_dim=(4, 3, 4, 4))
 
@@ -106,6 +106,6 @@ def test_cospar_beats_random_parameters_for_simulated_participants() -> None:
 def test_cospar_is_deterministic_under_a_seed() -> None:
     runs = []
     for _ in range(2):
-        user = QuadraticUser(ideal=np.array(HandoverParams().as_array()), sensitivity=np.ones(4), noise=0.05, seed=7)
+        user = QuadraticUser(ideal=np.array([100.0, 12.0, 0.6, 15.0]), sensitivity=np.ones(4), noise=0.05, seed=7)
         runs.append(CoSpar(SMALL, seed=1).run(user.prefers, iterations=5))
     assert runs[0] == runs[1]

@@ -34,8 +34,9 @@ def test_robot_does_not_move_before_hand_detection_and_delay():
     assert max_dev < 0.01  # held at the ready pose whatever the action
     # Detection = the hand fully raised after the receiver stopped in the predefined area.
     rec = u.receiver
-    assert rec.state == "presenting" and not np.isnan(rec.t_hand_raised)
-    np.testing.assert_allclose(rec.base_at(rec.t_hand_raised)[0], STOP_XY, atol=0.05)
+    assert rec.state == "presented" and not np.isnan(rec.t_hand_raised)
+    assert rec.at_rest
+    assert abs(rec.base()[0] - STOP_XY[0]) < 0.05  # stopped on the stop line
     assert u.t_detect == pytest.approx(rec.t_hand_raised)
     assert u.t_enabled == pytest.approx(rec.t_hand_raised + 2.0)
     assert enabled_at == pytest.approx(u.t_enabled, abs=1.5 / 30.0)
@@ -61,5 +62,5 @@ def test_static_handover_succeeds_and_reports_both_times(delay):
     assert info["handover_time_with_delay"] == pytest.approx(u.t_release - u.receiver.t_depart)
     assert info["handover_time_with_delay"] - info["handover_time"] == pytest.approx(delay)
     # The object went to the detected (raised) hand.
-    assert np.linalg.norm(u.data.xpos[u.ids.object_body] - u.data.mocap_pos[u.ids.hand_mocap]) < 0.12
+    assert np.linalg.norm(u.data.xpos[u.ids.object_body] - u.data.site_xpos[u.ids.body.grip_site]) < 0.12
     assert 1.0 < info["handover_time"] < 10.0

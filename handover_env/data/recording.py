@@ -15,7 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from handover_env.data.dataset import DatasetError, Episode
-from handover_env.data.public import _NAME_RE, _validate_record, episode_from_record, safe_load_pickle
+from handover_env.data.public import (
+    _NAME_RE,
+    _validate_record,
+    episode_from_record,
+    safe_load_pickle,
+)
 
 
 @dataclass(frozen=True)

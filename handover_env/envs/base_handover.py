@@ -31,10 +31,14 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
   hand catches the object afterwards: the episode ends at the release.
 * ``dropped``: nobody holds the object (gripper weld off, receiver not holding) and it has fallen
   0.15 m below where it was last held, or touches the floor.
-* ``unsafe_force``: the external force at the wrist (the person's pull) exceeded
-  ``safety_force`` (default 140 N: ISO/TS 15066, Annex A, maximum permissible quasi-static force
-  for the hand and fingers), or a robot/object contact on a body segment exceeded the
-  quasi-static limit of that body region (:mod:`handover_env.envs.contacts`).
+* ``unsafe_force``: the person's pull on an object the robot still holds (the grip force,
+  :mod:`handover_env.grip`) exceeded ``safety_force`` (default 140 N: ISO/TS 15066, Annex A,
+  maximum permissible quasi-static force for the hand and fingers: a tug of war), or a
+  robot/object contact on a body segment exceeded its body region's ISO/TS 15066 limit
+  (:mod:`handover_env.envs.contacts`). The wrist sensor's peak is reported but not held to a
+  limit: after the release it measures contacts, which are judged where they touch the body.
+* ``unstable``: MuJoCo reported a diverging position, velocity or acceleration (and reset its
+  state); the episode is void and says so instead of going on from a reset simulation.
 * ``missed``: the person walked past without taking the object (gave up on an object left
   behind them, see :class:`handover_env.receiver.ReceiverConfig`), or their walk ended (+1 s)
   without it. The static receiver waits; there only the TimeLimit ends an episode.
@@ -43,6 +47,7 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 import gymnasium as gym
@@ -57,8 +62,6 @@ from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.observation import ObsLayout
 from handover_env.receiver import CAMERA_RATE, Receiver, ReceiverConfig
 from handover_env.scene import (
-    ARM_PREFIX,
-    GRIPPER_PREFIX,
     SceneConfig,
     build_model,
     place_object_in_gripper,
@@ -75,9 +78,12 @@ READY_YAW = -math.pi / 2
 HOME_Q = np.array([-2.3, -1.8, 2.1, -0.3, -3.9, 0.0])
 ACTION_LOW = np.array([-0.3, -1.1, 0.8, -math.pi], dtype=np.float32)
 ACTION_HIGH = np.array([0.9, 0.1, 1.6, math.pi], dtype=np.float32)
-OUTCOMES = ("running", "success", "premature_release", "dropped", "unsafe_force", "missed")
+OUTCOMES = ("running", "success", "premature_release", "dropped", "unsafe_force", "missed", "unstable")
+#: MuJoCo's warnings for a diverging state (it then resets the simulation).
+_DIVERGED = tuple(int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                                   mujoco.mjtWarning.mjWARN_BADQACC))
 #: reset() options the envs understand; anything else is warned about by name.
-RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode")
+RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode", "walker")
 
 
 class HandoverEnvBase(gym.Env, EzPickle):
@@ -105,14 +111,18 @@ class HandoverEnvBase(gym.Env, EzPickle):
         width: int = 640,
         height: int = 480,
         camera: str = "overview",
+        person: dict[str, float] | None = None,
     ) -> None:
         EzPickle.__init__(
             self, render_mode, stiffness, damping, forecast_time, release_force, safety_force, history,
             obs_noise, obs_latency, default_receiver, stabilisation_delay, object_mass, miss_distance,
-            force_filter_tau, width, height, camera,
+            force_filter_tau, width, height, camera, person,
         )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if render_mode == "human" and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+            raise RuntimeError("render_mode='human' needs a display (DISPLAY is not set); use "
+                               "render_mode='rgb_array' (with MUJOCO_GL=egl or osmesa) on a headless machine")
         if default_receiver not in ("id", "ood"):
             raise ValueError(f"default_receiver must be 'id' or 'ood', got {default_receiver!r}")
         for name, v in (("safety_force", safety_force), ("obs_noise", obs_noise),
@@ -143,7 +153,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.ids = scene_ids(self.model)
         self.layout = ObsLayout(history=int(history))
         self.controller = ImpedanceController(self.model, self.ids, self.params, ControllerConfig())
-        self.receiver = Receiver(self.model, self.ids, ReceiverConfig(give_up_behind=self.miss_distance))
+        overrides = dict(person or {})
+        unknown = sorted(set(overrides) - set(ReceiverConfig.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"unknown person setting(s) {unknown}; see handover_env.receiver.ReceiverConfig")
+        overrides.setdefault("give_up_behind", self.miss_distance)
+        self.receiver = Receiver(self.model, self.ids, ReceiverConfig(**overrides))
         self.dt = self.model.opt.timestep * FRAME_SKIP
         self._ticks = self.controller.config.ticks
         # Fractions of an env step at which ticks fall, by the global step phase at its start.
@@ -166,7 +181,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._slices = {k: v[0] for k, v in self.layout.slices().items()}
         self._obs = np.zeros(self.layout.size, dtype=np.float64)
 
-        self.contacts = ContactMonitor(self.model, self.ids)
+        self.contacts = ContactMonitor(self.model, self.ids, tick=self.model.opt.timestep * ControllerConfig().ticks)
         self._gripper_qpos = self.ids.gripper_driver_qpos
         self._object_body = self.ids.object_body
         arm_act = np.asarray(self.ids.arm_act)
@@ -223,12 +238,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         mujoco.mj_forward(m, d)
         ctrl.reset(d)
         ctrl.set_target(READY_POS, READY_YAW)
-        # The person stands well away while the arm settles (reset places them).
-        b = ids.body
-        d.qpos[b.root_qpos:b.root_qpos + 3] = (5.0, -3.0, float(m.body_pos[b.bodies[0], 2]))
-        mujoco.mj_kinematics(m, d)
-        d.mocap_pos[b.mocap] = d.xpos[b.bodies]
-        d.mocap_quat[b.mocap] = d.xquat[b.bodies]
+        # The person stands at the model's parking spot, well away, while the arm settles.
         for _ in range(100):
             d.ctrl[ids.arm_act] = ctrl.compute(d)
             mujoco.mj_step(m, d, nstep=ctrl.config.ticks)
@@ -266,6 +276,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self._ready = False  # a reset that fails leaves an env that must be reset again
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = sorted(set(options) - set(RESET_OPTIONS))
@@ -306,9 +317,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return self._observation(), self._info()
 
     def _configure_receiver(self, kind: str, options: dict[str, Any]) -> None:
+        walker = options.get("walker")
+        if walker is not None and not isinstance(walker, dict):
+            raise ValueError(f"options['walker'] must be a dict of WalkerParams fields, got {type(walker).__name__}")
         self.receiver.reset(
             self.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
             episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
+            walker_overrides=walker,
         )
 
     def _record_camera_frame(self) -> None:
@@ -344,7 +359,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.receiver.plan_step(t0, t1, d, self._object_pos_v.copy(), self._vel6[3:].copy(),
                                 self._object_xmat_v.reshape(3, 3).copy(),
                                 object_free=not self._receiver_holds, released=self.released,
-                                gripper_pos=self._tcp_pos_v.copy() if self._gripper_holds else None,
+                                gripper_pos=self._tcp_pos_v.copy(),
                                 gripper_axis=(self._tcp_xmat_v.reshape(3, 3)[:, 2].copy()
                                               if self._gripper_holds else None))
         self.receiver.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
@@ -352,10 +367,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         # The controller ticks on the global step clock: the schedule of (tick?, physics steps)
         # segments depends only on the clock's phase at the start of the env step.
         apply_tick, tick, mj_step = self.receiver.apply_tick, self._tick, mujoco.mj_step
+        contacts = self.contacts
         for is_tick, n in self._segments[self._global_step % self._ticks]:
             if is_tick:
                 apply_tick(d)
                 tick()
+                if contacts.unsafe_segment >= 0:
+                    break  # the episode ends at the unsafe contact, not pressed on to the step's end
             mj_step(m, d, n)  # positional: pybind keyword parsing costs ~0.5 us a call
         self._global_step += FRAME_SKIP
         self.receiver.apply(d, 1.0)
@@ -426,15 +444,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._f_ext_f = (fx, fy, fz)
         self.f_ext[0], self.f_ext[1], self.f_ext[2] = fx, fy, fz
         f_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
-        if f_mag > self.peak_wrist_force:
-            self.peak_wrist_force = f_mag
+        self.peak_wrist_force = max(self.peak_wrist_force, f_mag)
         rec = self.receiver
         holds = rec.grip.active
         if holds and self._gripper_holds:
             pull = rec.grip.force
             p = math.sqrt(float(pull[0] * pull[0] + pull[1] * pull[1] + pull[2] * pull[2]))
-            if p > self.pull_force:
-                self.pull_force = p  # what the person pulls with while both hold the object
+            self.pull_force = max(self.pull_force, p)  # what the person pulls with while both hold the object
         if not self.released and f_mag > self.params.release_force:
             self.released = True
             self.released_while_held = bool(holds)
@@ -486,17 +502,21 @@ class HandoverEnvBase(gym.Env, EzPickle):
         j2 = sum(((a - 3.0 * b + 3.0 * c - e) * r) ** 2 for a, b, c, e in zip(p0, p1, p2, p3))
         self._jerk_sq += j2
         self._jerk_n += 1
-        if j2 > self._jerk_peak_sq:
-            self._jerk_peak_sq = j2
+        self._jerk_peak_sq = max(self._jerk_peak_sq, j2)
         del hist[0]
 
     def _after_step(self) -> None:
+        warning = self.data.warning
+        if any(warning[w].number for w in _DIVERGED):
+            # MuJoCo found a diverging acceleration and reset the simulation: the episode is void.
+            self.outcome = "unstable"
+            return
         t = float(self.data.time)
         obj = self._object_pos_v
         ox, oy, oz = obj.tolist()
         holds = self._receiver_holds
         self.peak_contact_force = max(self.peak_wrist_force, float(self.contacts.peak.max()))
-        if self.peak_wrist_force > self.safety_force or self.contacts.unsafe_segment >= 0:
+        if self.pull_force > self.safety_force or self.contacts.unsafe_segment >= 0:
             self.outcome = "unsafe_force"
         elif self.released and not self.released_while_held:
             self.outcome = "premature_release"

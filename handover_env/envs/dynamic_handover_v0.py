@@ -9,11 +9,14 @@ class DynamicHandoverEnv(HandoverEnvBase):
     """A UR5e with a Robotiq 2F-85 hands a 0.4 kg bottle to a receiver walking past (Kim et al. 2025).
 
     The robot (MuJoCo Menagerie models) stands on a pedestal at (0, -0.2, 0.79) in the frame of the
-    public Dynamic Handover Dataset, holding the bottle. A receiver walks toward -x past the
-    robot's side. When the bottle comes within arm's reach the receiver's right hand reaches for
-    it, grasps it and, walking on, pulls. The wrist force/torque sensor measures the pull; when it
-    exceeds f_r the gripper opens. The agent picks a Cartesian target at 30 Hz; a Cartesian
-    impedance controller (paper Eq. 1, K and B from Θ) tracks it at 200 Hz.
+    public Dynamic Handover Dataset, holding the bottle. A simulated person (an articulated,
+    compliant body: :mod:`handover_env.body_model`) walks toward -x past the robot's side, as a
+    scripted walker or a replayed recording. When the bottle will be at a comfortable place along
+    their walk soon, their right hand reaches for it (calibrated to the recorded transfers:
+    :mod:`handover_env.receiver`), grasps it and, walking on, pulls. The wrist force/torque
+    sensor measures the pull; when it exceeds f_r the gripper opens. The agent picks a Cartesian
+    target at 30 Hz; a Cartesian impedance controller (paper Eq. 1, K and B from Θ) tracks it at
+    200 Hz.
 
     ## Action Space
     ``Box(4,)`` float32, the Cartesian target for the gripper's pinch point:
@@ -49,24 +52,35 @@ class DynamicHandoverEnv(HandoverEnvBase):
 
     ## Starting State
     The arm at its ready pose (TCP at (0.3, -0.4, 1.15), gripper pointing -y) holding the bottle,
-    settled. The receiver at the start of its walk: a scripted ID walker (``options["receiver"] =
-    "id"``, default), an OOD walker (``"ood"``: wanders or pauses) or a recorded track
-    (``"replay"`` with ``options["episode"]``); ``options["height"]`` and ``["speed"]`` fix the
-    body height and walking speed. Unknown option keys are ignored.
+    settled. The person at the start of their walk: a scripted ID walker (``options["receiver"] =
+    "id"``, default), an OOD walker (``"ood"``: wanders or pauses) or a recorded person
+    (``"replay"`` with ``options["episode"]``: a ``Recording`` with the BODY_34 skeleton, an
+    ``Episode`` or a dict of arrays; ``options["hand_mode"]`` ``"reach"`` (modelled hand) or
+    ``"recorded"``); ``options["height"]`` and ``["speed"]`` fix the body height and walking
+    speed, ``options["walker"]`` any other field of a scripted walker
+    (:class:`handover_env.receiver_motion.WalkerParams`, e.g. ``{"pass_y": -1.0}``). Unknown
+    option keys are warned about by name.
 
     ## Episode End
-    ``terminated`` on success (released at a pull above f_r, fingers open, the receiver holding the
-    bottle clear of the gripper), object dropped, unsafe contact force (> ``safety_force``) or a
-    missed handover (the receiver walked past); ``truncated`` only by the TimeLimit (450 steps,
-    15 s).
+    ``terminated`` on success (released at a pull above f_r, fingers open, the person holding the
+    bottle clear of the gripper), a premature release (the gripper opened before the hand held the
+    bottle), object dropped, unsafe force (the pull above ``safety_force`` or a body contact above
+    its region's ISO/TS 15066 limit) or a missed handover (the person walked past); ``truncated``
+    only by the TimeLimit (450 steps, 15 s).
 
     | info key | Meaning |
     |----------|---------|
-    | is_success, outcome | True on success; "running", "success", "dropped", "unsafe_force", "missed" |
+    | is_success, outcome | True on success; "running", "success", "premature_release", "dropped", "unsafe_force", "missed" |
     | handover_time | s from when the receiver leaves the start point to the release (paper Sec. V-C) |
-    | release_force | N, filtered external wrist force at the release |
-    | peak_contact_force | N, max external wrist force or robot-receiver contact force so far |
-    | receiver_id, receiver_state, receiver_grasp_time | which receiver; its reach/hold state |
+    | transfer_time, transfer_pelvis_xy, transfer_object_pos | the person's grasp: when, where they were, where the bottle was |
+    | release_time, release_force, pull_force | the release; N, wrist force then; N, peak grip force while both held |
+    | peak_contact_force, peak_wrist_force | N, max external wrist force or body contact force so far |
+    | reach_distance, arm_extended_time | m, farthest grip-shoulder distance; s, the arm out (reaching, raised, holding) |
+    | time_lost, min_speed_factor, path_deviation | s behind the nominal walk; slowest speed factor; m pushed off the path |
+    | contact_force_<segment>, body_contact_force, penetration | N per body segment, N max; m, deepest |
+    | body_contact_robot, body_contact_object | whether the robot / the bottle touched the person |
+    | robot_jerk_rms, robot_jerk_peak | m/s^3, TCP jerk |
+    | receiver_id, receiver_state, reach_onset_time, departure_time | which person; their state |
 
     Values not yet defined (no release, no grasp) are ``None``.
 
@@ -80,6 +94,8 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | obs_latency | 0 | camera latency in frames |
     | default_receiver | "id" | receiver when reset() gets no option |
     | object_mass | 0.4 | kg |
+    | miss_distance | 0.35 | m behind the shoulder at which an unheld bottle is walked past |
+    | person | None | dict of :class:`handover_env.receiver.ReceiverConfig` overrides |
     | render_mode, width, height, camera | None, 640, 480, "overview" | rendering |
     """
 

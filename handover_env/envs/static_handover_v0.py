@@ -45,7 +45,8 @@ class StaticHandoverEnv(HandoverEnvBase):
     def _configure_receiver(self, kind: str, options: dict[str, Any]) -> None:
         # Scripted walkers walk to the stop area; recorded people follow their recording until
         # their pelvis reaches the stop line (x = STOP_XY[0]), where both stop and stand.
-        overrides = {"end_x": STOP_XY[0] - 0.3, "pass_y": STOP_XY[1]} if kind in ("id", "ood") else None
+        overrides = ({**dict(options.get("walker") or {}), "end_x": STOP_XY[0] - 0.3, "pass_y": STOP_XY[1]}
+                     if kind in ("id", "ood") else None)
         self.receiver.reset(
             self.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
             episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),

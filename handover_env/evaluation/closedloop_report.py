@@ -28,7 +28,11 @@ from handover_env.evaluation.closedloop_stats import (
     wilson_interval,
 )
 
-OUTCOMES = ("success", "premature_release", "dropped", "unsafe_force", "missed", "timeout")
+#: Every outcome a row can have: the env's ("unstable": MuJoCo reset a diverging simulation), and
+#: "timeout" for a TimeLimit truncation.
+OUTCOMES = (
+    "success", "premature_release", "dropped", "unsafe_force", "missed", "unstable", "timeout"
+)
 EFFORT = (
     "reach_distance",
     "arm_extended_time",

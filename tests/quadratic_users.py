@@ -1,12 +1,9 @@
-"""Simulated participants who state preferences between two handover parameter sets Theta.
+"""Toy users with a quadratic utility over Theta, for unit tests of the CoSpar algorithm only.
 
-The paper tuned Theta with 8 people. Here a simulated user has a latent satisfaction u(Theta)
-and answers "which of the two handovers did you like better?" with probit noise, the same
-observation model CoSpar assumes (paper Eq. 2): P(a > b) = Phi((u(a) - u(b)) / (sqrt(2) * noise)).
-
-:class:`QuadraticUser` has an ideal Theta and per-parameter sensitivities; its population is
-centred on the paper's learned Theta-hat with person-to-person spread (taller or faster people
-want a different forecast time and release force, paper Sec. V-C "Limitations").
+They answer "which of the two was better?" with the probit noise CoSpar assumes (paper Eq. 2),
+from a utility that is a function of Theta itself: a test of the learner, never of the handover.
+The study's participants, who judge real episodes, are :mod:`agents.participants`. The ideals
+are drawn uniformly in the paper's ranges (not around any learned Theta-hat).
 """
 
 from __future__ import annotations
@@ -15,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from handover_env.config import THETA_RANGES, HandoverParams
+from handover_env.config import THETA_RANGES
 
 _NAMES = ("stiffness", "damping", "forecast_time", "release_force")
 _LOW = np.array([THETA_RANGES[n][0] for n in _NAMES])
@@ -60,15 +57,14 @@ class QuadraticUser:
         return bool(margin > 0)
 
 
-def sample_users(n: int, seed: int = 0, spread: float = 0.08, noise: float = 0.05) -> list[QuadraticUser]:
-    """``n`` participants with ideals around the paper's Theta-hat (spread as a fraction of each range)."""
+def sample_users(n: int, seed: int = 0, noise: float = 0.05) -> list[QuadraticUser]:
+    """``n`` toy users with ideals uniform in the paper's ranges."""
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
     rng = np.random.default_rng(seed)
-    centre = np.array(HandoverParams().as_array())
     users = []
     for i in range(n):
-        ideal = np.clip(centre + spread * _SPAN * rng.standard_normal(4), _LOW, _LOW + _SPAN)
+        ideal = _LOW + _SPAN * rng.uniform(0.1, 0.9, size=4)
         sensitivity = rng.uniform(0.5, 2.0, size=4)
         users.append(QuadraticUser(ideal, sensitivity, noise=noise, seed=seed * 1000 + i))
     return users

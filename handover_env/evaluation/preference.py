@@ -1,0 +1,408 @@
+"""CoSpar on the env: simulated participants judge real handovers and CoSpar learns Theta from them.
+
+The paper's fine-tuning phase (Sec. IV-B, V-B-1): CoSpar (Tucker et al. 2020) over 20 iterations,
+K in [80, 140], B in [10, 20], t_f in [0, 1] s, f_r in [5, 20] N. Here every iteration:
+
+1. CoSpar draws ``n_samples`` utility functions from its Laplace posterior (paper Eqs. 2-3) and
+   proposes their argmax actions (Thompson sampling, :mod:`agents.cospar`);
+2. each proposed Theta is run as real episodes in the env: the planner (``ours``: the SPGP
+   planner fitted once on the synthetic default, which uses t_f; K, B and f_r are env kwargs) hands
+   the bottle to scripted walkers with the participant's body and path, one episode per walk, the
+   same ``walks`` walker seeds for every Theta (common random numbers; :class:`EpisodeRunner`
+   caches episodes by participant, walk and Theta);
+3. the participant (:mod:`agents.participants`) compares every pair among the new actions and the
+   ``buffer_size`` actions they tried last, by their mean satisfaction over the walks, with the
+   probit noise of Eq. 2; each answer is a preference added to the data (episodes the env ended
+   as ``unstable``, a numerical event, are not judged: :func:`lived`);
+4. the posterior is updated.
+
+Theta-hat is the argmax of the posterior mean over the actions tried (``CoSpar.best``); the
+argmax over the whole grid is reported beside it. With several participants (``--participants
+8``) they share one posterior, as the paper learned one Theta-hat from its volunteers: in each
+iteration every participant in turn makes one such step (their own buffer, their own walks), so
+an iteration holds ``participants x n_samples`` new actions.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.cospar import THETA_NAMES, CoSpar, CoSparConfig
+from agents.participants import COST_NAMES, Participant
+from handover_env.config import HandoverParams
+
+#: The paper's learned Theta-hat (Sec. V-B-1), printed beside ours; never given to participants.
+PAPER_THETA = (114.3, 17.1, 0.14, 7.1)
+AGENTS = ("ours", "reactive")
+RECEIVERS = ("id", "ood", "replay")
+#: ``info`` keys kept per episode (numbers or the outcome string).
+INFO_KEYS = (
+    "outcome", "handover_time", "handover_time_with_delay", "transfer_time", "release_time", "release_force",
+    "pull_force", "peak_wrist_force", "body_contact_force", "penetration", "reach_distance",
+    "arm_extended_time", "time_lost", "min_speed_factor", "path_deviation", "robot_jerk_rms",
+    "robot_jerk_peak",
+)
+CONTACT_PREFIX = "contact_force_"
+OUTCOME_COLUMNS = ("success_rate", "handover_time", "pull_force", "release_force", "reach_distance",
+                   "body_contact_force", "robot_jerk_rms", "time_lost")
+#: Measured outcomes whose names clash with Theta's are renamed in summaries.
+_RENAMED = {"release_force": "measured_release_force"}
+
+
+def _keep(info: Mapping) -> dict[str, Any]:
+    """The episode facts a participant may judge (JSON-friendly)."""
+    out: dict[str, Any] = {}
+    for k, v in info.items():
+        if k in INFO_KEYS or k.startswith(CONTACT_PREFIX):
+            out[k] = v if (v is None or isinstance(v, str)) else float(v)
+    if info.get("TimeLimit.truncated") or (out.get("outcome") == "running"):
+        out["outcome"] = "timeout"
+    return out
+
+
+class EpisodeRunner:
+    """Runs one agent with a given Theta on a participant's walks, in the dynamic or static env.
+
+    Args:
+        agent: ``"ours"`` (SPGP planner fitted on ``dataset``, or on the synthetic default) or
+            ``"reactive"``.
+        receiver: ``"id"``/``"ood"`` scripted walkers with the participant's body, or ``"replay"``
+            (synthetic demonstrations closest to the participant's speed, at their height).
+        dataset: training data of ``ours`` and the replay pool (default: ``load_any(None)``).
+    """
+
+    def __init__(self, agent: str = "ours", receiver: str = "id", dataset: Any = None) -> None:
+        if agent not in AGENTS:
+            raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}")
+        if receiver not in RECEIVERS:
+            raise ValueError(f"receiver must be one of {RECEIVERS}, got {receiver!r}")
+        self.agent_name, self.receiver = agent, receiver
+        self._dataset = dataset
+        self._agent: Any = None
+        self._static_agent: Any = None
+        self._env: Any = None
+        self._env_key: tuple | None = None
+        self._speeds: np.ndarray | None = None
+        self.cache: dict[tuple, dict[str, Any]] = {}
+        self.episodes_run = 0
+        self.seconds = 0.0
+
+    # ------------------------------------------------------------------ lazy pieces
+    def dataset(self) -> Any:
+        if self._dataset is None:
+            from handover_env.data import load_any
+
+            self._dataset = load_any(None)
+        return self._dataset
+
+    def _planner(self, theta: HandoverParams) -> Any:
+        if self._agent is None:
+            if self.agent_name == "ours":
+                from agents.nonparametric import NonparametricAgent
+
+                self._agent = NonparametricAgent().fit(self.dataset())
+            else:
+                from agents.reactive import ReactiveAgent
+
+                self._agent = ReactiveAgent()
+        self._agent.params = theta
+        return self._agent
+
+    def _make_env(self, theta: HandoverParams, static: bool) -> Any:
+        key = (theta.as_array(), static)
+        if self._env_key != key:
+            import gymnasium as gym
+
+            import handover_env  # noqa: F401  (registers the envs)
+
+            if self._env is not None:
+                self._env.close()
+            name = "handover_env/StaticHandover-v0" if static else "handover_env/DynamicHandover-v0"
+            self._env = gym.make(name, stiffness=theta.stiffness, damping=theta.damping,
+                                 forecast_time=theta.forecast_time, release_force=theta.release_force)
+            self._env_key = key
+        return self._env
+
+    def _options(self, participant: Participant, seed: int) -> dict:
+        if self.receiver != "replay":
+            return participant.walk_options(self.receiver)
+        data = self.dataset()
+        if self._speeds is None:
+            self._speeds = np.array([float(np.median(np.linalg.norm(np.diff(ep.receiver_xy, axis=0), axis=1)))
+                                     * data.rate_hz for ep in data])
+        order = np.argsort(np.abs(self._speeds - participant.body.speed), kind="stable")
+        episode = data[int(order[seed % min(len(order), 50)])]
+        return {"receiver": "replay", "episode": episode, "height": participant.body.height}
+
+    # ------------------------------------------------------------------ running
+    def run(self, participant: Participant, theta: HandoverParams, seeds: Sequence[int],
+            static: bool = False) -> list[dict[str, Any]]:
+        """One episode per walk seed (cached); the static env uses the static agent."""
+        import time
+
+        from handover_env.rollout import run_episode
+
+        out = []
+        for seed in seeds:
+            key = (participant.pid, participant.seed, self.receiver, self.agent_name, static, int(seed),
+                   tuple(round(v, 9) for v in theta.as_array()))
+            if key not in self.cache:
+                t0 = time.perf_counter()
+                env = self._make_env(theta, static)
+                if static:
+                    if self._static_agent is None:
+                        from agents.static import StaticAgent
+
+                        self._static_agent = StaticAgent()
+                    agent = self._static_agent
+                else:
+                    agent = self._planner(theta)
+                info = run_episode(env, agent, seed=int(seed), options=self._options(participant, int(seed)))
+                self.cache[key] = _keep(info)
+                self.episodes_run += 1
+                self.seconds += time.perf_counter() - t0
+            out.append(self.cache[key])
+        return out
+
+    def close(self) -> None:
+        if self._env is not None:
+            self._env.close()
+            self._env, self._env_key = None, None
+
+
+def lived(infos: Sequence[Mapping]) -> list[Mapping]:
+    """The episodes a participant judges: all but those the env ended as ``unstable`` (MuJoCo reset
+    a diverging simulation: a numerical event no person lives through). If every episode is
+    unstable, all are returned (and judged as failed handovers)."""
+    kept = [i for i in infos if i.get("outcome") != "unstable"]
+    return kept or list(infos)
+
+
+def summarise_outcomes(infos: Sequence[Mapping]) -> dict[str, float]:
+    """Mean outcome measures over episodes (times over successful ones; NaN if none); the measured
+    release force is ``measured_release_force`` (``release_force`` is Theta's f_r)."""
+    ok = [i for i in infos if i.get("outcome") == "success"]
+
+    def mean(key: str, rows: Sequence[Mapping]) -> float:
+        vals = [float(r[key]) for r in rows if r.get(key) is not None]
+        return float(np.mean(vals)) if vals else math.nan
+
+    out = {"success_rate": len(ok) / len(infos) if infos else math.nan, "handover_time": mean("handover_time", ok),
+           "unstable": float(sum(i.get("outcome") == "unstable" for i in infos))}
+    for key in OUTCOME_COLUMNS[2:]:
+        out[_RENAMED.get(key, key)] = mean(key, infos)
+    return out
+
+
+@dataclass(frozen=True)
+class PreferenceConfig:
+    """Settings of a CoSpar run on the env.
+
+    Args:
+        iterations: CoSpar iterations (the paper: 20).
+        walks: walks (episodes) per proposed Theta and participant.
+        agent: ``"ours"`` or ``"reactive"``.
+        receiver: ``"id"``, ``"ood"`` or ``"replay"``.
+        cospar: the learner's settings (grid over the paper's ranges, kernel, noise, Thompson
+            samples, buffer).
+        seed: seeds the Thompson samples.
+        walk_stream: which of the participant's walk-seed streams to tune on.
+    """
+
+    iterations: int = 20
+    walks: int = 3
+    agent: str = "ours"
+    receiver: str = "id"
+    cospar: CoSparConfig = field(default_factory=CoSparConfig)
+    seed: int = 0
+    walk_stream: int = 0
+
+    def __post_init__(self) -> None:
+        if self.iterations < 1 or self.walks < 1:
+            raise ValueError(f"need iterations >= 1 and walks >= 1, got {self.iterations}, {self.walks}")
+        if self.agent not in AGENTS or self.receiver not in RECEIVERS:
+            raise ValueError(f"agent must be one of {AGENTS} and receiver one of {RECEIVERS}")
+
+
+@dataclass
+class PreferenceResult:
+    """Theta-hat, the learner and the history of a CoSpar run."""
+
+    theta_hat: HandoverParams
+    theta_hat_grid: HandoverParams
+    learner: CoSpar
+    history: list[dict[str, Any]]
+    preferences: list[dict[str, Any]]
+    episodes: int
+    episode_seconds: float
+    seconds: float
+
+
+def run_preference(participants: Sequence[Participant], config: PreferenceConfig,
+                   runner: EpisodeRunner | None = None, progress: bool = False,
+                   judge: Callable[[Participant, int], float] | None = None) -> PreferenceResult:
+    """CoSpar with ``participants`` sharing one posterior (one participant: the paper's protocol).
+
+    Args:
+        participants: who answers (each keeps their own buffer of recently tried actions).
+        config: :class:`PreferenceConfig`.
+        runner: runs the episodes (a new :class:`EpisodeRunner` by default).
+        progress: tqdm bar over iterations.
+        judge: optional ``(participant, action index) -> utility`` replacing the env (tests, and
+            the brute-force check, which reads cached episodes through it).
+
+    Returns:
+        :class:`PreferenceResult`.
+    """
+    import time
+
+    if not participants:
+        raise ValueError("need at least one participant")
+    start = time.perf_counter()
+    runner = runner or EpisodeRunner(config.agent, config.receiver)
+    learner = CoSpar(config.cospar, seed=config.seed)
+    grid = learner.grid
+    buffers: dict[int, list[int]] = {p.pid: [] for p in participants}
+    seeds = {p.pid: p.walk_seeds(config.walks, config.walk_stream) for p in participants}
+    memory: dict[tuple[int, int], tuple[float, dict[str, float]]] = {}
+    history: list[dict[str, Any]] = []
+    prefs: list[dict[str, Any]] = []
+
+    def experience(p: Participant, a: int) -> tuple[float, dict[str, float]]:
+        if (p.pid, a) not in memory:
+            if judge is not None:
+                memory[(p.pid, a)] = (float(judge(p, a)), {})
+            else:
+                infos = lived(runner.run(p, HandoverParams(*grid[a]), seeds[p.pid]))
+                costs = {f"cost_{c}": float(np.mean([p.costs(i)[c] for i in infos])) for c in COST_NAMES}
+                memory[(p.pid, a)] = (p.utility(infos), {**summarise_outcomes(infos), **costs})
+        return memory[(p.pid, a)]
+
+    steps = range(config.iterations)
+    if progress:
+        from tqdm import tqdm
+
+        steps = tqdm(steps, desc=f"CoSpar ({len(participants)} participant{'s' * (len(participants) > 1)})",
+                     unit="iter")
+    for it in steps:
+        for p in participants:
+            tried = learner.propose()
+            buffer = buffers[p.pid][-config.cospar.buffer_size:] if config.cospar.buffer_size else []
+            compared = list(dict.fromkeys(tried + buffer))
+            wins = dict.fromkeys(compared, 0)
+            for i in range(len(compared)):
+                for j in range(i + 1, len(compared)):
+                    a, b = compared[i], compared[j]
+                    ua, ub = experience(p, a)[0], experience(p, b)[0]
+                    winner, loser = (a, b) if p.prefers(ua, ub) else (b, a)
+                    learner.add_preference(winner, loser)
+                    wins[winner] += 1
+                    prefs.append({"iteration": it, "participant": p.pid,
+                                  **{f"winner_{n}": grid[winner][k] for k, n in enumerate(THETA_NAMES)},
+                                  **{f"loser_{n}": grid[loser][k] for k, n in enumerate(THETA_NAMES)},
+                                  "winner_index": winner, "loser_index": loser})
+            for a in compared:
+                utility, outcomes = experience(p, a)
+                history.append({"iteration": it, "participant": p.pid, "role": "new" if a in tried else "buffer",
+                                "action": a, **{n: grid[a][k] for k, n in enumerate(THETA_NAMES)},
+                                "comparisons_won": wins[a], "comparisons": len(compared) - 1,
+                                "hidden_utility": utility, **outcomes})
+            buffers[p.pid].extend(tried)
+            learner.history.extend(tried)
+            learner.update_posterior()
+    return PreferenceResult(
+        theta_hat=learner.best(), theta_hat_grid=learner.best(tried_only=False), learner=learner,
+        history=history, preferences=prefs, episodes=runner.episodes_run, episode_seconds=runner.seconds,
+        seconds=time.perf_counter() - start,
+    )
+
+
+# ---------------------------------------------------------------------------- outputs
+def write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    """Rows of dicts to CSV (columns: the union, in first-seen order)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    columns: list[str] = []
+    for r in rows:
+        columns.extend(k for k in r if k not in columns)
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+
+
+def posterior_marginals(learner: CoSpar) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per parameter: (values, mean over the other parameters of the posterior mean, of its sd)."""
+    shape = learner.config.points_per_dim
+    mean = learner.f_hat.reshape(shape)
+    sd = np.sqrt(np.clip(np.diag(learner.cov), 0.0, None)).reshape(shape)
+    out = []
+    for k, (lo, hi) in enumerate(learner.config.ranges):
+        axes = tuple(j for j in range(4) if j != k)
+        out.append((np.linspace(lo, hi, shape[k]), mean.mean(axis=axes), sd.mean(axis=axes)))
+    return out
+
+
+def plot_marginals(learner: CoSpar, theta_hat: HandoverParams, path: Path, title: str) -> None:
+    """PNG: the posterior mean of the utility, averaged over the other three parameters, per parameter."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels = ("K (N/m)", "B (N s/m)", "t_f (s)", "f_r (N)")
+    fig, axes = plt.subplots(1, 4, figsize=(13, 3.2), sharey=True)
+    for k, (ax, (x, m, s)) in enumerate(zip(axes, posterior_marginals(learner))):
+        ax.plot(x, m, "o-", color="C0")
+        ax.fill_between(x, m - s, m + s, color="C0", alpha=0.2, label="posterior mean ± sd")
+        ax.axvline(theta_hat.as_array()[k], color="C3", label="our Θ̂")
+        ax.axvline(PAPER_THETA[k], color="0.4", ls="--", label="paper's Θ̂")
+        ax.set_xlabel(labels[k])
+    axes[0].set_ylabel("utility (posterior mean,\naveraged over the others)")
+    axes[0].legend(fontsize=7, loc="lower left")
+    fig.suptitle(title + " (simulated participants)", fontsize=10)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def theta_line(theta: HandoverParams) -> str:
+    k, b, tf, fr = theta.as_array()
+    return f"[K {k:.1f}, B {b:.1f}, t_f {tf:.2f}, f_r {fr:.1f}]"
+
+
+def save_run(result: PreferenceResult, participants: Sequence[Participant], config: PreferenceConfig,
+             out: Path) -> list[Path]:
+    """theta_hat.json, history.csv, preferences.csv, participants.csv, posterior_marginals.png."""
+    import json
+
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / "theta_hat.json", out / "history.csv", out / "preferences.csv", out / "participants.csv",
+             out / "posterior_marginals.png"]
+    iters = config.iterations
+    record = {
+        "source": "simulated participants (agents/participants.py), not people",
+        "theta_hat": dict(zip(THETA_NAMES, result.theta_hat.as_array())),
+        "theta_hat_whole_grid": dict(zip(THETA_NAMES, result.theta_hat_grid.as_array())),
+        "paper_theta_hat": dict(zip(THETA_NAMES, PAPER_THETA)),
+        "participants": [p.pid for p in participants], "iterations": iters, "walks": config.walks,
+        "agent": config.agent, "receiver": config.receiver, "grid": list(config.cospar.points_per_dim),
+        "preferences": len(result.preferences), "episodes": result.episodes,
+        "episode_seconds": result.episode_seconds, "wall_seconds": result.seconds,
+        "seconds_per_iteration": result.seconds / iters,
+    }
+    paths[0].write_text(json.dumps(record, indent=1))
+    write_csv(paths[1], result.history)
+    write_csv(paths[2], result.preferences)
+    write_csv(paths[3], [p.describe() for p in participants])
+    who = f"participant {participants[0].pid}" if len(participants) == 1 else f"{len(participants)} participants pooled"
+    plot_marginals(result.learner, result.theta_hat, paths[4], f"CoSpar posterior after {iters} iterations, {who}")
+    return paths

@@ -1,0 +1,194 @@
+"""The simulated person under physics: outcomes that cannot lie, contact, effort, replays."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import handover_env  # noqa: F401
+from agents.giver_replay import GiverReplayAgent
+from agents.null import DelayedAgent, NullAgent
+from agents.reactive import ReactiveAgent
+from handover_env import receiver_motion as rm
+from handover_env.gait import walking_pose
+from handover_env.person import RATE
+from handover_env.skeleton import BodyDims, joints_of
+
+ENV_ID = "handover_env/DynamicHandover-v0"
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "dynamic_handover_dataset" / "whole_motions"
+
+
+def _run(env, agent, seed=0, options=None):
+    obs, info = env.reset(seed=seed, options=options or {"receiver": "id"})
+    agent.reset()
+    while True:
+        obs, _, term, trunc, info = env.step(agent.act(obs))
+        if term or trunc:
+            return info, term, trunc
+
+
+class _Hold:
+    """Holds the object at a fixed target."""
+
+    def __init__(self, target):
+        self.target = np.asarray(target, dtype=np.float32)
+
+    def reset(self):
+        pass
+
+    def act(self, obs):
+        return self.target.copy()
+
+
+def _straight_walk(y: float, speed: float = 0.9, start_x: float = 2.2, frames: int = 150,
+                   skeleton: bool = False) -> dict:
+    """A replay dict of a person walking along y toward -x (optionally with a full skeleton)."""
+    t = np.arange(frames) / RATE
+    xy = np.stack([start_x - speed * t, np.full_like(t, y)], axis=1)
+    episode = {"receiver_xy": xy, "source_id": f"straight_{y}"}
+    if skeleton:
+        heading = np.full(frames, math.pi)
+        phase = np.mod(2 * math.pi * speed * t / (2 * 0.28 * 1.725), 2 * math.pi)
+        traj = rm.BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=phase)
+        dims = BodyDims.from_height(1.725)
+        episode["receiver_pose"] = joints_of(walking_pose(traj, dims), dims)
+    return episode
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = gym.make(ENV_ID)
+    yield e
+    e.close()
+
+
+def test_a_handover_grasps_before_the_release_without_ghosts(env):
+    for seed in (0, 1):
+        info, _term, _ = _run(env, ReactiveAgent(), seed)
+        assert info["outcome"] == "success"
+        assert info["transfer_time"] < info["release_time"]  # the hand held it first
+        assert info["penetration"] < 0.01
+        assert 0.3 < info["reach_distance"] < 0.75 and info["arm_extended_time"] > 0.3
+        assert info["release_force"] > 7.1 and info["pull_force"] >= info["release_force"] * 0.5
+
+
+def test_a_bump_that_opens_the_gripper_is_a_premature_release_not_a_success(env):
+    """The robot holds the bottle in front of the left side of the chest of a person whose
+    (replayed, recorded-mode) right hand never comes near it: the torso runs into the gripper and
+    the push opens it before any grasp."""
+    y = -0.75
+    episode = _straight_walk(y, skeleton=True)
+    info, term, _ = _run(env, _Hold([0.5, y - 0.08, 1.25, -math.pi / 2]),
+                         options={"receiver": "replay", "episode": episode, "hand_mode": "recorded"})
+    assert term and info["outcome"] == "premature_release" and not info["is_success"]
+    assert info["released"] and info["transfer_time"] is None
+    assert (info["body_contact_object"] or info["body_contact_robot"]) and info["contact_force_torso"] > 7.1
+
+
+def test_an_object_out_of_reach_slows_the_person_then_is_missed(env):
+    """The robot keeps the object at its ready pose; the person passes 1.3 m away: too far to
+    take it, so they slow down (as far as the recordings show) and walk past."""
+    info, term, _ = _run(env, NullAgent(), options={"receiver": "replay", "episode": _straight_walk(-1.3)})
+    assert term and info["outcome"] == "missed"
+    assert info["min_speed_factor"] == pytest.approx(0.82)
+    assert info["time_lost"] > 0.05
+    assert info["transfer_time"] is None and not info["released"]
+
+
+def test_the_null_agent_makes_the_person_reach_further_than_the_reactive_one(env):
+    reach = {}
+    for name, agent in (("reactive", ReactiveAgent()), ("null", NullAgent())):
+        info, *_ = _run(env, agent, seed=3)
+        assert info["outcome"] == "success", (name, info["outcome"])
+        reach[name] = info["reach_distance"]
+    assert reach["null"] > reach["reactive"]
+
+
+def test_a_delayed_agent_acts_half_a_second_late():
+    agent = DelayedAgent(ReactiveAgent(), delay=0.5)
+    assert agent.steps == 15
+    agent.reset()
+    obs = np.zeros(ReactiveAgent().layout.size, dtype=np.float32)
+    first = [agent.act(obs) for _ in range(16)]
+    np.testing.assert_allclose(first[0], agent.ready)
+    np.testing.assert_allclose(first[14], agent.ready)
+    with pytest.raises(ValueError, match="delay"):
+        DelayedAgent(ReactiveAgent(), delay=-1.0)
+
+
+def test_replay_without_a_skeleton_walks_the_track_with_a_scripted_gait(env):
+    episode = _straight_walk(-0.9)
+    info, _term, _ = _run(env, ReactiveAgent(), options={"receiver": "replay", "episode": episode})
+    assert info["outcome"] == "success"
+    # The camera saw the recorded track.
+    u = env.unwrapped
+    np.testing.assert_allclose(u._receiver_frames[0], episode["receiver_xy"][0], atol=1e-12)
+
+
+def test_person_settings_and_bad_options():
+    with pytest.raises(ValueError, match="unknown person setting"):
+        gym.make(ENV_ID, person={"reach_time": 1.0})
+    with pytest.raises(ValueError, match="min_speed_factor"):
+        gym.make(ENV_ID, person={"min_speed_factor": 0.0})
+    e = gym.make(ENV_ID, person={"reach_duration": 0.9})
+    assert e.unwrapped.receiver.config.reach_duration == 0.9
+    with pytest.raises(ValueError, match="recorded"):
+        e.reset(seed=0, options={"receiver": "id", "hand_mode": "recorded"})
+    with pytest.raises(RuntimeError, match="reset"):
+        e.step(e.action_space.sample())  # the failed reset left it un-reset
+    with pytest.raises(ValueError, match="skeleton"):
+        e.reset(seed=0, options={"receiver": "replay", "episode": _straight_walk(-0.9), "hand_mode": "recorded"})
+
+
+def test_same_seed_same_person_and_outcome():
+    a, b = gym.make(ENV_ID), gym.make(ENV_ID)
+    ia, *_ = _run(a, ReactiveAgent(), seed=5, options={"receiver": "ood"})
+    ib, *_ = _run(b, ReactiveAgent(), seed=5, options={"receiver": "ood"})
+    assert ia == ib
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="development copy of the public dataset not present")
+def test_giver_replay_takes_the_object_where_the_recorded_person_did(env):
+    """On held-out recordings (Table I folds 5-9: not used to calibrate the person) the robot that
+    moves the object along the recorded giver's path hands it over at the recorded time."""
+    from handover_env.data.dataset import stratified_fold_ids
+    from handover_env.data.filtering import smooth_track
+    from handover_env.data.public import list_public_files
+    from handover_env.data.recording import load_recording
+    from handover_env.data.transfer import detect_transfer
+
+    files = list_public_files(DATA)
+    folds = stratified_fold_ids(np.array([p.name.startswith("motion_variation") for p in files]), 10, 0)
+    held_out = [p for p, f in zip(files, folds) if f >= 5][:8]
+    agent = GiverReplayAgent()
+    ok, dts = 0, []
+    for path in held_out:
+        rec = load_recording(path)
+        agent.set_episode(rec.episode)
+        info, *_ = _run(env, agent, options={"receiver": "replay", "episode": rec})
+        ok += info["outcome"] == "success"
+        det = detect_transfer(smooth_track(rec.receiver_pose, 30.0), smooth_track(rec.episode.giver_xyz, 30.0))
+        if det.frame is not None and info["transfer_time"] is not None:
+            dts.append(abs(info["transfer_time"] - det.frame / 30.0))
+        assert info["penetration"] < 0.01
+    assert ok >= 7
+    assert np.median(dts) <= 0.25
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="development copy of the public dataset not present")
+def test_a_recorded_person_stops_on_the_static_stop_line():
+    from agents.static import StaticAgent
+    from handover_env.data.recording import load_recording
+    from handover_env.envs.static_handover_v0 import STOP_XY
+
+    env = gym.make("handover_env/StaticHandover-v0")
+    rec = load_recording(DATA / "motion_normal_0.pkl")
+    info, _term, _ = _run(env, StaticAgent(), options={"receiver": "replay", "episode": rec})
+    u = env.unwrapped
+    assert info["outcome"] == "success"
+    assert u.receiver.at_rest and abs(u.receiver.base()[0] - STOP_XY[0]) < 0.05
+    assert info["arm_extended_time"] > 2.0  # the raised hand waited for detection and delivery
