@@ -4,6 +4,8 @@
     python evaluate.py table1 --data PATH --folds 10 --seed 0     # Table I: RMS (mm), ID / OOD
     python evaluate.py sample-efficiency --data PATH              # RMS vs training-data ratio
     python evaluate.py tradeoff --data PATH                       # RMS vs per-frame inference time
+    python evaluate.py closed-loop --data PATH                    # every agent with the simulated person
+    python evaluate.py theta-sweep --data PATH                    # does each of K, B, t_f, f_r matter?
     python evaluate.py user-study --participants 8 --trials 5     # H1-H3 with simulated participants
 
 PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
@@ -11,7 +13,8 @@ omitted for the embedded synthetic default. Every method is scored by the same o
 (``handover_env/evaluation/openloop.py``, summarised in the README). Results go to ``--out``
 (default ``results/<command>/``): Markdown and CSV tables, per-fold and per-episode CSVs, PNG plots.
 Trained BC-MLP / ACT checkpoints are kept under ``<out>/checkpoints`` and reused when the method
-configuration and the training set match (``--no-reuse`` retrains).
+configuration and the training set match (``--no-reuse`` retrains); closed-loop and theta-sweep
+reuse Table I's (``--checkpoints``, default ``results/table1/checkpoints``).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from pathlib import Path
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 
+from handover_env.evaluation import closedloop_cli  # noqa: E402
 from handover_env.evaluation.methods import (  # noqa: E402
     ACT_EVAL_STEPS,
     METHODS,
@@ -98,6 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="inducing rates of ours (default: 0.1 to 1.0 in steps of 0.1)")
     p.add_argument("--timing-episodes", type=int, default=20,
                    help="test episodes streamed frame by frame to time each variant (default: 20)")
+    closedloop_cli.add_parsers(sub)
     user_study_cli.add_parser(sub)
     return parser
 
@@ -124,6 +129,8 @@ def load_dataset(path: str | None, quick: bool, seed: int):
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.command in closedloop_cli.COMMANDS:
+        return closedloop_cli.main(args, load_dataset)
     if args.command == "user-study":
         return user_study_cli.run(args)
     from handover_env.evaluation import experiments
