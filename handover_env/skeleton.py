@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 #: ZED SDK BODY_34 joint names, in order (shared/data/README.md).
@@ -175,6 +176,10 @@ class BodyPose:
 
 
 # ------------------------------------------------------------------------------ rotations
+#: Up to this many matrices, :func:`mat_to_quat` calls MuJoCo per matrix.
+_FEW_MATRICES = 32
+
+
 def _normalize(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, 1e-12)
@@ -216,7 +221,18 @@ def yaw_matrix(yaw: np.ndarray | float) -> np.ndarray:
 
 
 def mat_to_quat(rot: np.ndarray) -> np.ndarray:
-    """(..., 4) unit quaternions (w, x, y, z) of rotation matrices (..., 3, 3), w >= 0."""
+    """(..., 4) unit quaternions (w, x, y, z) of rotation matrices (..., 3, 3), w >= 0.
+
+    A few matrices (one pose per env step) go through MuJoCo's ``mju_mat2Quat``, many (a whole
+    recording) through the vectorised branch-free form below: the same quaternions either way.
+    """
+    if rot.size <= 9 * _FEW_MATRICES:
+        flat = np.ascontiguousarray(rot, dtype=np.float64).reshape(-1, 9)
+        out = np.empty((flat.shape[0], 4))
+        for i in range(flat.shape[0]):
+            mujoco.mju_mat2Quat(out[i], flat[i])
+        out *= np.where(out[:, :1] < 0, -1.0, 1.0)
+        return out.reshape(rot.shape[:-2] + (4,))
     m = rot
     tr = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
     cands = np.stack([

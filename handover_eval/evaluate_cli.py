@@ -3,6 +3,8 @@
     python evaluate.py table1 --data PATH --folds 10 --seed 0     # Table I: RMS (mm), ID / OOD
     python evaluate.py sample-efficiency --data PATH              # RMS vs training-data ratio
     python evaluate.py tradeoff --data PATH                       # RMS vs per-frame inference time
+    python evaluate.py closed-loop --data PATH                    # every agent with the simulated person
+    python evaluate.py theta-sweep --data PATH                    # does each of K, B, t_f, f_r matter?
     python evaluate.py user-study --participants 8 --trials 5     # H1-H3 with simulated participants
 
 PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
@@ -10,7 +12,8 @@ omitted for the embedded synthetic default. Every method is scored by the same o
 (``handover_eval/openloop.py``, summarised in the README). Results go to ``--out``
 (default ``results/<command>/``): Markdown and CSV tables, per-fold and per-episode CSVs, PNG plots.
 Trained BC-MLP / ACT checkpoints are kept under ``<out>/checkpoints`` and reused when the method
-configuration and the training set match (``--no-reuse`` retrains).
+configuration and the training set match (``--no-reuse`` retrains); closed-loop and theta-sweep
+reuse Table I's (``--checkpoints``, default ``results/table1/checkpoints``).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import time
 from pathlib import Path
 
 from handover_env.offline import hub_offline
-from handover_eval import user_study_cli
+from handover_eval import closedloop_cli, user_study_cli
 from handover_eval.methods import (
     ACT_EVAL_STEPS,
     METHODS,
@@ -95,6 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="inducing rates of ours (default: 0.1 to 1.0 in steps of 0.1)")
     p.add_argument("--timing-episodes", type=int, default=20,
                    help="test episodes streamed frame by frame to time each variant (default: 20)")
+    closedloop_cli.add_parsers(sub)
     user_study_cli.add_parser(sub)
     return parser
 
@@ -122,6 +126,8 @@ def load_dataset(path: str | None, quick: bool, seed: int):
 def main(argv: list[str] | None = None) -> int:
     hub_offline()
     args = build_parser().parse_args(argv)
+    if args.command in closedloop_cli.COMMANDS:
+        return closedloop_cli.main(args, load_dataset)
     if args.command == "user-study":
         return user_study_cli.run(args)
     from handover_eval import experiments

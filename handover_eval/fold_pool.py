@@ -49,17 +49,21 @@ def map_folds(
     progress: bool = True,
     desc: str = "folds",
     label: Callable[[J], str] = str,
+    weight: Callable[[J], int] | None = None,
+    unit: str = "job",
 ) -> list[R]:
     """``[fn(dataset, job) for job in jobs]``, in ``workers`` spawned processes when ``workers`` > 1.
 
     ``fn`` must be a module-level function (it is pickled by reference). With more than one
     worker the pool uses the ``spawn`` start method, so a script that calls this needs the usual
     ``if __name__ == "__main__":`` guard. The first job that raises stops the pool (queued jobs
-    are dropped) and its exception is re-raised here.
+    are dropped) and its exception is re-raised here. The progress bar counts jobs, or
+    ``weight(job)`` units per job (e.g. the episodes a job runs) with ``weight``.
     """
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    bar = tqdm(total=len(jobs), desc=desc, unit="job", disable=not progress)
+    size = weight or (lambda job: 1)
+    bar = tqdm(total=sum(size(job) for job in jobs), desc=desc, unit=unit, disable=not progress)
     try:
         n_proc = min(workers, len(jobs))
         if n_proc <= 1:
@@ -67,7 +71,7 @@ def map_folds(
             for job in jobs:
                 bar.set_postfix_str(label(job))
                 results.append(fn(dataset, job))
-                bar.update()
+                bar.update(size(job))
             return results
         ctx = multiprocessing.get_context("spawn")
         out: dict[int, R] = {}
@@ -83,7 +87,7 @@ def map_folds(
                         raise fut.exception()
                     out[pending[fut]] = fut.result()
                     bar.set_postfix_str(f"{label(jobs[pending[fut]])} done")
-                    bar.update()
+                    bar.update(size(jobs[pending[fut]]))
         return [out[i] for i in range(len(jobs))]
     finally:
         bar.close()

@@ -1,0 +1,244 @@
+"""``evaluate.py closed-loop``: every agent hands the bottle to the same simulated receivers.
+
+The run, top to bottom (:func:`run_closed_loop`):
+
+1. **Receivers** (:mod:`.closedloop_receivers`): N seeded scripted ID and OOD walkers, and the
+   replayed episodes of the chosen folds of Table I's split (default: the held-out half).
+2. **Fold models** (:mod:`.closedloop_agents`): BC-MLP / ACT checkpoints of the needed folds are
+   loaded from Table I's cache, or trained first (the training time is reported apart).
+3. **Episodes**: chunks of a few receivers for one agent are run in ``workers`` spawned
+   processes (:func:`handover_eval.fold_pool.map_folds`, the dataset sent once per
+   worker; :mod:`.closedloop_worker`). Each worker makes its own envs (one per env kind and Θ,
+   never pickled) and fits or loads each fold model once. Every episode is seeded and every
+   agent reset, so the rows do not depend on the number of workers or on which worker ran what.
+4. **Rows** (:func:`.closedloop_worker.episode_row`): the final ``info`` flattened, ``outcome``
+   "timeout" for a TimeLimit truncation, for replays the recorded transfer and Δt, Δx, and the
+   number of MuJoCo instabilities (auto-resets) in the episode.
+
+The tables and the plot are made by :mod:`.closedloop_report`.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from handover_env.config import HandoverParams
+from handover_env.data.dataset import HandoverDataset
+from handover_eval.closedloop_agents import (
+    AGENTS,
+    LEARNING,
+    ModelRecord,
+    check_agents,
+    prepare_models,
+)
+from handover_eval.closedloop_receivers import (
+    SETS,
+    ReceiverSpec,
+    fold_of,
+    held_out_folds,
+    recording_paths,
+    replays,
+    walkers,
+)
+from handover_eval.closedloop_worker import (  # noqa: F401 - episode_row re-exported
+    EpisodeJob,
+    clear_worker_state,
+    episode_row,
+    run_job,
+)
+from handover_eval.fold_pool import map_folds
+from handover_eval.methods import MethodOptions
+
+
+@dataclass(frozen=True)
+class ClosedLoopConfig:
+    """What ``evaluate.py closed-loop`` runs.
+
+    Args:
+        agents: agent names (:data:`handover_eval.closedloop_agents.AGENTS`).
+        sets: receiver sets among "id", "ood", "replay".
+        walkers: scripted walkers per set (ID, OOD).
+        replay_folds: folds whose episodes are replayed (None: the held-out half).
+        replays_per_fold: at most this many replays of each fold, spread evenly (None: all).
+        hand_mode: "reach" (modelled hand) or "recorded" (the recorded arm) for replays.
+        params: Θ = K, B, t_f, f_r.
+        folds, seed: Table I's stratified split.
+        walker_fold: the fold whose model the learning agents use on scripted walkers.
+        chunk: receivers per worker job.
+        workers: processes running episodes (1 = in this process).
+    """
+
+    agents: tuple[str, ...] = AGENTS
+    sets: tuple[str, ...] = SETS
+    walkers: int = 50
+    replay_folds: tuple[int, ...] | None = None
+    replays_per_fold: int | None = None
+    hand_mode: str = "reach"
+    params: HandoverParams = field(default_factory=HandoverParams)
+    folds: int = 10
+    seed: int = 0
+    walker_fold: int = 0
+    chunk: int = 4
+    workers: int = 2
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "agents", tuple(check_agents(list(self.agents))))
+        bad = [s for s in self.sets if s not in SETS]
+        if bad or not self.sets:
+            raise ValueError(f"unknown receiver set(s) {bad}; choose from {list(SETS)}")
+        if self.hand_mode not in ("reach", "recorded"):
+            raise ValueError(f"--hand-mode must be 'reach' or 'recorded', got {self.hand_mode!r}")
+        if self.walkers < 0 or (self.replays_per_fold is not None and self.replays_per_fold < 1):
+            raise ValueError("--walkers must be >= 0 and --replays-per-fold >= 1")
+        if self.workers < 1 or self.chunk < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if not 0 <= self.walker_fold < self.folds:
+            raise ValueError(f"walker fold {self.walker_fold} is not a fold of {self.folds}")
+
+
+def plan_jobs(
+    config: ClosedLoopConfig,
+    receivers: list[ReceiverSpec],
+    splits: list[tuple[np.ndarray, np.ndarray]],
+    options: MethodOptions,
+    cache_dir: Path,
+    token: str,
+) -> list[EpisodeJob]:
+    """Chunks of receivers per agent; learning agents get the fold model each receiver needs.
+
+    Giver replay meets replays only. Jobs are ordered by model fold (so a worker's fold models
+    are fitted once) and, within that, by agent.
+    """
+    jobs = []
+    for agent in config.agents:
+        groups: dict[tuple[str, int | None], list[ReceiverSpec]] = {}
+        for spec in receivers:
+            if agent == "giver-replay" and spec.set != "replay":
+                continue
+            fold = (
+                (spec.fold if spec.set == "replay" else config.walker_fold)
+                if agent in LEARNING
+                else None
+            )
+            groups.setdefault((spec.set, fold), []).append(spec)
+        for (_, fold), specs in groups.items():
+            for i in range(0, len(specs), config.chunk):
+                jobs.append(
+                    EpisodeJob(
+                        token,
+                        agent,
+                        tuple(specs[i : i + config.chunk]),
+                        config.params,
+                        config.hand_mode,
+                        options,
+                        cache_dir,
+                        fold,
+                        None if fold is None else splits[fold][0],
+                    )
+                )
+    order = {a: k for k, a in enumerate(AGENTS)}
+    return sorted(
+        jobs, key=lambda j: (-1 if j.model_fold is None else j.model_fold, order[j.agent])
+    )
+
+
+def run_jobs(
+    dataset: HandoverDataset,
+    jobs: list[EpisodeJob],
+    workers: int,
+    progress: bool,
+    desc: str = "episodes",
+) -> tuple[list[dict], list[ModelRecord]]:
+    """All jobs' rows (in job order) and model records, in ``workers`` processes (or in-process)."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # as in a worker: results must not depend on where an episode ran
+    try:
+        results = map_folds(
+            run_job,
+            dataset,
+            jobs,
+            workers=workers,
+            progress=progress,
+            desc=desc,
+            label=lambda j: f"{j.agent} {j.receivers[0].set}",
+            weight=lambda j: len(j.receivers),
+            unit="episode",
+        )
+    finally:
+        torch.set_num_threads(threads)
+        clear_worker_state()
+    return [r for rows, _ in results for r in rows], [f for _, fits in results for f in fits]
+
+
+@dataclass
+class ClosedLoopRun:
+    """What :func:`run_closed_loop` returns: the rows, the models and the timings."""
+
+    rows: list[dict]
+    receivers: list[ReceiverSpec]
+    models: list[ModelRecord]
+    prepare_seconds: float
+    episode_seconds: float
+    replay_folds: tuple[int, ...]
+
+
+def build_receivers(
+    config: ClosedLoopConfig, dataset: HandoverDataset, data: str | None
+) -> tuple[list[ReceiverSpec], tuple[int, ...]]:
+    """The walkers and replays of ``config`` (replays of recordings when ``data`` is a folder)."""
+    specs = walkers(config.walkers, tuple(s for s in config.sets if s != "replay"))
+    folds: tuple[int, ...] = ()
+    if "replay" in config.sets:
+        fold_ids = fold_of(dataset, config.folds, config.seed)
+        folds = (
+            held_out_folds(config.folds)
+            if config.replay_folds is None
+            else tuple(config.replay_folds)
+        )
+        paths = recording_paths(data, dataset)
+        if config.hand_mode == "recorded" and not paths:
+            raise ValueError(
+                "--hand-mode recorded needs recordings with the skeleton: "
+                "--data a public-dataset folder (whole_motions/)"
+            )
+        specs += replays(dataset, fold_ids, folds, paths, config.replays_per_fold)
+    if not specs:
+        raise ValueError("no receivers: use --walkers > 0 or the replay set")
+    return specs, folds
+
+
+def run_closed_loop(
+    config: ClosedLoopConfig,
+    dataset: HandoverDataset,
+    data: str | None,
+    options: MethodOptions,
+    cache_dir: Path,
+    progress: bool = True,
+) -> ClosedLoopRun:
+    """Receivers, fold models, then every agent's episodes (module docstring)."""
+    specs, replay_folds = build_receivers(config, dataset, data)
+    splits = dataset.stratified_kfold(config.folds, config.seed)
+    walker_folds = {config.walker_fold} if any(s.set != "replay" for s in specs) else set()
+    needed = sorted(walker_folds | {s.fold for s in specs if s.fold is not None})
+    token = f"{os.getpid()}-{uuid.uuid4().hex}"
+    jobs = plan_jobs(config, specs, splits, options, cache_dir, token)
+    if not jobs:
+        raise ValueError("nothing to run: giver-replay meets replays only (add --sets replay)")
+    t0 = time.perf_counter()
+    models = prepare_models(
+        dataset, list(config.agents), splits, needed, options, cache_dir, progress
+    )
+    prepared = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rows, fits = run_jobs(dataset, jobs, config.workers, progress)
+    return ClosedLoopRun(
+        rows, specs, models + fits, prepared, time.perf_counter() - t0, replay_folds
+    )

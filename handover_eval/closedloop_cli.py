@@ -1,0 +1,304 @@
+"""The ``closed-loop`` and ``theta-sweep`` commands of evaluate.py: their flags and their runs.
+
+``evaluate.py`` keeps only the dispatch; the files are written by :mod:`.closedloop_output`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from handover_env.config import THETA_RANGES, HandoverParams
+from handover_eval.closedloop import ClosedLoopConfig, run_closed_loop
+from handover_eval.closedloop_agents import AGENTS
+from handover_eval.closedloop_output import run_and_write_sweep, write_closed_loop
+from handover_eval.closedloop_receivers import SETS
+from handover_eval.closedloop_stats import N_BOOTSTRAP
+from handover_eval.methods import MethodOptions, default_workers
+
+COMMANDS = ("closed-loop", "theta-sweep")
+QUICK_WALKERS = 2
+QUICK_REPLAYS = 3
+QUICK_FOLDS = 3
+THETA_HAT = HandoverParams()
+CLOSED_LOOP_DESCRIPTION = (
+    "Closed-loop handovers of every agent with the same scripted ID/OOD walkers and replayed "
+    "held-out recordings (the simulated person): success with Wilson CIs, outcomes, handover time, "
+    "transfer, forces, receiver effort, jerk, and paired bootstrap comparisons against the "
+    "reactive agent. Writes closed_loop.md/.csv/.png, closed_loop_episodes.csv and "
+    "closed_loop_paired.csv."
+)
+THETA_SWEEP_DESCRIPTION = (
+    "Sweep each Θ parameter over its CoSpar range (the others at --theta, default Θ̂) for one "
+    "agent on the same receivers at every value: every outcome per value with a bootstrap CI over "
+    "receivers, and per parameter whether the extreme values differ beyond that noise (paired CI "
+    "excluding 0). Writes theta_sweep.md/.csv/.png."
+)
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    """Add the ``closed-loop`` and ``theta-sweep`` sub-commands to evaluate.py's parser."""
+    p = sub.add_parser(
+        "closed-loop",
+        help="every agent hands the bottle to the same simulated receivers (md/csv/png)",
+        description=CLOSED_LOOP_DESCRIPTION,
+    )
+    _common(p)
+    p.add_argument(
+        "--agents",
+        nargs="+",
+        default=list(AGENTS),
+        metavar="NAME",
+        help=f"agents, any of {list(AGENTS)} (default: all). giver-replay meets replays only; "
+        "static runs in StaticHandover-v0 on the same receivers",
+    )
+    p.add_argument(
+        "--sets",
+        nargs="+",
+        default=list(SETS),
+        metavar="SET",
+        help="receiver sets: id, ood (scripted walkers), replay (recordings) (default: all three)",
+    )
+    p.add_argument(
+        "--walkers",
+        type=int,
+        default=None,
+        metavar="N",
+        help=f"scripted walkers per set, seeds 0..N-1 (ID) and 10000.. (OOD) (default: 50; "
+        f"{QUICK_WALKERS} with --quick)",
+    )
+    p = sub.add_parser(
+        "theta-sweep",
+        help="sweep each of K, B, t_f, f_r over the paper's range (md/csv/png)",
+        description=THETA_SWEEP_DESCRIPTION,
+    )
+    _common(p)
+    p.add_argument(
+        "--agent",
+        default="ours",
+        metavar="NAME",
+        help="the agent swept (default: ours; reactive is the model-free check)",
+    )
+    p.add_argument(
+        "--params",
+        nargs="+",
+        default=list(THETA_RANGES),
+        metavar="NAME",
+        help=f"parameters to sweep, any of {list(THETA_RANGES)} (default: all four)",
+    )
+    p.add_argument(
+        "--values",
+        type=int,
+        default=None,
+        metavar="N",
+        help="values per parameter, evenly spaced over the paper's range, ends included "
+        f"(ranges {THETA_RANGES}) (default: 5; 3 with --quick)",
+    )
+    p.add_argument(
+        "--walkers",
+        type=int,
+        default=None,
+        metavar="N",
+        help=f"scripted walkers per set (ID, OOD), the same at every value (default: 20; "
+        f"{QUICK_WALKERS} with --quick)",
+    )
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--data",
+        default=None,
+        metavar="PATH",
+        help="public-dataset folder (whole_motions/: replays drive the body with the recorded "
+        "skeleton), canonical .npz (pelvis tracks only), or omit for the synthetic default",
+    )
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="output folder (default: results/<command>, results/<command>-quick with --quick)",
+    )
+    p.add_argument(
+        "--replay-folds",
+        nargs="+",
+        type=int,
+        default=None,
+        metavar="F",
+        help="folds of Table I's split whose episodes are replayed (default: the held-out half, "
+        "folds k//2..k-1 = 5-9 of 10, which the receiver was not calibrated on; 0 with --quick)",
+    )
+    p.add_argument(
+        "--replays-per-fold",
+        type=int,
+        default=None,
+        metavar="N",
+        help="at most N replays per fold, spread evenly (default: all for closed-loop, none for "
+        f"theta-sweep; {QUICK_REPLAYS} with --quick)",
+    )
+    p.add_argument(
+        "--hand-mode",
+        choices=("reach", "recorded"),
+        default="reach",
+        help="replays: the modelled reaching hand, or the recorded arm with a closing grasp "
+        "(needs --data a folder of recordings) (default: reach)",
+    )
+    p.add_argument(
+        "--theta",
+        nargs=4,
+        type=float,
+        default=None,
+        metavar=("K", "B", "TF", "FR"),
+        help=f"Θ: stiffness N/m, damping N·s/m, forecast time s, release force N "
+        f"(default: the paper's Θ̂ = {' '.join(f'{v:g}' for v in THETA_HAT.as_array())})",
+    )
+    p.add_argument(
+        "--folds", type=int, default=10, help="k of Table I's stratified split (default: 10)"
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the split and of the learned baselines, as Table I (default: 0)",
+    )
+    p.add_argument(
+        "--checkpoints",
+        default=None,
+        metavar="DIR",
+        help="Table I's checkpoint cache: BC-MLP/ACT fold models are loaded from it, or trained "
+        "into it when missing (default: results/table1/checkpoints, "
+        "results/table1-quick/checkpoints with --quick)",
+    )
+    p.add_argument(
+        "--act-steps",
+        type=int,
+        default=None,
+        help="ACT optimisation steps of the fold models (default: Table I's; must match the "
+        "checkpoints to reuse them)",
+    )
+    p.add_argument(
+        "--bc-epochs", type=int, default=None, help="BC-MLP maximum epochs (default: Table I's)"
+    )
+    p.add_argument(
+        "--bootstrap",
+        type=int,
+        default=N_BOOTSTRAP,
+        metavar="N",
+        help=f"bootstrap resamples of the CIs, seeded (default: {N_BOOTSTRAP})",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="processes running the episodes, each with its own envs and fold models (default: "
+        "one per core, at most 2; 1 runs in this process); the results do not depend on it",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"small fast run for tests: synthetic data, {QUICK_FOLDS} folds, {QUICK_WALKERS} "
+        f"walkers per set, {QUICK_REPLAYS} replays of fold 0, tiny ACT/BC-MLP budgets; "
+        "never for reported numbers",
+    )
+    p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+
+def _params(theta: list[float] | None) -> HandoverParams:
+    if theta is None:
+        return THETA_HAT
+    params = HandoverParams(*theta)
+    outside = [
+        n
+        for n, v in zip(THETA_RANGES, params.as_array(), strict=True)
+        if not THETA_RANGES[n][0] <= v <= THETA_RANGES[n][1]
+    ]
+    if outside:
+        print(f"note: --theta {outside} outside the paper's ranges {THETA_RANGES}", file=sys.stderr)
+    return params
+
+
+def main(args: argparse.Namespace, load_dataset: Callable) -> int:
+    """Run ``args.command`` (closed-loop or theta-sweep); 2 with a one-line error on bad input."""
+    try:
+        workers = default_workers() if args.workers is None else args.workers
+        options = MethodOptions(
+            seed=args.seed,
+            quick=args.quick,
+            act_steps=args.act_steps,
+            bc_epochs=args.bc_epochs,
+            workers=workers,
+        )
+        if args.bootstrap < 1:
+            raise ValueError(f"--bootstrap must be >= 1, got {args.bootstrap}")
+        quick = args.quick
+        replay_folds = tuple(args.replay_folds) if args.replay_folds else ((0,) if quick else None)
+        per_fold = (
+            args.replays_per_fold
+            if args.replays_per_fold is not None
+            else (QUICK_REPLAYS if quick else None)
+        )
+        receivers = ClosedLoopConfig(
+            agents=tuple(getattr(args, "agents", ["reactive"])),
+            sets=tuple(getattr(args, "sets", SETS)),
+            walkers=args.walkers
+            if args.walkers is not None
+            else (QUICK_WALKERS if quick else (50 if args.command == "closed-loop" else 20)),
+            replay_folds=replay_folds,
+            replays_per_fold=per_fold,
+            hand_mode=args.hand_mode,
+            params=_params(args.theta),
+            folds=QUICK_FOLDS if quick else args.folds,
+            seed=args.seed,
+            workers=workers,
+        )
+        sweep = None
+        if args.command == "theta-sweep":
+            from handover_eval.theta_sweep import SweepConfig
+
+            sweep = SweepConfig(
+                agent=args.agent,
+                params=tuple(args.params),
+                values=args.values if args.values is not None else (3 if quick else 5),
+                walkers=receivers.walkers,
+                replays_per_fold=args.replays_per_fold or 0,
+                receivers=receivers,
+            )
+        out = (
+            Path(args.out)
+            if args.out
+            else Path("results") / (args.command + ("-quick" if quick else ""))
+        )
+        if out.exists() and not out.is_dir():
+            raise ValueError(f"--out {out}: exists and is not a folder")
+        cache = (
+            Path(args.checkpoints)
+            if args.checkpoints
+            else Path("results") / ("table1-quick" if quick else "table1") / "checkpoints"
+        )
+        dataset = load_dataset(args.data, quick, args.seed)
+        out.mkdir(parents=True, exist_ok=True)
+    except (ValueError, OSError) as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 2
+    progress = not args.no_progress
+    start = time.perf_counter()
+    print(
+        f"{args.command}: {dataset.name} ({len(dataset)} episodes), "
+        f"Θ = {receivers.params.as_array()}, {workers} worker(s), {os.cpu_count()} cores",
+        flush=True,
+    )
+    try:
+        if sweep is None:
+            run = run_closed_loop(receivers, dataset, args.data, options, cache, progress)
+            write_closed_loop(run, receivers, dataset, args, out)
+        else:
+            run_and_write_sweep(sweep, dataset, args, options, cache, out, progress)
+    except ValueError as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s")
+    return 0

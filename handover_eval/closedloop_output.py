@@ -1,0 +1,197 @@
+"""Output files and console summaries of the ``closed-loop`` and ``theta-sweep`` commands.
+
+closed-loop writes ``closed_loop.md/.csv/.png`` and ``closed_loop_{episodes,paired,ghosts,models,
+timing}.csv``; theta-sweep writes ``theta_sweep.md/.csv/.png`` and
+``theta_sweep_{episodes,extremes}.csv``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+from handover_eval.closedloop import ClosedLoopConfig, ClosedLoopRun
+from handover_eval.closedloop_agents import LABELS, ModelRecord
+from handover_eval.closedloop_receivers import SETS
+from handover_eval.methods import MethodOptions
+from handover_eval.reporting import markdown_table, write_csv, write_text
+
+
+def timing_rows(rows: list[dict]) -> list[dict]:
+    """Per agent and set: episodes, env steps and the worker wall time they took."""
+    out = []
+    for key in dict.fromkeys((r["agent"], r["set"]) for r in rows):
+        mine = [r for r in rows if (r["agent"], r["set"]) == key]
+        wall, steps = sum(r["wall_s"] for r in mine), sum(r["steps"] for r in mine)
+        out.append(
+            {
+                "agent": key[0],
+                "set": key[1],
+                "episodes": len(mine),
+                "steps": steps,
+                "worker_s": wall,
+                "s_per_episode": wall / len(mine),
+                "ms_per_step": 1e3 * wall / max(1, steps),
+            }
+        )
+    return out
+
+
+def _models_text(models: list[ModelRecord]) -> str:
+    if not models:
+        return "No learning agents."
+    rows = {}
+    for m in models:
+        rows.setdefault((m.agent, m.how), []).append(m)
+    body = [
+        [
+            LABELS.get(a, a),
+            how,
+            len(ms),
+            ", ".join(str(f) for f in sorted({m.fold for m in ms})),
+            f"{sum(m.seconds for m in ms):.1f}",
+        ]
+        for (a, how), ms in rows.items()
+    ]
+    return markdown_table(["agent", "model", "count", "folds", "seconds (sum)"], body)
+
+
+def _header(
+    title: str, dataset, receivers: ClosedLoopConfig, args: argparse.Namespace, n_rec: str
+) -> str:
+    th = receivers.params
+    return (
+        f"# {title}\n\nDataset: {dataset.name} ({len(dataset)} episodes). Receivers: {n_rec}. "
+        f"Θ = K {th.stiffness:g} N/m, B {th.damping:g} N·s/m, t_f {th.forecast_time:g} s, f_r "
+        f"{th.release_force:g} N. Learning agents: Table I's {receivers.folds}-fold split (seed "
+        f"{receivers.seed}); a replay of fold f meets the model trained on the other folds, the "
+        f"scripted walkers meet the fold-{receivers.walker_fold} model. Replays: hand mode "
+        f"`{receivers.hand_mode}`."
+        f"{' **Quick run: tiny models, never for reported numbers.**' if args.quick else ''}\n"
+    )
+
+
+def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, out: Path) -> None:
+    from handover_eval import closedloop_markdown as md
+    from handover_eval import closedloop_report as rep
+    from handover_eval.closedloop_plot import plot_closed_loop
+
+    agg = rep.aggregate(run.rows)
+    pairs = (
+        rep.paired(run.rows, n_boot=args.bootstrap, seed=args.seed)
+        if "reactive" in cfg.agents
+        else []
+    )
+    ghost = rep.ghosts(run.rows)
+    timing = timing_rows(run.rows)
+    n_sets = {s: sum(1 for r in run.receivers if r.set == s) for s in SETS}
+    n_rec = (
+        f"{n_sets['id']} ID + {n_sets['ood']} OOD scripted walkers, {n_sets['replay']} replays of "
+        f"folds {list(run.replay_folds)}"
+    )
+    worker_s = sum(t["worker_s"] for t in timing)
+    footer = (
+        "## Models and timing\n\n"
+        + _models_text(run.models)
+        + "\nModel preparation (training or checking Table I's checkpoints): "
+        f"{run.prepare_seconds:.1f} s. Episodes: {len(run.rows)} in {run.episode_seconds:.1f} s "
+        f"wall time with {cfg.workers} worker(s) ({worker_s:.1f} s of episode time in the "
+        "workers; per agent and set: `closed_loop_timing.csv`).\n"
+    )
+    write_csv(run.rows, out / "closed_loop_episodes.csv")
+    write_csv(agg, out / "closed_loop.csv")
+    write_csv(pairs, out / "closed_loop_paired.csv")
+    write_csv(ghost, out / "closed_loop_ghosts.csv")
+    write_csv([dataclasses.asdict(m) for m in run.models], out / "closed_loop_models.csv")
+    write_csv(timing, out / "closed_loop_timing.csv")
+    write_text(
+        md.markdown(
+            agg, pairs, ghost, _header("Closed-loop evaluation", dataset, cfg, args, n_rec), footer
+        ),
+        out / "closed_loop.md",
+    )
+    plot_closed_loop(
+        run.rows,
+        agg,
+        out / "closed_loop.png",
+        f"Closed loop with the simulated person ({n_rec}); Θ = {cfg.params.as_array()}",
+    )
+    print(
+        "\n"
+        + markdown_table(
+            [
+                "agent",
+                "set",
+                "n",
+                "success [95 % CI]",
+                "other outcomes",
+                "handover time (s)",
+                "time lost (s)",
+            ],
+            [
+                [
+                    LABELS.get(r["agent"], r["agent"]),
+                    r["set"],
+                    r["n"],
+                    md.success_cell(r),
+                    md.outcomes_cell(r),
+                    md.med_iqr(r, "handover_time", 2),
+                    md.med_iqr(r, "time_lost", 2),
+                ]
+                for r in agg
+            ],
+        )
+    )
+    g = ghost[0]
+    print(
+        f"no ghosts: max penetration {1000 * g['max_penetration_m']:.1f} mm, successes released "
+        f"before the grasp {g['successes_release_before_grasp']}, peak body contact q50/q99/max "
+        + "/".join(f"{g[f'body_contact_force_{q}']:.0f}" for q in ("q50", "q99", "max"))
+        + " N"
+    )
+    trained = sum(m.seconds for m in run.models if m.how == "trained")
+    print(
+        f"models: {run.prepare_seconds:.0f} s preparing ({trained:.0f} s training); episodes: "
+        f"{len(run.rows)} in {run.episode_seconds:.0f} s with {cfg.workers} worker(s)"
+    )
+
+
+def run_and_write_sweep(
+    sweep, dataset, args, options: MethodOptions, cache: Path, out: Path, progress: bool
+) -> None:
+    from handover_eval import theta_sweep as ts
+
+    rows, models, seconds = ts.run_sweep(sweep, dataset, args.data, options, cache, progress)
+    per_value, extremes = ts.summarise(rows, args.bootstrap, args.seed)
+    cfg = sweep.receivers
+    n_sets = {s: len({r["receiver"] for r in rows if r["set"] == s}) for s in SETS}
+    n_rec = (
+        f"{n_sets['id']} ID + {n_sets['ood']} OOD scripted walkers"
+        + (f", {n_sets['replay']} replays" if n_sets["replay"] else "")
+        + ", the same at every value"
+    )
+    header = _header(
+        f"Θ sweep: {LABELS.get(sweep.agent, sweep.agent)}", dataset, cfg, args, n_rec
+    ).replace("Θ = K", "Base Θ (the others while one is swept) = K")
+    footer = (
+        f"\n## Models and timing\n\n{_models_text(models)}\n{len(rows)} episodes in "
+        f"{seconds:.1f} s with {cfg.workers} worker(s). Results come from the simulated person.\n"
+    )
+    write_csv(rows, out / "theta_sweep_episodes.csv")
+    write_csv(per_value, out / "theta_sweep.csv")
+    write_csv(extremes, out / "theta_sweep_extremes.csv")
+    write_text(ts.markdown(per_value, extremes, header, footer), out / "theta_sweep.md")
+    ts.plot_sweep(
+        per_value, out / "theta_sweep.png", f"Θ sweep, {sweep.agent}, {n_rec} (simulated person)"
+    )
+    print(
+        "\n"
+        + markdown_table(
+            ["parameter", "moves", "outcomes (high - low end, 95 % CI excludes 0)"],
+            [
+                [ts.SYMBOLS[v["param"]], "yes" if v["moves"] else "no", v["outcomes_moved"] or "-"]
+                for v in ts.verdicts(extremes)
+            ],
+        )
+    )
