@@ -1,8 +1,9 @@
 """Shared core of the handover envs: physics loop, wrist F/T, release, outcomes, observation.
 
-The two registered envs (:mod:`.dynamic_handover_v0`, :mod:`.static_handover_v0`) are thin
-subclasses that differ in the receiver (walking past vs. stopping and raising a hand) and in when
-the robot may move. Everything below is common.
+The two registered envs (:mod:`.dynamic_handover_v0`, :mod:`.static_handover_v0`) differ only in
+their task (:mod:`handover_env.envs.tasks`): the receiver's set-up (walking past vs. stopping and
+raising a hand), when the robot may move, when an episode ends, and the reward. Everything below
+is common; a task is a constructor argument (``task=``), so a new variant is one task file.
 
 Timing: physics dt = 1/600 s; the impedance controller runs every 3 physics steps (200 Hz) on a
 global step counter, so its rate holds across env steps; one env step = 1/30 s = 20 physics steps
@@ -60,6 +61,8 @@ from handover_env.config import HandoverParams
 from handover_env.controller import ControllerConfig, ImpedanceController, inverse_kinematics
 from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.observation import ObsLayout
+from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
+from handover_env.envs.tasks.dynamic import DynamicHandover
 from handover_env.receiver import CAMERA_RATE, Receiver, ReceiverConfig
 from handover_env.scene import (
     SceneConfig,
@@ -87,10 +90,14 @@ RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode", "walker"
 
 
 class HandoverEnvBase(gym.Env, EzPickle):
-    """Common implementation; use ``DynamicHandoverEnv`` or ``StaticHandoverEnv``."""
+    """Common implementation; use ``DynamicHandoverEnv`` or ``StaticHandoverEnv``.
+
+    ``task`` (a :class:`~handover_env.envs.tasks.base.HandoverTask`) replaces the env's own
+    (:meth:`default_task`); ``reward`` (a :class:`~handover_env.envs.tasks.base.HandoverReward`
+    or a dict of its fields) sets the default task's reward weights.
+    """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
-    static: bool = False
 
     def __init__(
         self,
@@ -112,11 +119,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         height: int = 480,
         camera: str = "overview",
         person: dict[str, float] | None = None,
+        task: HandoverTask | None = None,
+        reward: HandoverReward | dict[str, float] | None = None,
     ) -> None:
         EzPickle.__init__(
             self, render_mode, stiffness, damping, forecast_time, release_force, safety_force, history,
             obs_noise, obs_latency, default_receiver, stabilisation_delay, object_mass, miss_distance,
-            force_filter_tau, width, height, camera, person,
+            force_filter_tau, width, height, camera, person, task, reward,
         )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
@@ -138,12 +147,21 @@ class HandoverEnvBase(gym.Env, EzPickle):
             if isinstance(v, bool) or int(v) != v or v <= 0:
                 raise ValueError(f"{name} must be a positive whole number of pixels, got {v!r}")
         self.params = HandoverParams(stiffness, damping, forecast_time, release_force)
+        self.stabilisation_delay = float(stabilisation_delay)
+        if task is not None and reward is not None:
+            raise ValueError("pass the reward weights to the task (task=...(reward=...)) or reward=, not both")
+        if isinstance(reward, dict):
+            reward = HandoverReward(**reward)
+        if reward is not None and not isinstance(reward, HandoverReward):
+            raise ValueError(f"reward must be a HandoverReward or a dict of its fields, got {type(reward).__name__}")
+        if task is not None and not isinstance(task, HandoverTask):
+            raise ValueError(f"task must be a HandoverTask, got {type(task).__name__}")
+        self.task = task if task is not None else self.default_task(reward or HandoverReward())
         self.render_mode = render_mode
         self.safety_force = float(safety_force)
         self.obs_noise = float(obs_noise)
         self.obs_latency = int(obs_latency)
         self.default_receiver = default_receiver
-        self.stabilisation_delay = float(stabilisation_delay)
         self.miss_distance = float(miss_distance)
         self.clear_distance = CLEAR_DISTANCE
         self.width, self.height, self.camera = int(width), int(height), camera
@@ -198,6 +216,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._viewer: Any = None
         self._global_step = 0
         self._reset_episode_state()
+
+    def default_task(self, reward: HandoverReward) -> HandoverTask:
+        """The task of this env when none is given (the dynamic handover here)."""
+        return DynamicHandover(reward=reward)
 
     def _bind_data(self) -> None:
         """Views of the ``self.data`` rows read or written at every tick or step.
@@ -273,6 +295,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._jerk_sq = 0.0
         self._jerk_peak_sq = 0.0
         self._jerk_n = 0
+        self.reward_terms = dict.fromkeys(TERMS, 0.0)
 
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -285,7 +308,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         kind = options.get("receiver", self.default_receiver)
         m, d, ids = self.model, self.data, self.ids
         # The person is chosen (and every option validated) before any state changes.
-        self._configure_receiver(kind, options)
+        self.task.configure_receiver(self, kind, options)
         mujoco.mj_resetData(m, d)
         mujoco.mj_setConst(m, d)  # the person's masses and sizes changed (uses d as scratch)
         mujoco.mj_setState(m, d, self._init_state, mujoco.mjtState.mjSTATE_INTEGRATION)
@@ -310,21 +333,11 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._record_camera_frame()
         self._hand_frames = [self._grip_v.copy()]
         self._tcp_hist.append(self._tcp_pos_v.tolist())
-        self.t_enabled = math.inf if self.static else 0.0
+        self.t_enabled = self.task.enabled_time(self)
         self._ready = True
         if self.render_mode == "human":
             self.render()
         return self._observation(), self._info()
-
-    def _configure_receiver(self, kind: str, options: dict[str, Any]) -> None:
-        walker = options.get("walker")
-        if walker is not None and not isinstance(walker, dict):
-            raise ValueError(f"options['walker'] must be a dict of WalkerParams fields, got {type(walker).__name__}")
-        self.receiver.reset(
-            self.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
-            episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
-            walker_overrides=walker,
-        )
 
     def _record_camera_frame(self) -> None:
         x, y = self.receiver.camera_xy().tolist()
@@ -383,7 +396,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._hand_frames.append(self._grip_v.copy())
         self._track_jerk()
         self._after_step()
-        reward = self._reward()
+        self.reward_terms = self.task.reward_terms(self)
+        reward = 0.0
+        for term in self.reward_terms.values():
+            reward += term
         terminated = self.outcome != "running"
         if self.render_mode == "human":
             self.render()
@@ -393,6 +409,37 @@ class HandoverEnvBase(gym.Env, EzPickle):
     @property
     def _receiver_holds(self) -> bool:
         return self.receiver.grip.active
+
+    # what a task reads of the env's state
+    @property
+    def receiver_holds(self) -> bool:
+        """The person's hand holds the object."""
+        return self.receiver.grip.active
+
+    @property
+    def gripper_holds(self) -> bool:
+        """The gripper holds the object (its weld is on)."""
+        return self._gripper_holds
+
+    @property
+    def last_held_z(self) -> float:
+        """Height (m) of the object when it was last held by anyone."""
+        return self._last_held_z
+
+    def object_position(self) -> np.ndarray:
+        """The object's position (a view: copy it to keep it)."""
+        return self._object_pos_v
+
+    def wrist_force_magnitude(self) -> float:
+        """N, the filtered external wrist force (what the release compares with f_r)."""
+        fx, fy, fz = self._f_ext_f
+        return math.sqrt(fx * fx + fy * fy + fz * fz)
+
+    def clear_of_gripper(self, ox: float, oy: float, oz: float) -> bool:
+        """Whether the object centre is more than ``clear_distance`` from the TCP."""
+        px, py, pz = self._tcp_pos_v.tolist()
+        dx, dy, dz = ox - px, oy - py, oz - pz
+        return math.sqrt(dx * dx + dy * dy + dz * dz) > self.clear_distance
 
     def _update_payload(self) -> None:
         """Mass and centre of mass (in the F/T site frame) of what hangs below the sensor."""
@@ -506,53 +553,14 @@ class HandoverEnvBase(gym.Env, EzPickle):
         del hist[0]
 
     def _after_step(self) -> None:
+        self.task.before_outcome(self)
         warning = self.data.warning
         if any(warning[w].number for w in _DIVERGED):
             # MuJoCo found a diverging acceleration and reset the simulation: the episode is void.
             self.outcome = "unstable"
             return
-        t = float(self.data.time)
-        obj = self._object_pos_v
-        ox, oy, oz = obj.tolist()
-        holds = self._receiver_holds
         self.peak_contact_force = max(self.peak_wrist_force, float(self.contacts.peak.max()))
-        if self.pull_force > self.safety_force or self.contacts.unsafe_segment >= 0:
-            self.outcome = "unsafe_force"
-        elif self.released and not self.released_while_held:
-            self.outcome = "premature_release"
-        elif self.released and holds and not self._gripper_holds and self._clear_of_gripper(ox, oy, oz):
-            self.outcome = "success"
-        elif not self._gripper_holds and not holds and (oz < self._last_held_z - 0.15 or oz < 0.1):
-            self.outcome = "dropped"
-        elif not holds and not self.released and self._receiver_passed(obj, t):
-            self.outcome = "missed"
-
-    def _clear_of_gripper(self, ox: float, oy: float, oz: float) -> bool:
-        """Whether the object centre is more than ``clear_distance`` from the TCP."""
-        px, py, pz = self._tcp_pos_v.tolist()
-        dx, dy, dz = ox - px, oy - py, oz - pz
-        return math.sqrt(dx * dx + dy * dy + dz * dz) > self.clear_distance
-
-    def _receiver_passed(self, obj: np.ndarray, t: float) -> bool:
-        """The person walked past: they left the object behind (a modelled hand gives up on an
-        unheld object behind them), or their walk ended over a second ago without it."""
-        if self.static:
-            return False
-        rec = self.receiver
-        return rec.state == "passed" or (rec.finished and t > rec.duration + rec.time_lost + 1.0)
-
-    def _reward(self) -> float:
-        """-dt per step (time), -dt * excess force over 2 f_r / 10 N, +10 success, -10 failure."""
-        r = -self.dt
-        fx, fy, fz = self._f_ext_f
-        excess = math.sqrt(fx * fx + fy * fy + fz * fz) - 2.0 * self.params.release_force
-        if excess > 0:
-            r -= self.dt * excess / 10.0
-        if self.outcome == "success":
-            r += 10.0
-        elif self.outcome != "running":
-            r -= 10.0
-        return float(r)
+        self.outcome = self.task.outcome(self)
 
     def _observation(self) -> np.ndarray:
         d, v = self.data, self._obs_views
@@ -600,7 +608,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         """
         ok = self.outcome == "success"
         rec = self.receiver
-        delay = self.stabilisation_delay if self.static else 0.0
+        delay = self.task.handover_delay
         # Paper Sec. V-C: from when the receiver leaves the start point to the gripper release;
         # the static baseline's stabilisation delay is subtracted ("handover_time") or not.
         t_ho = self.t_release - rec.t_depart
@@ -628,6 +636,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
             "robot_jerk_peak": math.sqrt(self._jerk_peak_sq),
             "time": float(self.data.time),
         }
+        for term, value in self.reward_terms.items():
+            info[f"reward_{term}"] = value
         info.update(rec.effort())
         info.update(self.contacts.info())
         return info

@@ -48,7 +48,14 @@ class DynamicHandoverEnv(HandoverEnvBase):
 
     ## Rewards
     Per step: ``-dt`` (time), ``-dt * max(0, |F_ext| - 2 f_r) / 10 N`` (excess wrist force);
-    ``+10`` on success, ``-10`` on a failure (dropped, unsafe force, missed).
+    ``+10`` on success, ``-10`` on a failure (dropped, unsafe force, missed). The weights are
+    :class:`handover_env.envs.tasks.base.HandoverReward`'s (``reward={"success": 5.0}`` or a
+    task's ``reward=``); each step's terms are in ``info`` as ``reward_time``, ``reward_force`` and
+    ``reward_outcome`` (their sum is the reward).
+
+    ## Task
+    :class:`handover_env.envs.tasks.dynamic.DynamicHandover` (receiver set-up, episode end,
+    reward); ``task=`` gives the env another :class:`~handover_env.envs.tasks.base.HandoverTask`.
 
     ## Starting State
     The arm at its ready pose (TCP at (0.3, -0.4, 1.15), gripper pointing -y) holding the bottle,
@@ -96,7 +103,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | object_mass | 0.4 | kg |
     | miss_distance | 0.35 | m behind the shoulder at which an unheld bottle is walked past |
     | person | None | dict of :class:`handover_env.receiver.ReceiverConfig` overrides |
+    | task | None | a :class:`~handover_env.envs.tasks.base.HandoverTask` instead of ``DynamicHandover`` |
+    | reward | None | :class:`~handover_env.envs.tasks.base.HandoverReward` weights (or a dict of them) |
     | render_mode, width, height, camera | None, 640, 480, "overview" | rendering |
     """
-
-    static = False

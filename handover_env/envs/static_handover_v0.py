@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import math
-from typing import Any
-
 from handover_env.envs.base_handover import HandoverEnvBase
+from handover_env.envs.tasks.base import HandoverReward, HandoverTask
+from handover_env.envs.tasks.static import STOP_XY, StaticHandover
 
-STOP_XY = (0.45, -0.95)  # the predefined area where the receiver stops, m
+__all__ = ["STOP_XY", "StaticHandoverEnv"]
 
 
 class StaticHandoverEnv(HandoverEnvBase):
@@ -36,25 +35,14 @@ class StaticHandoverEnv(HandoverEnvBase):
     leaves the start point to the gripper release. ``info["handover_time"]`` excludes the
     stabilisation delay, as the paper does; ``info["handover_time_with_delay"]`` includes it.
 
+    ## Task
+    :class:`handover_env.envs.tasks.static.StaticHandover` (receiver set-up, the robot's start,
+    no ``missed``, the reward).
+
     ## Arguments
     As the dynamic env, plus ``stabilisation_delay`` (s, default 2.0).
     """
 
-    static = True
-
-    def _configure_receiver(self, kind: str, options: dict[str, Any]) -> None:
-        # Scripted walkers walk to the stop area; recorded people follow their recording until
-        # their pelvis reaches the stop line (x = STOP_XY[0]), where both stop and stand.
-        overrides = ({**dict(options.get("walker") or {}), "end_x": STOP_XY[0] - 0.3, "pass_y": STOP_XY[1]}
-                     if kind in ("id", "ood") else None)
-        self.receiver.reset(
-            self.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
-            episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
-            walker_overrides=overrides, stop_x=STOP_XY[0],
-        )
-
-    def _after_step(self) -> None:
-        if math.isinf(self.t_enabled) and not math.isnan(self.receiver.t_hand_raised):
-            self.t_detect = self.receiver.t_hand_raised
-            self.t_enabled = self.t_detect + self.stabilisation_delay
-        super()._after_step()
+    def default_task(self, reward: HandoverReward) -> HandoverTask:
+        """:class:`~handover_env.envs.tasks.static.StaticHandover` with this env's ``stabilisation_delay``."""
+        return StaticHandover(reward=reward, stabilisation_delay=self.stabilisation_delay)

@@ -1,0 +1,30 @@
+"""The dynamic handover: the receiver keeps walking and takes the object on the way."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from handover_env.envs.tasks.base import HandoverTask
+
+if TYPE_CHECKING:
+    from handover_env.envs.base_handover import HandoverEnvBase
+
+#: s after the end of their walk at which a person without the object has missed it.
+WALK_END_GRACE = 1.0
+
+
+@dataclass
+class DynamicHandover(HandoverTask):
+    """The receiver walks past (scripted or replayed); the robot may move from the start.
+
+    The episode ends as ``missed`` when the person left the object behind (a modelled hand gives up
+    on an unheld object behind them) or their walk ended over :data:`WALK_END_GRACE` s ago without it.
+
+    Args:
+        reward: the reward's weights (:class:`~handover_env.envs.tasks.base.HandoverReward`).
+    """
+
+    def walked_past(self, env: HandoverEnvBase, t: float) -> bool:
+        rec = env.receiver
+        return rec.state == "passed" or (rec.finished and t > rec.duration + rec.time_lost + WALK_END_GRACE)

@@ -1,0 +1,101 @@
+"""The handover variants are Task objects: receiver set-up, episode end and a weighted reward in info."""
+
+from __future__ import annotations
+
+import math
+import pickle
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import handover_env  # noqa: F401
+from agents.reactive import ReactiveAgent
+from handover_env.envs.tasks import DynamicHandover, HandoverReward, HandoverTask, StaticHandover
+
+DYNAMIC = "handover_env/DynamicHandover-v0"
+
+
+def _episode(env, seed=0, agent=None):
+    agent = agent or ReactiveAgent()
+    obs, info = env.reset(seed=seed, options={"receiver": "id"})
+    agent.reset()
+    steps = []
+    while True:
+        obs, r, term, trunc, info = env.step(agent.act(obs))
+        steps.append((r, info))
+        if term or trunc:
+            return steps
+
+
+def test_each_env_has_its_task_with_the_default_weights():
+    dyn, sta = gym.make(DYNAMIC).unwrapped, gym.make("handover_env/StaticHandover-v0").unwrapped
+    assert type(dyn.task) is DynamicHandover and type(sta.task) is StaticHandover
+    assert dyn.task.reward == sta.task.reward == HandoverReward(1.0, 2.0, 10.0, 10.0, 10.0)
+    assert sta.task.stabilisation_delay == 2.0 and sta.task.handover_delay == 2.0 and dyn.task.handover_delay == 0.0
+    assert dyn.task.enabled_time(dyn) == 0.0 and math.isinf(sta.task.enabled_time(sta))
+
+
+def test_reward_terms_are_in_info_and_sum_to_the_reward():
+    env = gym.make(DYNAMIC)
+    steps = _episode(env)
+    for r, info in steps:
+        assert r == info["reward_time"] + info["reward_force"] + info["reward_outcome"]
+        assert info["reward_time"] == pytest.approx(-1.0 / 30.0)
+    assert steps[-1][1]["outcome"] == "success" and steps[-1][1]["reward_outcome"] == 10.0
+    assert all(info["reward_outcome"] == 0.0 for _, info in steps[:-1])
+    _, info = env.reset(seed=0)
+    assert info["reward_time"] == info["reward_force"] == info["reward_outcome"] == 0.0
+
+
+def test_reward_weights_are_constructor_arguments_and_leave_the_episode_alone():
+    base = _episode(gym.make(DYNAMIC))
+    weighted = _episode(gym.make(DYNAMIC, reward={"success": 3.0, "time_cost": 2.0}))
+    assert len(base) == len(weighted) and base[-1][1]["outcome"] == weighted[-1][1]["outcome"] == "success"
+    assert weighted[-1][1]["reward_outcome"] == 3.0
+    assert weighted[0][0] == pytest.approx(2.0 * base[0][0])
+    # a force threshold of 0 f_r makes every wrist force count
+    forced = _episode(gym.make(DYNAMIC, task=DynamicHandover(reward=HandoverReward(force_threshold=0.0))))
+    assert min(info["reward_force"] for _, info in forced) < 0.0
+    assert sum(info["reward_force"] for _, info in base) >= sum(info["reward_force"] for _, info in forced)
+
+
+@dataclass
+class StandStill(HandoverTask):
+    """A variant in a few lines: a person who never walks past (no 'missed'), nothing else changed."""
+
+    def walked_past(self, env, t):
+        return False
+
+
+def test_a_new_variant_is_one_task_class():
+    env = gym.make(DYNAMIC, task=StandStill(), max_episode_steps=40)
+    assert isinstance(env.unwrapped.task, StandStill)
+    steps = _episode(env, agent=_Still())
+    assert steps[-1][1]["outcome"] == "running"  # truncated by the TimeLimit, never 'missed'
+    clone = pickle.loads(pickle.dumps(env.unwrapped))
+    assert isinstance(clone.task, StandStill)
+
+
+class _Still:
+    def reset(self):
+        pass
+
+    def act(self, obs):
+        return np.array([0.3, -0.4, 1.15, -math.pi / 2], dtype=np.float32)
+
+
+def test_bad_task_and_reward_arguments_are_clear_errors():
+    with pytest.raises(ValueError, match="task must be a HandoverTask"):
+        gym.make(DYNAMIC, task="static")
+    with pytest.raises(ValueError, match="not both"):
+        gym.make(DYNAMIC, task=DynamicHandover(), reward={"success": 1.0})
+    with pytest.raises(ValueError, match="force_scale"):
+        HandoverReward(force_scale=0.0)
+    with pytest.raises(ValueError, match="finite"):
+        HandoverReward(success=float("nan"))
+    with pytest.raises(TypeError):
+        gym.make(DYNAMIC, reward={"sucess": 1.0})
+    with pytest.raises(ValueError, match="stabilisation_delay"):
+        StaticHandover(stabilisation_delay=-1.0)
