@@ -19,10 +19,13 @@ from handover_env.envs.observation import ObsLayout
 
 
 class IAALAgent(NonparametricAgent):
-    """The nonparametric planner with exact GP motion flows (``config.exact`` is forced True).
+    """The nonparametric planner with exact GP motion flows.
+
+    ``config.exact`` is forced True and ``config.inducing_ratio`` to 1.0 (an exact GP uses every
+    sample), so the config reports what the model uses.
 
     Args:
-        config: the shared planner settings; ``inducing_ratio`` is ignored.
+        config: the shared planner settings; its ``inducing_ratio`` does not apply.
         params, closed_loop, layout: as for :class:`NonparametricAgent`.
     """
 
@@ -33,4 +36,4 @@ class IAALAgent(NonparametricAgent):
         closed_loop: ClosedLoopConfig | None = None,
         layout: ObsLayout | None = None,
     ) -> None:
-        super().__init__(replace(config or NonparametricConfig(), exact=True), params, closed_loop, layout)
+        super().__init__(replace(config or NonparametricConfig(), exact=True, inducing_ratio=1.0), params, closed_loop, layout)

@@ -103,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     print(_pin_one_core(), "| torch threads 1", flush=True)
     path = args.data or (str(DEV_COPY) if DEV_COPY.is_dir() else None)
     data = load_any(path)
+    print(f"data: {len(data)} episodes, {data.n_frames} frames ({path or 'synthetic default'})", flush=True)
     agents = _agents(args, data)
     for name, (_, origin) in agents.items():
         print(f"{name}: {origin}")
