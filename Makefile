@@ -12,21 +12,29 @@ export PYOPENGL_PLATFORM ?= egl
 export OMP_NUM_THREADS ?= 1
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: demo test bench install clean
+.PHONY: demo test lint bench install clean
+
+# e.g. `make test TORCH_INDEX=https://download.pytorch.org/whl/cpu`: torch from that index first
+# (the CPU-only build), then the project's extras keep it.
+TORCH_INDEX ?=
 
 install: $(STAMP)
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
+	$(if $(TORCH_INDEX),$(PY) -m pip install --quiet torch --index-url $(TORCH_INDEX))
 	$(PY) -m pip install --quiet -e '.[test]'
 	@touch $(STAMP)
 
 demo: $(STAMP)
 	$(PY) -m handover_eval.demo
 
-test: $(STAMP)
+test: lint
 	$(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(PY) -m ruff check .
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
