@@ -74,6 +74,12 @@ def test_policy_is_lerobots_state_only_act():
     assert paper.policy_config().dim_model == 512 and ACTAgentConfig().policy_config().dim_model == 128
 
 
+def test_training_shows_a_tqdm_bar_of_its_steps(export, capsys):
+    ACTAgent(ACTAgentConfig(**dict(TINY, steps=2, eval_every=2))).fit_lerobot(export, progress=True)
+    err = capsys.readouterr().err
+    assert "act" in err and "2/2" in err
+
+
 def test_vectorised_samples_equal_lerobot_getitem(export):
     ds, _ = open_export(export, "local/handover", FeatureSpec(history=10))
     samples = lerobot_samples(ds, np.arange(ds.num_episodes))
