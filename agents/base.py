@@ -21,7 +21,9 @@ def validate_history(receiver_history: np.ndarray, min_frames: int = 1) -> np.nd
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise ValueError(f"receiver_history must have shape (T, 2), got {arr.shape}")
     if arr.shape[0] < min_frames:
-        raise ValueError(f"receiver_history needs at least {min_frames} frame(s), got {arr.shape[0]}")
+        raise ValueError(
+            f"receiver_history needs at least {min_frames} frame(s), got {arr.shape[0]}"
+        )
     if not np.all(np.isfinite(arr)):
         raise ValueError("receiver_history contains NaN or inf")
     return arr

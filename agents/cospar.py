@@ -1,4 +1,5 @@
-"""CoSpar preference learning of the handover parameters Theta = {K, B, t_f, f_r} (paper Sec. III-B, IV-B).
+"""CoSpar preference learning of the handover parameters Theta = {K, B, t_f, f_r} (paper Sec. III-B,
+IV-B).
 
 The paper tunes Theta with CoSpar (Tucker et al., ICRA 2020) over 20 iterations within
 K in [80, 140], B in [10, 20], t_f in [0, 1] and f_r in [5, 20]. CoSpar keeps a Gaussian-process
@@ -75,7 +76,9 @@ class CoSparConfig:
         if self.signal_variance <= 0 or self.preference_noise <= 0 or self.jitter <= 0:
             raise ValueError("signal_variance, preference_noise and jitter must be positive")
         if self.n_samples < 1 or self.buffer_size < 0 or self.n_samples + self.buffer_size < 2:
-            raise ValueError("need n_samples >= 1, buffer_size >= 0 and at least 2 actions to compare")
+            raise ValueError(
+                "need n_samples >= 1, buffer_size >= 0 and at least 2 actions to compare"
+            )
         if int(np.prod(self.points_per_dim)) > 5000:
             raise ValueError("grid larger than 5000 actions: the dense posterior would be too slow")
 
@@ -109,7 +112,8 @@ def laplace_posterior(
     found by Newton's method on f_S under the prior K_SS (|S| is at most twice the number of
     preferences, far below the grid size), and then extended to every action exactly: at the MAP
     ``K^-1 f = grad log P(D|f)``, which is zero outside S, so ``f = K_{:,S} grad_S``; the covariance
-    ``(K^-1 + W)^-1 = K - K_{:,S} (I + W_SS K_SS)^-1 W_SS K_{S,:}`` (W is zero outside S). The result
+    ``(K^-1 + W)^-1 = K - K_{:,S} (I + W_SS K_SS)^-1 W_SS K_{S,:}`` (W is zero outside S). The
+    result
     equals the dense computation over all actions (:func:`laplace_posterior_dense`, kept for the
     tests) to round-off, at O(A |S|^2 + A^2 |S|) instead of O(A^3) per Newton step.
 
@@ -142,7 +146,11 @@ def laplace_posterior(
 
 
 def laplace_posterior_dense(
-    prior_cov: np.ndarray, preferences: np.ndarray, noise: float, max_iters: int = 50, tol: float = 1e-9
+    prior_cov: np.ndarray,
+    preferences: np.ndarray,
+    noise: float,
+    max_iters: int = 50,
+    tol: float = 1e-9,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`laplace_posterior` by Newton's method over every action at once (O(A^3) per step)."""
     n_actions = prior_cov.shape[0]
@@ -156,9 +164,15 @@ def laplace_posterior_dense(
 
 
 def _newton_map(
-    prior_cov: np.ndarray, win: np.ndarray, lose: np.ndarray, noise: float, max_iters: int, tol: float
+    prior_cov: np.ndarray,
+    win: np.ndarray,
+    lose: np.ndarray,
+    noise: float,
+    max_iters: int,
+    tol: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """MAP of ``log P(D|f) - f^T K^-1 f / 2`` by Newton's method: (f, grad log P(D|f), W) at the MAP."""
+    """MAP of ``log P(D|f) - f^T K^-1 f / 2`` by Newton's method: (f, grad log P(D|f), W) at the
+    MAP."""
     n = prior_cov.shape[0]
     scale = 1.0 / (np.sqrt(2.0) * noise)
     eye = np.eye(n)
@@ -222,7 +236,10 @@ class CoSpar:
     def propose(self) -> list[int]:
         """Action indices to try this iteration: the argmax of ``n_samples`` posterior draws."""
         chol = np.linalg.cholesky(self.cov + self.config.jitter * np.eye(len(self.grid)))
-        draws = self.f_hat[None, :] + self.rng.standard_normal((self.config.n_samples, len(self.grid))) @ chol.T
+        draws = (
+            self.f_hat[None, :]
+            + self.rng.standard_normal((self.config.n_samples, len(self.grid))) @ chol.T
+        )
         return [int(i) for i in np.argmax(draws, axis=1)]
 
     def add_preference(self, winner: int, loser: int) -> None:
@@ -237,7 +254,10 @@ class CoSpar:
     def update_posterior(self) -> None:
         """Recompute the Laplace posterior from every preference so far."""
         self.f_hat, self.cov = laplace_posterior(
-            self.prior_cov, np.array(self.preferences), self.config.preference_noise, self.config.newton_iters
+            self.prior_cov,
+            np.array(self.preferences),
+            self.config.preference_noise,
+            self.config.newton_iters,
         )
 
     def step(self, prefers: Preference) -> list[int]:
@@ -261,7 +281,9 @@ class CoSpar:
         self.update_posterior()
         return tried
 
-    def run(self, prefers: Preference, iterations: int = 20, progress: bool = False) -> HandoverParams:
+    def run(
+        self, prefers: Preference, iterations: int = 20, progress: bool = False
+    ) -> HandoverParams:
         """Run ``iterations`` CoSpar steps (the paper: 20) and return the learned Theta-hat."""
         steps: Sequence[int] = range(iterations)
         if progress:

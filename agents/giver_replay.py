@@ -1,4 +1,5 @@
-"""The giver-replay reference agent: the robot moves the object along the recorded human giver's path.
+"""The giver-replay reference agent: the robot moves the object along the recorded human giver's
+path.
 
 In a replayed recording the human giver's object path (``Episode.giver_xyz``, OptiTrack) is the
 ground truth of where the object was, frame by frame. This agent feeds that path through the same
@@ -32,8 +33,13 @@ class GiverReplayAgent(PredictiveAgent):
         layout: the env's observation layout.
     """
 
-    def __init__(self, episode: Episode | None = None, params: HandoverParams | None = None,
-                 closed_loop: ClosedLoopConfig | None = None, layout: ObsLayout | None = None) -> None:
+    def __init__(
+        self,
+        episode: Episode | None = None,
+        params: HandoverParams | None = None,
+        closed_loop: ClosedLoopConfig | None = None,
+        layout: ObsLayout | None = None,
+    ) -> None:
         super().__init__(params, closed_loop, layout)
         self._giver: np.ndarray | None = None
         if episode is not None:

@@ -57,7 +57,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_solve, cholesky, eigh, solve_triangular
 
-DEFAULT_RCOND = 1e-14  # eigenvalues of K_mm below rcond * max are treated as zero (float64 round-off)
+DEFAULT_RCOND = (
+    1e-14  # eigenvalues of K_mm below rcond * max are treated as zero (float64 round-off)
+)
 
 
 @dataclass(frozen=True)
@@ -171,7 +173,8 @@ def exact_gp(x: np.ndarray, y: np.ndarray, hyp: GPHyperparameters) -> Predictive
 def exact_gp_reference(
     x: np.ndarray, y: np.ndarray, xq: np.ndarray, hyp: GPHyperparameters
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Textbook exact GP prediction by triangular solves (Rasmussen & Williams Alg. 2.1), for tests."""
+    """Textbook exact GP prediction by triangular solves (Rasmussen & Williams Alg. 2.1), for
+    tests."""
     x, y = _check_xy(x, y)
     k = se_kernel(x, x, hyp) + hyp.noise_var * np.eye(x.shape[0])
     c = cholesky(k, lower=True)
@@ -183,7 +186,8 @@ def exact_gp_reference(
 def _fitc_parts(
     x: np.ndarray, y: np.ndarray, z: np.ndarray, hyp: GPHyperparameters, rcond: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Feature-space FITC: P (M, r), Lambda (N,), eigen-decomposition (a, E) of A, and A^-1 Phi^T Lambda^-1 Y."""
+    """Feature-space FITC: P (M, r), Lambda (N,), eigen-decomposition (a, E) of A, and A^-1 Phi^T
+    Lambda^-1 Y."""
     x, y = _check_xy(x, y)
     z = np.asarray(z, dtype=np.float64)
     if z.ndim != 2 or z.shape[1] != 2 or z.shape[0] < 1 or not np.all(np.isfinite(z)):
@@ -200,7 +204,11 @@ def _fitc_parts(
 
 
 def fitc_gp(
-    x: np.ndarray, y: np.ndarray, z: np.ndarray, hyp: GPHyperparameters, rcond: float = DEFAULT_RCOND
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    hyp: GPHyperparameters,
+    rcond: float = DEFAULT_RCOND,
 ) -> PredictiveForm:
     """FITC / SPGP (Snelson & Ghahramani 2006) in predictive form, inducing inputs ``z``.
 
@@ -278,7 +286,9 @@ def _split_buckets(order: np.ndarray, sizes: np.ndarray, ranks: np.ndarray, max_
     for b in range(1, max_buckets + 1):
         for i in range(1, n + 1):
             # last bucket = sorted demos j..i-1, padded to the largest (the (i-1)-th) M and R
-            cand = cost[b - 1, :i] + overhead_entries + (i - j[:i]) * m_sorted[i - 1] * r_sorted[i - 1]
+            cand = (
+                cost[b - 1, :i] + overhead_entries + (i - j[:i]) * m_sorted[i - 1] * r_sorted[i - 1]
+            )
             k = int(np.argmin(cand))
             cost[b, i], back[b, i] = cand[k], k
     b = int(np.argmin(cost[1:, n])) + 1
@@ -367,14 +377,18 @@ class FlowBank:
         self._seg_top = np.concatenate(seg_top)  # 2 per demo: mean rows start, T rows start
         self._seg_bot = np.concatenate(seg_bot)
         self._mean_idx = np.concatenate(mean_idx)[self._unsort]  # (N, D) in the caller's order
-        self._empty_bot = np.array([bk.bottom.shape[1] == 0 for bk in self.buckets for _ in range(bk.n_demos)])
+        self._empty_bot = np.array(
+            [bk.bottom.shape[1] == 0 for bk in self.buckets for _ in range(bk.n_demos)]
+        )
         self._empty_top = np.array([bk.h == 0 for bk in self.buckets for _ in range(bk.n_demos)])
         self.z_all = np.concatenate(z_all)  # (P, 2) every (padded) inducing point of every demo
         c = -0.5 / hyp.lengthscale**2
         self._c = c
         # k(x, z) = exp(c |z|^2 + log s2 - 2c z.x + c |x|^2); padding gets -inf, i.e. k = 0.
         mask = np.concatenate(mask_all) > 0
-        self._log_base = np.where(mask, c * np.sum(self.z_all**2, axis=1) + np.log(hyp.signal_var), -np.inf)
+        self._log_base = np.where(
+            mask, c * np.sum(self.z_all**2, axis=1) + np.log(hyp.signal_var), -np.inf
+        )
         self._z_t = np.ascontiguousarray(self.z_all.T)  # (2, P)
 
     @property
@@ -390,7 +404,7 @@ class FlowBank:
         the stored ``[alpha^T; T]`` blocks; no loop over demos. Padding has k = 0.
         """
         xq = np.asarray(xq, dtype=np.float64).reshape(-1, 2)
-        q, d = xq.shape[0], self.out_dim
+        q = xq.shape[0]
         e = (-2.0 * self._c * xq) @ self._z_t  # (Q, P); the expansion is exact to ~1e-15 in float64
         e += self._log_base
         e += (self._c * np.sum(xq**2, axis=1))[:, None]
@@ -401,7 +415,9 @@ class FlowBank:
             k = np.exp(e, out=e).T  # (P, Q)
         top = np.empty((self._top_off[-1], q), dtype=self.dtype)
         bot = np.empty((max(self._bot_off[-1], 1), q), dtype=self.dtype)
-        for b, t0, t1, b0, b1 in zip(self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]):
+        for b, t0, t1, b0, b1 in zip(
+            self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]
+        ):
             kb = k[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, q)
             np.matmul(b.top, kb, out=top[t0:t1].reshape(b.n_demos, -1, q))
             if b1 > b0:

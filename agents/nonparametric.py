@@ -13,7 +13,8 @@ velocity (s2 = 1), noise from successive velocity differences, lengthscale a set
 
 **Distance and similarity** (Eqs. d and sim)::
 
-    d(xi_o; xi_k) = 1/t_c * sum_{t=1..t_c} [ kappa * d_cos(xdot_{o,t}, mu_k(x_{o,t})) + sigma2_k(x_{o,t}) ]
+    d(xi_o; xi_k) = 1/t_c * sum_{t=1..t_c} [ kappa * d_cos(xdot_{o,t}, mu_k(x_{o,t})) +
+    sigma2_k(x_{o,t}) ]
     sim_k = exp(-d)
 
 sigma2_k is the latent variance in the scaled units (0 on demo k's path, 1 far from it).
@@ -183,7 +184,9 @@ class NonparametricAgent(PredictiveAgent):
         if not isinstance(dataset, HandoverDataset) or len(dataset) == 0:
             raise ValueError("fit needs a non-empty HandoverDataset")
         if abs(dataset.rate_hz - c.rate_hz) > 1e-6:
-            raise ValueError(f"dataset rate is {dataset.rate_hz} Hz, the planner is set to {c.rate_hz} Hz")
+            raise ValueError(
+                f"dataset rate is {dataset.rate_hz} Hz, the planner is set to {c.rate_hz} Hz"
+            )
         xs = [ep.receiver_xy for ep in dataset]
         vels = [backward_velocity(x, c.rate_hz) for x in xs]
         allv = np.concatenate(vels)
@@ -211,7 +214,9 @@ class NonparametricAgent(PredictiveAgent):
             self.receivers[k, : ep.length] = ep.receiver_xy
             self.givers[k, : ep.length] = ep.giver_xyz
             self.givers[k, ep.length :] = ep.giver_xyz[-1]  # hold the last row (see module doc)
-        self._rr = np.sum(self.receivers**2, axis=2)  # (N, Lmax): |r|^2 for the closest-frame search
+        self._rr = np.sum(
+            self.receivers**2, axis=2
+        )  # (N, Lmax): |r|^2 for the closest-frame search
         self.n_demos = n
         self._top_k = min(c.top_k, n)
         self._steps = np.arange(c.horizon)
@@ -224,7 +229,8 @@ class NonparametricAgent(PredictiveAgent):
 
     # ------------------------------------------------------------------ per-frame terms
     def frame_terms(self, xy: np.ndarray, vel: np.ndarray) -> np.ndarray:
-        """Eq. d summands ``kappa * d_cos + sigma2`` of frames (F, 2) with velocities (F, 2): (F, N)."""
+        """Eq. d summands ``kappa * d_cos + sigma2`` of frames (F, 2) with velocities (F, 2): (F,
+        N)."""
         self._check_fitted()
         mean, var = self.bank.predict(np.asarray(xy) - self.origin)  # (F, N, 2), (F, N)
         dcos = cosine_distance(vel[:, None, :], mean * self.output_scale, self.config.min_speed)
@@ -235,7 +241,9 @@ class NonparametricAgent(PredictiveAgent):
         vel = np.zeros_like(hist)
         vel[1:] = np.diff(hist, axis=0) * self.config.rate_hz
         fb = self.config.frame_batch
-        return np.concatenate([self.frame_terms(hist[i : i + fb], vel[i : i + fb]) for i in range(0, len(hist), fb)])
+        return np.concatenate(
+            [self.frame_terms(hist[i : i + fb], vel[i : i + fb]) for i in range(0, len(hist), fb)]
+        )
 
     def distances(self, receiver_history: np.ndarray) -> np.ndarray:
         """Eq. d of a whole observed history against every demo, recomputed from scratch: (N,)."""
@@ -288,7 +296,9 @@ class NonparametricAgent(PredictiveAgent):
     def stream_update(self, receiver_xy: np.ndarray) -> None:
         """Add one new 30 Hz frame: only its own terms, for all demos at once."""
         self._check_fitted()
-        xy = validate_history(np.reshape(receiver_xy, (1, 2)) if np.size(receiver_xy) == 2 else receiver_xy)
+        xy = validate_history(
+            np.reshape(receiver_xy, (1, 2)) if np.size(receiver_xy) == 2 else receiver_xy
+        )
         if xy.shape[0] != 1:
             raise ValueError(f"stream_update takes one frame (2,), got {np.shape(receiver_xy)}")
         s = self._state

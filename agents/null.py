@@ -1,4 +1,5 @@
-"""Reference agents that show what the env can tell apart: a robot that does nothing, and a late one.
+"""Reference agents that show what the env can tell apart: a robot that does nothing, and a late
+one.
 
 * :class:`NullAgent` holds the object still at the ready pose: whatever handover happens, the
   person made it happen.
@@ -52,7 +53,9 @@ class DelayedAgent(Agent):
         ready: the action used before the first delayed one arrives.
     """
 
-    def __init__(self, agent: Agent, delay: float = 0.5, ready: tuple[float, float, float, float] = READY) -> None:
+    def __init__(
+        self, agent: Agent, delay: float = 0.5, ready: tuple[float, float, float, float] = READY
+    ) -> None:
         if not (math.isfinite(delay) and delay >= 0):
             raise ValueError(f"delay must be a finite number of seconds >= 0, got {delay!r}")
         self.agent = agent

@@ -123,7 +123,16 @@ ISO_LIMITS: dict[str, float] = {
 }
 #: A contact counts as a touch above this force, N.
 TOUCH_FORCE = 1.0
-COST_NAMES = ("failure", "waiting", "slowing", "reach", "arm_out", "pull", "contact", "robot_motion")
+COST_NAMES = (
+    "failure",
+    "waiting",
+    "slowing",
+    "reach",
+    "arm_out",
+    "pull",
+    "contact",
+    "robot_motion",
+)
 
 
 @dataclass(frozen=True)
@@ -178,8 +187,12 @@ class Body:
     def __post_init__(self) -> None:
         if self.sex not in ("male", "female"):
             raise ValueError(f"sex must be 'male' or 'female', got {self.sex!r}")
-        if not (1.2 <= self.height <= 2.2 and 0.1 <= self.speed <= 2.5 and -1.6 <= self.pass_y <= -0.3):
-            raise ValueError(f"body out of range: height {self.height}, speed {self.speed}, pass_y {self.pass_y}")
+        if not (
+            1.2 <= self.height <= 2.2 and 0.1 <= self.speed <= 2.5 and -1.6 <= self.pass_y <= -0.3
+        ):
+            raise ValueError(
+                f"body out of range: height {self.height}, speed {self.speed}, pass_y {self.pass_y}"
+            )
 
     @property
     def arm_length(self) -> float:
@@ -248,15 +261,23 @@ class Participant:
     def reseed(self, stream: int) -> None:
         """Restart the answer noise on its own stream (so that one part of a study does not depend
         on how many questions an earlier part asked)."""
-        self.rng = np.random.default_rng(np.random.SeedSequence([int(self.seed), int(self.pid), 7, int(stream)]))
+        self.rng = np.random.default_rng(
+            np.random.SeedSequence([int(self.seed), int(self.pid), 7, int(stream)])
+        )
 
     # ------------------------------------------------------------------ the walk
     def walk_options(self, receiver: str = "id") -> dict:
-        """Reset options for a scripted walker with this body and path (seeded by ``reset(seed)``)."""
+        """Reset options for a scripted walker with this body and path (seeded by
+        ``reset(seed)``)."""
         if receiver not in ("id", "ood"):
             raise ValueError(f"a participant walks as an 'id' or 'ood' walker, got {receiver!r}")
         b = self.body
-        return {"receiver": receiver, "height": b.height, "speed": b.speed, "walker": {"pass_y": b.pass_y}}
+        return {
+            "receiver": receiver,
+            "height": b.height,
+            "speed": b.speed,
+            "walker": {"pass_y": b.pass_y},
+        }
 
     def walk_seeds(self, n: int, stream: int = 0) -> list[int]:
         """``n`` walker seeds of this participant; different streams never overlap (tuning: 0,
@@ -268,7 +289,8 @@ class Participant:
 
     # ------------------------------------------------------------------ judging one episode
     def costs(self, info: Mapping) -> dict[str, float]:
-        """The cost terms (comfort points, >= 0) of one episode's final ``info`` (module docstring)."""
+        """The cost terms (comfort points, >= 0) of one episode's final ``info`` (module
+        docstring)."""
         t, b = self.traits, self.body
         outcome = info.get("outcome", "running")
         ok = outcome == "success"
@@ -315,9 +337,12 @@ class Participant:
         return bool(self.rng.random() < self.preference_probability(u_a, u_b))
 
     def likert(self, info: Mapping) -> int:
-        """Q1 "The handover process felt comfortable", 1-5 (ordered probit; draws from :attr:`rng`)."""
+        """Q1 "The handover process felt comfortable", 1-5 (ordered probit; draws from
+        :attr:`rng`)."""
         t = self.traits
-        latent = self.satisfaction(info) + t.rating_bias + t.rating_noise * self.rng.standard_normal()
+        latent = (
+            self.satisfaction(info) + t.rating_bias + t.rating_noise * self.rng.standard_normal()
+        )
         return 1 + int(np.searchsorted(LIKERT_THRESHOLDS, latent))
 
     def describe(self) -> dict[str, float | str | int]:
@@ -330,7 +355,9 @@ def _lognormal(rng: np.random.Generator, spec: tuple[float, float]) -> float:
     return float(median * math.exp(math.log(gsd) * rng.standard_normal()))
 
 
-def sample_participant(seed: int, sex: str | None = None, population: Population | None = None) -> Participant:
+def sample_participant(
+    seed: int, sex: str | None = None, population: Population | None = None
+) -> Participant:
     """Draw participant ``seed`` from ``population`` (the stated distributions by default).
 
     Args:
@@ -391,4 +418,7 @@ def sample_population(n: int, seed: int = 0, male_fraction: float = 0.75,
     if not 0.0 <= male_fraction <= 1.0:
         raise ValueError(f"male_fraction must be in [0, 1], got {male_fraction}")
     n_male = round(male_fraction * n)
-    return [sample_participant(seed * 1000 + i, "male" if i < n_male else "female", population) for i in range(n)]
+    return [
+        sample_participant(seed * 1000 + i, "male" if i < n_male else "female", population)
+        for i in range(n)
+    ]

@@ -148,7 +148,9 @@ class PredictiveAgent(Agent):
         new = seen - self._frames_seen
         hist_slice = self._slices["receiver_xy_history"][0]
         track = obs[hist_slice].astype(np.float64).reshape(self.layout.history, 2)
-        track = track[-min(self.layout.history, seen):]  # the valid rows, as ObsLayout.receiver_track
+        track = track[
+            -min(self.layout.history, seen) :
+        ]  # the valid rows, as ObsLayout.receiver_track
         if new > 0:
             for row in track[-min(new, track.shape[0]):]:
                 self.stream_update(row)

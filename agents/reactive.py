@@ -10,7 +10,8 @@ t_f of Θ at the receiver's current velocity (paper Sec. IV-B: the robot tracks 
 is clipped to the robot's workspace. Before the receiver is near (its handover point farther
 than ``engage_distance`` from the robot base in x) it holds the ready pose; after the release it
 holds its last target until the fingers have let go of the object (``object_held`` = 0), then
-returns to the ready pose. The gripper yaw points at the receiver's path (-y), turned toward where the receiver comes
+returns to the ready pose. The gripper yaw points at the receiver's path (-y), turned toward where
+the receiver comes
 from by at most ``max_yaw_turn``.
 """
 
@@ -57,8 +58,16 @@ class ReactiveConfig:
     horizon: int = 30
 
     def __post_init__(self) -> None:
-        nums = (self.lateral_offset, self.forward_offset, self.handover_height, self.engage_distance,
-                self.ready_yaw, *self.ready_pos, *self.x_range, *self.y_range)
+        nums = (
+            self.lateral_offset,
+            self.forward_offset,
+            self.handover_height,
+            self.engage_distance,
+            self.ready_yaw,
+            *self.ready_pos,
+            *self.x_range,
+            *self.y_range,
+        )
         if not all(math.isfinite(v) for v in nums):
             raise ValueError("ReactiveConfig values must be finite")
         if self.velocity_window < 2 or self.horizon < 1:
@@ -70,7 +79,8 @@ class ReactiveConfig:
 
 
 class ReactiveAgent(Agent):
-    """Constant-velocity reactive handover agent (the baseline every other agent is measured against).
+    """Constant-velocity reactive handover agent (the baseline every other agent is measured
+    against).
 
     Args:
         params: Θ; only ``forecast_time`` (t_f) is used here (K, B, f_r act in the env).
@@ -101,8 +111,13 @@ class ReactiveAgent(Agent):
 
     def _point(self, xy: np.ndarray, vel: np.ndarray, dt: float) -> np.ndarray:
         c = self.config
-        p = np.array([xy[0] + vel[0] * dt - c.forward_offset, xy[1] + vel[1] * dt + c.lateral_offset,
-                      c.handover_height])
+        p = np.array(
+            [
+                xy[0] + vel[0] * dt - c.forward_offset,
+                xy[1] + vel[1] * dt + c.lateral_offset,
+                c.handover_height,
+            ]
+        )
         p[0] = min(max(p[0], c.x_range[0]), c.x_range[1])
         p[1] = min(max(p[1], c.y_range[0]), c.y_range[1])
         return p

@@ -1,4 +1,5 @@
-"""The static handover baseline (paper Sec. V-C, after Meng et al. 2022): deliver to the detected hand.
+"""The static handover baseline (paper Sec. V-C, after Meng et al. 2022): deliver to the detected
+hand.
 
 The receiver walks into a predefined area, stops and raises the right hand. The robot holds its
 ready pose until it has detected the hand and waited the stabilisation delay (the env reports
@@ -46,7 +47,14 @@ class StaticConfig:
     horizon: int = 30
 
     def __post_init__(self) -> None:
-        nums = (*self.ready_pos, self.ready_yaw, *self.hand_offset, *self.x_range, *self.y_range, *self.z_range)
+        nums = (
+            *self.ready_pos,
+            self.ready_yaw,
+            *self.hand_offset,
+            *self.x_range,
+            *self.y_range,
+            *self.z_range,
+        )
         if not all(math.isfinite(v) for v in nums):
             raise ValueError("StaticConfig values must be finite")
         for name in ("x_range", "y_range", "z_range"):

@@ -60,12 +60,16 @@ class TemporalEnsembler:
         """
         chunk = np.asarray(chunk, dtype=np.float64)
         if chunk.shape != (self.horizon, self.dim):
-            raise ValueError(f"chunk must have shape ({self.horizon}, {self.dim}), got {chunk.shape}")
+            raise ValueError(
+                f"chunk must have shape ({self.horizon}, {self.dim}), got {chunk.shape}"
+            )
         if not np.all(np.isfinite(chunk)):
             raise ValueError("chunk contains NaN or inf")
         start_frame = int(start_frame)
         if self.latest_start is not None and start_frame < self.latest_start:
-            raise ValueError(f"start frames must not decrease: {start_frame} after {self.latest_start}")
+            raise ValueError(
+                f"start frames must not decrease: {start_frame} after {self.latest_start}"
+            )
         slot = start_frame % self.horizon
         self._chunks[slot] = chunk
         self._starts[slot] = start_frame

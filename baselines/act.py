@@ -2,11 +2,11 @@
 
 State-only ACT: no camera, no vision backbone, no pretrained weights, no network.
 
-| ACT input / output                | feature type | shape  | content (:mod:`handover_env.data.features`)            |
-|-----------------------------------|--------------|--------|------------------------------------------------|
-| ``observation.environment_state`` | ENV          | (2 W,) | receiver base xy history (current xy + offsets) |
-| ``observation.state``             | STATE        | (3,)   | current giver xyz (robot TCP in the env)        |
-| ``action``                        | ACTION       | (3,)   | giver xyz; the policy predicts a chunk of H=30  |
+| ACT input / output | feature type | shape | content (:mod:`handover_env.data.features`) |
+|---|---|---|---|
+| ``observation.environment_state`` | ENV | (2 W,) | receiver base xy history (xy + offsets) |
+| ``observation.state`` | STATE | (3,) | current giver xyz (robot TCP in the env) |
+| ``action`` | ACTION | (3,) | giver xyz; the policy predicts a chunk of H=30 |
 
 Training goes through LeRobot's machinery: the dataset is exported with
 :func:`handover_env.data.lerobot_export.export_lerobot`, read back as a ``LeRobotDataset`` with
@@ -20,7 +20,8 @@ the whole dataset once (:mod:`handover_eval.act_folds`).
 CPU cost (receiver-only default model, batch 64, one thread, 2-core AMD EPYC VM): a step is
 ~5.4 GFLOP of forward + backward, ~117 ms (8.6 steps/s). Besides the model itself, training
 avoids: reading the export column by column (~80 s a fold, now one batch read), calling the
-preprocessor per batch (the samples are normalised once, bitwise the same tensors), the per-parameter
+preprocessor per batch (the samples are normalised once, bitwise the same tensors), the
+per-parameter
 AdamW loop (``fused=True``) and most of ``torch.bernoulli_``'s dropout-mask cost
 (:class:`DropoutMasks`, ``fast_dropout``). Before these the same loop ran at ~7 steps/s.
 
@@ -81,7 +82,14 @@ except ModuleNotFoundError as _exc:
 
 from agents.predictive import ClosedLoopConfig
 from baselines import act_files, trainer
-from baselines.checkpoint_io import CheckpointError, config_from_dict, expected_of, load_tensors, staged_write, write_json
+from baselines.checkpoint_io import (
+    CheckpointError,
+    config_from_dict,
+    expected_of,
+    load_tensors,
+    staged_write,
+    write_json,
+)
 from baselines.giver_conditioned import GiverConditionedAgent
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import Episode, HandoverDataset
@@ -102,7 +110,8 @@ CHECKPOINT_TYPE = "act"
 CHECKPOINT_FORMAT = 2
 HANDOVER_JSON = "handover_act.json"
 #: The CPU-sized model: LeRobot ``ACTConfig`` fields set unless ``paper_scale`` (which keeps
-#: ACTConfig's own sizes, the paper's: dim 512, 8 heads, ffn 3200, 4 encoder layers, VAE 4, latent 32).
+#: ACTConfig's own sizes, the paper's: dim 512, 8 heads, ffn 3200, 4 encoder layers, VAE 4,
+#: latent 32).
 CPU_SCALE: dict[str, int] = dict(
     dim_model=128, n_heads=4, dim_feedforward=512, n_encoder_layers=2, n_decoder_layers=1,
     n_vae_encoder_layers=1, latent_dim=16,
@@ -112,12 +121,29 @@ CPU_SCALE: dict[str, int] = dict(
 ACT_DEFAULTS: dict[str, Any] = dict(optimizer_lr=1e-4, temporal_ensemble_coeff=0.01)
 #: ``ACTConfig`` fields the agent owns (features, chunking, normalisation, device, no backbone
 #: weights, no hub): they follow from ``history``, ``horizon``, ``use_giver_state`` and ``device``.
-OWNED_FIELDS = frozenset({
-    "input_features", "output_features", "normalization_mapping", "chunk_size", "n_action_steps",
-    "n_obs_steps", "device", "use_amp", "push_to_hub", "repo_id", "private", "tags", "license",
-    "pretrained_path", "pretrained_backbone_weights", "vision_backbone", "replace_final_stride_with_dilation",
-    "optimizer_lr_backbone", "use_peft",
-})
+OWNED_FIELDS = frozenset(
+    {
+        "input_features",
+        "output_features",
+        "normalization_mapping",
+        "chunk_size",
+        "n_action_steps",
+        "n_obs_steps",
+        "device",
+        "use_amp",
+        "push_to_hub",
+        "repo_id",
+        "private",
+        "tags",
+        "license",
+        "pretrained_path",
+        "pretrained_backbone_weights",
+        "vision_backbone",
+        "replace_final_stride_with_dilation",
+        "optimizer_lr_backbone",
+        "use_peft",
+    }
+)
 #: torch intra-op threads while ACT trains. Summation order, hence the last bits of every step,
 #: depends on the thread count; one thread makes a seed reproducible in any process (and is also
 #: the fast setting on the project's shared 2-core machine; parallelism comes from processes).
@@ -131,7 +157,9 @@ def _settable_fields() -> dict[str, Any]:
     from lerobot.policies.act.configuration_act import ACTConfig
 
     hints = typing.get_type_hints(ACTConfig)
-    return {f.name: hints[f.name] for f in fields(ACTConfig) if f.init and f.name not in OWNED_FIELDS}
+    return {
+        f.name: hints[f.name] for f in fields(ACTConfig) if f.init and f.name not in OWNED_FIELDS
+    }
 
 
 def _json_value_ok(value: Any, hint: Any) -> bool:
@@ -144,7 +172,9 @@ def _json_value_ok(value: Any, hint: Any) -> bool:
     if hint is int:
         return isinstance(value, int) and not isinstance(value, bool)
     if hint is float:
-        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        return (
+            isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        )
     if hint is str:
         return isinstance(value, str)
     return False
@@ -218,7 +248,9 @@ class ACTAgentConfig:
     def __post_init__(self) -> None:
         FeatureSpec(history=self.history, horizon=self.horizon)
         if not isinstance(self.policy, dict):
-            raise ValueError(f"policy must be a dict of ACTConfig fields, got {type(self.policy).__name__}")
+            raise ValueError(
+                f"policy must be a dict of ACTConfig fields, got {type(self.policy).__name__}"
+            )
         settable = _settable_fields()
         for key, value in self.policy.items():
             if key not in settable:
@@ -227,8 +259,15 @@ class ACTAgentConfig:
             if not _json_value_ok(value, settable[key]):
                 raise ValueError(f"policy[{key!r}] = {value!r} is not a {settable[key]}")
         model = self.model()
-        for name in ("dim_model", "n_heads", "dim_feedforward", "n_encoder_layers", "n_decoder_layers",
-                     "latent_dim", "n_vae_encoder_layers"):
+        for name in (
+            "dim_model",
+            "n_heads",
+            "dim_feedforward",
+            "n_encoder_layers",
+            "n_decoder_layers",
+            "latent_dim",
+            "n_vae_encoder_layers",
+        ):
             if model[name] < 1:
                 raise ValueError(f"{name} must be a positive integer, got {model[name]!r}")
         for name in ("batch_size", "steps", "eval_every"):
@@ -236,9 +275,18 @@ class ACTAgentConfig:
             if not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if model["dim_model"] % model["n_heads"]:
-            raise ValueError(f"dim_model ({model['dim_model']}) must be divisible by n_heads ({model['n_heads']})")
-        if model["optimizer_lr"] <= 0 or model["optimizer_weight_decay"] < 0 or model["kl_weight"] < 0:
-            raise ValueError("optimizer_lr must be positive, optimizer_weight_decay and kl_weight >= 0")
+            raise ValueError(
+                f"dim_model ({model['dim_model']}) must be divisible by n_heads "
+                f"({model['n_heads']})"
+            )
+        if (
+            model["optimizer_lr"] <= 0
+            or model["optimizer_weight_decay"] < 0
+            or model["kl_weight"] < 0
+        ):
+            raise ValueError(
+                "optimizer_lr must be positive, optimizer_weight_decay and kl_weight >= 0"
+            )
         if not 0.0 <= model["dropout"] < 1.0:
             raise ValueError(f"dropout must be in [0, 1), got {model['dropout']}")
         if not 0.0 < self.val_fraction < 1.0:
@@ -252,10 +300,19 @@ class ACTAgentConfig:
         """Every settable ``ACTConfig`` field as :meth:`policy_config` resolves it."""
         from lerobot.policies.act.configuration_act import ACTConfig
 
-        defaults = {f.name: getattr(ACTConfig, f.name) for f in fields(ACTConfig)
-                    if f.name in _settable_fields() and not callable(getattr(ACTConfig, f.name, None))
-                    and hasattr(ACTConfig, f.name)}
-        return {**defaults, **ACT_DEFAULTS, **({} if self.paper_scale else CPU_SCALE), **self.policy}
+        defaults = {
+            f.name: getattr(ACTConfig, f.name)
+            for f in fields(ACTConfig)
+            if f.name in _settable_fields()
+            and not callable(getattr(ACTConfig, f.name, None))
+            and hasattr(ACTConfig, f.name)
+        }
+        return {
+            **defaults,
+            **ACT_DEFAULTS,
+            **({} if self.paper_scale else CPU_SCALE),
+            **self.policy,
+        }
 
     def policy_config(self):
         """LeRobot's ``ACTConfig`` for this agent (state-only, no backbone weights, no hub)."""
@@ -285,27 +342,35 @@ class ACTAgentConfig:
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "config") -> ACTAgentConfig:
-        """From a checkpoint's JSON: every field present and of its type (see ``config_from_dict``)."""
+        """From a checkpoint's JSON: every field present and of its type (see
+        ``config_from_dict``)."""
         return config_from_dict(cls, d, source)
 
 
 # ---------------------------------------------------------------------- LeRobot data
 def open_export(root: str | os.PathLike, repo_id: str, spec: FeatureSpec):
-    """``LeRobotDataset(repo_id, root, delta_timestamps=...)`` after checking its features fit ``spec``."""
+    """``LeRobotDataset(repo_id, root, delta_timestamps=...)`` after checking its features fit
+    ``spec``."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     from handover_env.data.lerobot_export import action_delta_timestamps, read_sidecar
 
     sidecar = read_sidecar(root)
-    ds = LeRobotDataset(repo_id, root=root, delta_timestamps=action_delta_timestamps(spec.horizon, spec.rate_hz))
+    ds = LeRobotDataset(
+        repo_id, root=root, delta_timestamps=action_delta_timestamps(spec.horizon, spec.rate_hz)
+    )
     want = {OBS_ENV_STATE: (spec.env_dim,), OBS_STATE: (STATE_DIM,), ACTION: (ACTION_DIM,)}
     for key, shape in want.items():
         if key not in ds.features:
-            raise ValueError(f"LeRobot dataset at {root} has no feature {key!r} (features: {sorted(ds.features)})")
+            raise ValueError(
+                f"LeRobot dataset at {root} has no feature {key!r} (features: "
+                f"{sorted(ds.features)})"
+            )
         got = tuple(ds.features[key]["shape"])
         if got != shape:
             raise ValueError(
-                f"LeRobot dataset at {root}: feature {key!r} has shape {got}, this ACT config needs {shape} "
+                f"LeRobot dataset at {root}: feature {key!r} has shape {got}, this ACT config "
+                f"needs {shape} "
                 f"(history W={spec.history}; the export used W={sidecar.get('history')})"
             )
     if int(ds.fps) != int(round(spec.rate_hz)):
@@ -323,7 +388,9 @@ def lerobot_samples(ds, episode_indices: np.ndarray) -> dict[str, torch.Tensor]:
     read as one numpy batch: ``datasets``' lazy column objects convert row by row, which took ~80 s
     for the 100k frames of the public set.
     """
-    cols = ds.hf_dataset.with_format("numpy")[:]  # one batch read (~0.4 s); column access iterates rows (~80 s)
+    cols = ds.hf_dataset.with_format("numpy")[
+        :
+    ]  # one batch read (~0.4 s); column access iterates rows (~80 s)
     env = np.asarray(cols[OBS_ENV_STATE], dtype=np.float32)
     state = np.asarray(cols[OBS_STATE], dtype=np.float32)
     action = np.asarray(cols[ACTION], dtype=np.float32)
@@ -331,7 +398,9 @@ def lerobot_samples(ds, episode_indices: np.ndarray) -> dict[str, torch.Tensor]:
     if not np.array_equal(index, np.arange(index.size)):
         raise ValueError("LeRobot dataset rows are not in index order; re-export it")
     deltas = np.asarray(ds.delta_indices[ACTION], dtype=np.int64)
-    out: dict[str, list[np.ndarray]] = {k: [] for k in (OBS_ENV_STATE, OBS_STATE, ACTION, "action_is_pad")}
+    out: dict[str, list[np.ndarray]] = {
+        k: [] for k in (OBS_ENV_STATE, OBS_STATE, ACTION, "action_is_pad")
+    }
     for e in np.asarray(episode_indices, dtype=np.int64):
         ep = ds.meta.episodes[int(e)]
         start, end = int(ep["dataset_from_index"]), int(ep["dataset_to_index"])
@@ -344,7 +413,9 @@ def lerobot_samples(ds, episode_indices: np.ndarray) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(np.concatenate(v)) for k, v in out.items()}
 
 
-def normalise_samples(preprocessor, samples: dict[str, torch.Tensor], chunk: int = 32_768) -> dict[str, torch.Tensor]:
+def normalise_samples(
+    preprocessor, samples: dict[str, torch.Tensor], chunk: int = 32_768
+) -> dict[str, torch.Tensor]:
     """``samples`` passed through LeRobot's ``preprocessor`` once, instead of once per batch.
 
     The pipeline (rename, batch dim, device, ``NormalizerProcessorStep``) is elementwise over rows,
@@ -353,7 +424,10 @@ def normalise_samples(preprocessor, samples: dict[str, torch.Tensor], chunk: int
     a time bound the pipeline's temporaries.
     """
     n = int(next(iter(samples.values())).shape[0])
-    parts = [preprocessor({k: v[i : i + chunk] for k, v in samples.items()}) for i in range(0, max(n, 1), chunk)]
+    parts = [
+        preprocessor({k: v[i : i + chunk] for k, v in samples.items()})
+        for i in range(0, max(n, 1), chunk)
+    ]
     return {k: torch.cat([part[k] for part in parts]) if parts else samples[k] for k in samples}
 
 
@@ -361,7 +435,9 @@ def feature_stats(samples: dict[str, torch.Tensor]) -> dict[str, dict[str, np.nd
     """LeRobot ``get_feature_stats`` of the training samples (action over its per-frame values)."""
     from lerobot.datasets.compute_stats import get_feature_stats
 
-    per_frame_action = samples[ACTION][:, 0].numpy()  # the action column itself, as LeRobot's stats.json
+    per_frame_action = samples[ACTION][
+        :, 0
+    ].numpy()  # the action column itself, as LeRobot's stats.json
     return {
         OBS_ENV_STATE: get_feature_stats(samples[OBS_ENV_STATE].numpy(), axis=0, keepdims=False),
         OBS_STATE: get_feature_stats(samples[OBS_STATE].numpy(), axis=0, keepdims=False),
@@ -370,18 +446,23 @@ def feature_stats(samples: dict[str, torch.Tensor]) -> dict[str, dict[str, np.nd
 
 
 def check_episodes(episodes: np.ndarray | None, n_export: int) -> np.ndarray:
-    """Export episode indices to train on (all of them for None), validated: 1-D, unique, in range."""
+    """Export episode indices to train on (all of them for None), validated: 1-D, unique, in
+    range."""
     if episodes is None:
         return np.arange(n_export, dtype=np.int64)
     arr = np.asarray(episodes)
     if arr.ndim != 1 or (arr.size and not np.issubdtype(arr.dtype, np.integer)):
-        raise ValueError(f"episodes must be a 1-D array of export episode indices, got dtype {arr.dtype}, "
-                         f"shape {arr.shape}")
+        raise ValueError(
+            f"episodes must be a 1-D array of export episode indices, got dtype {arr.dtype}, "
+            f"shape {arr.shape}"
+        )
     arr = arr.astype(np.int64)
     if arr.size < 2:
         raise ValueError(f"need at least 2 episodes for a train/validation split, got {arr.size}")
     if arr.min() < 0 or arr.max() >= n_export:
-        raise ValueError(f"episode indices must lie in [0, {n_export - 1}] (the export has {n_export} episodes)")
+        raise ValueError(
+            f"episode indices must lie in [0, {n_export - 1}] (the export has {n_export} episodes)"
+        )
     if np.unique(arr).size != arr.size:
         raise ValueError("episode indices must be unique")
     return arr
@@ -398,9 +479,17 @@ def _split_from_export(
     """
     chosen = check_episodes(episodes, len(sidecar["source_id"]))
     stub = HandoverDataset(
-        [Episode(np.zeros((2, 2)), np.zeros((2, 3)), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)),
-                 bool(sidecar["is_ood"][i]), sidecar["source_id"][i])
-         for i in chosen]
+        [
+            Episode(
+                np.zeros((2, 2)),
+                np.zeros((2, 3)),
+                np.zeros((2, 3)),
+                np.tile([1.0, 0, 0, 0], (2, 1)),
+                bool(sidecar["is_ood"][i]),
+                sidecar["source_id"][i],
+            )
+            for i in chosen
+        ]
     )
     train, val = split_train_val(stub, val_fraction, seed)
     return chosen[train], chosen[val]
@@ -435,7 +524,8 @@ class DropoutMasks:
 
 
 class FastDropout(torch.nn.Dropout):
-    """``nn.Dropout`` (same p, same train/eval behaviour) with its mask from :class:`DropoutMasks`."""
+    """``nn.Dropout`` (same p, same train/eval behaviour) with its mask from
+    :class:`DropoutMasks`."""
 
     def __init__(self, p: float, masks: DropoutMasks) -> None:
         super().__init__(p)
@@ -453,7 +543,8 @@ def fast_dropout(policy: torch.nn.Module, masks: DropoutMasks):
 
     Only the dropout *modules* are swapped (the residual and feed-forward dropouts, ~87% of the
     dropped elements); ``nn.MultiheadAttention``'s internal attention dropout stays PyTorch's.
-    The originals are put back on exit; dropout modules hold no weights, so checkpoints are unchanged.
+    The originals are put back on exit; dropout modules hold no weights, so checkpoints are
+    unchanged.
     """
     swapped = []
     for parent in list(policy.modules()):
@@ -527,7 +618,9 @@ class ACTAgent(GiverConditionedAgent):
         torch.manual_seed(self.config.seed)
         self.policy = ACTPolicy(self.config.policy_config())
         self.policy.eval()
-        self.preprocessor, self.postprocessor = make_act_pre_post_processors(self.policy.config, None)
+        self.preprocessor, self.postprocessor = make_act_pre_post_processors(
+            self.policy.config, None
+        )
         self.fitted = False
         self.train_log: dict = {}
         self._giver_now: np.ndarray | None = None
@@ -544,7 +637,8 @@ class ACTAgent(GiverConditionedAgent):
         log: Callable[[str], None] | None = None,
         rebuild_export: bool = True,
     ) -> ACTAgent:
-        """Export ``dataset`` to a LeRobotDataset (``export_root`` or a temp folder) and train on it.
+        """Export ``dataset`` to a LeRobotDataset (``export_root`` or a temp folder) and train on
+        it.
 
         An existing export at ``export_root`` is reused only if it holds exactly ``dataset`` (its
         fingerprint, frames and the windows W, H). Otherwise it is rebuilt when ``rebuild_export``
@@ -561,13 +655,21 @@ class ACTAgent(GiverConditionedAgent):
                 why = export_matches(export_root, dataset, spec.history, spec.horizon)
                 if why is not None:
                     if not rebuild_export:
-                        raise CheckpointError(f"{why}; pass --overwrite to rebuild it, or another --export-root")
+                        raise CheckpointError(
+                            f"{why}; pass --overwrite to rebuild it, or another --export-root"
+                        )
                     if log is not None:
                         log(f"rebuilding the LeRobot export: {why}")
                     export_lerobot(dataset, export_root, history=spec.history, horizon=spec.horizon,
                                    overwrite=True, progress=progress)
             else:
-                export_lerobot(dataset, export_root, history=spec.history, horizon=spec.horizon, progress=progress)
+                export_lerobot(
+                    dataset,
+                    export_root,
+                    history=spec.history,
+                    horizon=spec.horizon,
+                    progress=progress,
+                )
             return self.fit_lerobot(export_root, out_dir=out_dir, resume=resume, progress=progress,
                                     steps=steps, log=log)
 
@@ -605,8 +707,19 @@ class ACTAgent(GiverConditionedAgent):
         val = lerobot_samples(ds, val_ep)
         stats = feature_stats(train)
         with reproducible(cfg.seed):
-            return self._train(train, val, stats, sidecar, train_ep, val_ep, total_steps, out_dir, resume,
-                               progress, log)
+            return self._train(
+                train,
+                val,
+                stats,
+                sidecar,
+                train_ep,
+                val_ep,
+                total_steps,
+                out_dir,
+                resume,
+                progress,
+                log,
+            )
 
     def _train(
         self,
@@ -629,12 +742,20 @@ class ACTAgent(GiverConditionedAgent):
         cfg = self.config
         policy_cfg = cfg.policy_config()
         self.policy = ACTPolicy(policy_cfg)
-        self.preprocessor, self.postprocessor = make_act_pre_post_processors(self.policy.config, stats)
+        self.preprocessor, self.postprocessor = make_act_pre_post_processors(
+            self.policy.config, stats
+        )
         train = normalise_samples(self.preprocessor, train)  # once, not per batch: same tensors
         val = normalise_samples(self.preprocessor, val)
         preset = policy_cfg.get_optimizer_preset()  # LeRobot's ACT optimiser: AdamW, grad clip 10
-        opt = torch.optim.AdamW(self.policy.parameters(), lr=preset.lr, betas=preset.betas, eps=preset.eps,
-                                weight_decay=preset.weight_decay, fused=cfg.device == "cpu")
+        opt = torch.optim.AdamW(
+            self.policy.parameters(),
+            lr=preset.lr,
+            betas=preset.betas,
+            eps=preset.eps,
+            weight_decay=preset.weight_decay,
+            fused=cfg.device == "cpu",
+        )
         split = {"train": [sidecar["source_id"][i] for i in train_ep],
                  "val": [sidecar["source_id"][i] for i in val_ep]}
         state = trainer.new_state("step", split)
@@ -644,15 +765,29 @@ class ACTAgent(GiverConditionedAgent):
             if out is None:
                 raise CheckpointError("resume needs the checkpoint folder (out_dir)")
             state, best = trainer.load_training_state(
-                out, self.policy, opt, split=split, config=asdict(cfg),
-                saved_config=lambda o: _read_handover_json(o)["config"], resumable=RESUMABLE_CHANGES,
-                check_state=_check_state, rng=True)
+                out,
+                self.policy,
+                opt,
+                split=split,
+                config=asdict(cfg),
+                saved_config=lambda o: _read_handover_json(o)["config"],
+                resumable=RESUMABLE_CHANGES,
+                check_state=_check_state,
+                rng=True,
+            )
 
         n = train[ACTION].shape[0]
         per_epoch = max(1, n // cfg.batch_size)
         t_start = time.perf_counter() - state["wall_time_s"]
-        report = trainer.TrainingProgress("act", total_steps, state["step"], "step", progress, log,
-                                          trainer.previous_log(out) if resume and out is not None else "")
+        report = trainer.TrainingProgress(
+            "act",
+            total_steps,
+            state["step"],
+            "step",
+            progress,
+            log,
+            trainer.previous_log(out) if resume and out is not None else "",
+        )
         running, count = 0.0, 0
         perm = None
         masks = DropoutMasks(cfg.seed)
@@ -662,7 +797,9 @@ class ACTAgent(GiverConditionedAgent):
                 while state["step"] < total_steps:
                     step = state["step"]
                     epoch, pos = divmod(step, per_epoch)
-                    if perm is None or pos == 0:  # the permutation depends only on (seed, epoch): resumable
+                    if (
+                        perm is None or pos == 0
+                    ):  # the permutation depends only on (seed, epoch): resumable
                         gen = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)
                         perm = torch.randperm(n, generator=gen)
                     idx = perm[pos * cfg.batch_size : (pos + 1) * cfg.batch_size]
@@ -671,7 +808,8 @@ class ACTAgent(GiverConditionedAgent):
                     loss, _ = self.policy.forward({k: v[idx] for k, v in train.items()})
                     if not torch.isfinite(loss):
                         raise FloatingPointError(
-                            f"ACT training diverged at step {step + 1} (loss {float(loss)}); check the "
+                            f"ACT training diverged at step {step + 1} (loss {float(loss)}); "
+                            "check the "
                             f"data's coordinates and the learning rate"
                         )
                     opt.zero_grad(set_to_none=True)
@@ -684,17 +822,30 @@ class ACTAgent(GiverConditionedAgent):
                     report.advance(1, running / count if count % 25 == 0 else None)
                     if state["step"] % cfg.eval_every == 0 or state["step"] == total_steps:
                         val_l1 = self._val_l1(val)
-                        if trainer.record_validation(state, "step", running / max(count, 1), val_l1):
+                        if trainer.record_validation(
+                            state, "step", running / max(count, 1), val_l1
+                        ):
                             best = trainer.clone_weights(self.policy)
                         running, count = 0.0, 0
                         state["wall_time_s"] = time.perf_counter() - t_start
-                        report.validation(state, f"step {state['step']:6d}  train {state['train_loss'][-1]:.4f}  "
-                                                 f"val L1 {val_l1:.4f}  best {state['best_val']:.4f} @ "
-                                                 f"{state['best_step']}")
+                        report.validation(
+                            state,
+                            f"step {state['step']:6d}  train {state['train_loss'][-1]:.4f}  "
+                            f"val L1 {val_l1:.4f}  best {state['best_val']:.4f} @ "
+                            f"{state['best_step']}",
+                        )
                         if out is not None:
                             trainer.save_checkpoint(
-                                out, lambda stage, best=best, state=state: self._write_model(stage, best, state),
-                                self.policy, opt, state, report, rng=True)
+                                out,
+                                lambda stage, best=best, state=state: self._write_model(
+                                    stage, best, state
+                                ),
+                                self.policy,
+                                opt,
+                                state,
+                                report,
+                                rng=True,
+                            )
         finally:
             report.close()
         self.policy.load_state_dict(best)
@@ -732,7 +883,11 @@ class ACTAgent(GiverConditionedAgent):
         self._require_fitted()
         env = torch.as_tensor(np.asarray(env_state, dtype=np.float32))
         st = torch.as_tensor(np.asarray(state, dtype=np.float32))
-        if env.ndim != 2 or env.shape[1] != self.config.spec.env_dim or tuple(st.shape) != (env.shape[0], 3):
+        if (
+            env.ndim != 2
+            or env.shape[1] != self.config.spec.env_dim
+            or tuple(st.shape) != (env.shape[0], 3)
+        ):
             raise ValueError(
                 f"expected env_state (B, {self.config.spec.env_dim}) and state (B, 3), "
                 f"got {tuple(env.shape)} and {tuple(st.shape)}"
@@ -756,7 +911,9 @@ class ACTAgent(GiverConditionedAgent):
         the next frames (``temporal_ensembler.ensembled_actions``), so t_f can be read from them.
         """
         self._require_fitted()
-        env = torch.as_tensor(encode_history(np.asarray(self._history), self.config.history), dtype=torch.float32)
+        env = torch.as_tensor(
+            encode_history(np.asarray(self._history), self.config.history), dtype=torch.float32
+        )
         state = validate_giver(self._giver_now) if self.config.use_giver_state else np.zeros(3)
         giver = torch.as_tensor(state, dtype=torch.float32)
         batch = self.preprocessor({OBS_ENV_STATE: env, OBS_STATE: giver})
@@ -766,7 +923,8 @@ class ACTAgent(GiverConditionedAgent):
 
     # ------------------------------------------------------------------ checkpoints
     def _write_model(self, out: Path, weights: dict | None, state: dict | None) -> None:
-        """The policy, its processors and ``handover_act.json`` into the (staging) folder ``out``."""
+        """The policy, its processors and ``handover_act.json`` into the (staging) folder
+        ``out``."""
         current = None
         if weights is not None:
             current = {k: v.detach().clone() for k, v in self.policy.state_dict().items()}
@@ -776,10 +934,14 @@ class ACTAgent(GiverConditionedAgent):
             self.policy.load_state_dict(current)
         self.preprocessor.save_pretrained(out)
         self.postprocessor.save_pretrained(out)
-        write_json(out / HANDOVER_JSON, trainer.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state))
+        write_json(
+            out / HANDOVER_JSON,
+            trainer.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state),
+        )
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the policy (``config.json``, ``model.safetensors``), processors and ``handover_act.json``, as a unit."""
+        """Write the policy (``config.json``, ``model.safetensors``), processors and
+        ``handover_act.json``, as a unit."""
         self._require_fitted()
         with staged_write(path) as stage:
             self._write_model(stage, None, self.train_log)
@@ -802,8 +964,15 @@ class ACTAgent(GiverConditionedAgent):
         trainer.recover_checkpoint(path)
         saved = _read_handover_json(path)
         trained = ACTAgentConfig.from_dict(saved["config"], str(path / HANDOVER_JSON))
-        cfg = ACTAgentConfig.from_dict({**saved["config"], "device": device}, str(path / HANDOVER_JSON))
-        for name in ("config.json", "model.safetensors", act_files.PREPROCESSOR_JSON, act_files.POSTPROCESSOR_JSON):
+        cfg = ACTAgentConfig.from_dict(
+            {**saved["config"], "device": device}, str(path / HANDOVER_JSON)
+        )
+        for name in (
+            "config.json",
+            "model.safetensors",
+            act_files.PREPROCESSOR_JSON,
+            act_files.POSTPROCESSOR_JSON,
+        ):
             if not (path / name).is_file():
                 raise CheckpointError(f"{path}: missing {name} (incomplete ACT checkpoint)")
         act_files.validate_config_json(path, trained.policy_config())
@@ -812,15 +981,23 @@ class ACTAgent(GiverConditionedAgent):
             path, act_files.PREPROCESSOR_JSON, saved_pre, act_files.PREPROCESSOR_STEPS)
         post_state = act_files.validate_processor_json(
             path, act_files.POSTPROCESSOR_JSON, saved_post, act_files.POSTPROCESSOR_STEPS)
-        shapes = {OBS_ENV_STATE: (cfg.spec.env_dim,), OBS_STATE: (STATE_DIM,), ACTION: (ACTION_DIM,)}
+        shapes = {
+            OBS_ENV_STATE: (cfg.spec.env_dim,),
+            OBS_STATE: (STATE_DIM,),
+            ACTION: (ACTION_DIM,),
+        }
         stats = {i: act_files.load_stats(f, shapes) for i, f in {**pre_state, **post_state}.items()}
         pre_stats, post_stats = stats[3], stats[0]  # the normaliser and unnormaliser steps
         agent = cls.__new__(cls)
         GiverConditionedAgent.__init__(agent, **closed_loop_kwargs)
         agent.config, agent.horizon, agent._giver_now = cfg, cfg.horizon, None
-        with torch.random.fork_rng(devices=[]):  # the initial weights are overwritten: leave the caller's RNG be
+        with torch.random.fork_rng(
+            devices=[]
+        ):  # the initial weights are overwritten: leave the caller's RNG be
             policy = ACTPolicy(cfg.policy_config())
-        policy.load_state_dict(load_tensors(path / "model.safetensors", expected_of(policy.state_dict())))
+        policy.load_state_dict(
+            load_tensors(path / "model.safetensors", expected_of(policy.state_dict()))
+        )
         agent.policy = policy.to(device)
         agent.preprocessor, agent.postprocessor = make_act_pre_post_processors(policy.config, None)
         try:
@@ -835,10 +1012,13 @@ class ACTAgent(GiverConditionedAgent):
 
 
 def _check_state(state: object, source: Path) -> dict:
-    """An ACT ``state.json`` whose fields have their types and agree with each other, or CheckpointError."""
+    """An ACT ``state.json`` whose fields have their types and agree with each other, or
+    CheckpointError."""
     return trainer.check_state(state, source, "step")
 
 
 def _read_handover_json(path: Path) -> dict:
     """``handover_act.json``, validated: type, format, a complete config and matching features."""
-    return trainer.read_checkpoint_json(path, HANDOVER_JSON, CHECKPOINT_TYPE, CHECKPOINT_FORMAT, ACTAgentConfig, "ACT")
+    return trainer.read_checkpoint_json(
+        path, HANDOVER_JSON, CHECKPOINT_TYPE, CHECKPOINT_FORMAT, ACTAgentConfig, "ACT"
+    )

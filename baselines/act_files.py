@@ -57,17 +57,22 @@ def _normalised(obj: Any) -> Any:
 
 
 def expected_steps(pipeline) -> list[dict]:
-    """The step entries LeRobot's ``save_pretrained`` writes for ``pipeline`` (without state files)."""
+    """The step entries LeRobot's ``save_pretrained`` writes for ``pipeline`` (without state
+    files)."""
     entries = []
     for step in pipeline.steps:
         name = getattr(type(step), "_registry_name", None)
         if name not in ALLOWED_STEPS:  # our own pipelines are built from these steps only
-            raise CheckpointError(f"internal: processor step {type(step).__name__} is not allow-listed")
+            raise CheckpointError(
+                f"internal: processor step {type(step).__name__} is not allow-listed"
+            )
         entries.append({"registry_name": name, "config": _normalised(step.get_config())})
     return entries
 
 
-def validate_processor_json(folder: Path, filename: str, pipeline, names: tuple[str, ...]) -> dict[int, Path]:
+def validate_processor_json(
+    folder: Path, filename: str, pipeline, names: tuple[str, ...]
+) -> dict[int, Path]:
     """Check ``folder/filename`` against the steps of ``pipeline`` (built from our config).
 
     Returns:
@@ -80,7 +85,11 @@ def validate_processor_json(folder: Path, filename: str, pipeline, names: tuple[
     """
     path = folder / filename
     data = read_json(path, filename)
-    if not isinstance(data, dict) or set(data) != {"name", "steps"} or not isinstance(data["steps"], list):
+    if (
+        not isinstance(data, dict)
+        or set(data) != {"name", "steps"}
+        or not isinstance(data["steps"], list)
+    ):
         raise CheckpointError(f"{path}: expected {{'name': ..., 'steps': [...]}}")
     expected = expected_steps(pipeline)
     prefix = re.sub(r"[^a-zA-Z0-9_]", "_", pipeline.name.lower())
@@ -93,7 +102,8 @@ def validate_processor_json(folder: Path, filename: str, pipeline, names: tuple[
             raise CheckpointError(f"{where} is not a JSON object; refused before loading anything")
         if "class" in step:
             raise CheckpointError(
-                f"{where} names the class {step['class']!r}; only the registry steps {list(names)} are "
+                f"{where} names the class {step['class']!r}; only the registry steps "
+                f"{list(names)} are "
                 f"accepted, so nothing was imported or run"
             )
         name = step.get("registry_name")
@@ -142,7 +152,9 @@ def load_stats(path: Path, features: dict[str, tuple[int, ...]]) -> dict[str, to
             raise CheckpointError(f"{path}: unexpected statistic {key!r}")
         shape = (1,) if stat == "count" else features[feature]
         if tuple(t.shape) != tuple(shape) or t.dtype != torch.float32:
-            raise CheckpointError(f"{path}: {key} is {t.dtype} {tuple(t.shape)}, expected float32 {shape}")
+            raise CheckpointError(
+                f"{path}: {key} is {t.dtype} {tuple(t.shape)}, expected float32 {shape}"
+            )
         if stat == "std" and not bool((t > 0).all()):
             raise CheckpointError(f"{path}: {key} has a zero or negative standard deviation")
     return tensors

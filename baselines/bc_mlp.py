@@ -1,6 +1,7 @@
 """BC-MLP: behaviour cloning with a multi-layer perceptron (the paper's Table I baseline).
 
-A torch MLP maps the shared baseline features of one frame (:mod:`handover_env.data.features`: the W-frame
+A torch MLP maps the shared baseline features of one frame (:mod:`handover_env.data.features`: the
+W-frame
 receiver base-xy history and the current giver xyz) to the giver xyz chunk of the next H = 30
 frames. Inputs and outputs are standardised with mean/std statistics of the training frames, kept
 as buffers of the module so they are saved with the weights (``model.safetensors``). Training uses
@@ -50,7 +51,14 @@ except ModuleNotFoundError as _exc:
 
 from agents.predictive import ClosedLoopConfig
 from baselines import trainer
-from baselines.checkpoint_io import CheckpointError, config_from_dict, expected_of, load_tensors, staged_write, write_json
+from baselines.checkpoint_io import (
+    CheckpointError,
+    config_from_dict,
+    expected_of,
+    load_tensors,
+    staged_write,
+    write_json,
+)
 from baselines.giver_conditioned import GiverConditionedAgent
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
@@ -105,7 +113,9 @@ class BCMLPConfig:
         self.hidden = tuple(int(h) for h in self.hidden)
         FeatureSpec(history=self.history, horizon=self.horizon)  # validates W and H
         if not self.hidden or min(self.hidden) < 1:
-            raise ValueError(f"hidden must be a non-empty list of positive widths, got {self.hidden}")
+            raise ValueError(
+                f"hidden must be a non-empty list of positive widths, got {self.hidden}"
+            )
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"dropout must be in [0, 1), got {self.dropout}")
         for name in ("lr", "batch_size", "max_epochs", "patience"):
@@ -122,7 +132,8 @@ class BCMLPConfig:
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "config") -> BCMLPConfig:
-        """From a checkpoint's JSON: every field present and of its type (see ``config_from_dict``)."""
+        """From a checkpoint's JSON: every field present and of its type (see
+        ``config_from_dict``)."""
         return config_from_dict(cls, d, source)
 
 
@@ -130,7 +141,12 @@ class BCMLPNet(nn.Module):
     """Standardise -> MLP -> un-standardise; the statistics are buffers (saved with the weights)."""
 
     def __init__(
-        self, env_dim: int, horizon: int, hidden: tuple[int, ...], dropout: float = 0.0, use_state: bool = True
+        self,
+        env_dim: int,
+        horizon: int,
+        hidden: tuple[int, ...],
+        dropout: float = 0.0,
+        use_state: bool = True,
     ):
         super().__init__()
         self.horizon = horizon
@@ -205,7 +221,8 @@ class BCMLPAgent(GiverConditionedAgent):
     """The BC-MLP baseline behind the common agent interface.
 
     ``predict`` and ``predict_sequence`` need the current giver position (see
-    :mod:`handover_env.data.features`); ``predict_episode`` (the open-loop protocol) takes it from the
+    :mod:`handover_env.data.features`); ``predict_episode`` (the open-loop protocol) takes it from
+    the
     episode at the query frame, ``act`` from the robot's ``ee_pos``.
 
     Args:
@@ -243,7 +260,8 @@ class BCMLPAgent(GiverConditionedAgent):
         max_epochs: int | None = None,
         log: Callable[[str], None] | None = None,
     ) -> BCMLPAgent:
-        """Train on ``dataset`` with early stopping; optionally checkpoint every epoch to ``out_dir``.
+        """Train on ``dataset`` with early stopping; optionally checkpoint every epoch to
+        ``out_dir``.
 
         Args:
             dataset: demonstrations; a validation split of whole episodes is held out.
@@ -260,11 +278,16 @@ class BCMLPAgent(GiverConditionedAgent):
         max_epochs = cfg.max_epochs if max_epochs is None else int(max_epochs)
 
         torch.manual_seed(cfg.seed)
-        self.net = BCMLPNet(cfg.spec.env_dim, cfg.horizon, cfg.hidden, cfg.dropout, cfg.use_giver_state)
+        self.net = BCMLPNet(
+            cfg.spec.env_dim, cfg.horizon, cfg.hidden, cfg.dropout, cfg.use_giver_state
+        )
         self.net.to(cfg.device)
         self.net.set_stats(train)
         opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-        split = {"train": [dataset[i].source_id for i in train_idx], "val": [dataset[i].source_id for i in val_idx]}
+        split = {
+            "train": [dataset[i].source_id for i in train_idx],
+            "val": [dataset[i].source_id for i in val_idx],
+        }
         state = trainer.new_state("epoch", split, bad_epochs=0, stopped_early=False)
         best = trainer.clone_weights(self.net)
         out = trainer.out_path(out_dir)
@@ -272,21 +295,38 @@ class BCMLPAgent(GiverConditionedAgent):
             if out is None:
                 raise CheckpointError("resume needs the checkpoint folder (out_dir)")
             state, best = trainer.load_training_state(
-                out, self.net, opt, split=split, config=self._config_dict(), saved_config=lambda o: _read_config(o)["config"],
-                resumable=RESUMABLE_CHANGES, check_state=_check_state, check_best=_check_scales)
+                out,
+                self.net,
+                opt,
+                split=split,
+                config=self._config_dict(),
+                saved_config=lambda o: _read_config(o)["config"],
+                resumable=RESUMABLE_CHANGES,
+                check_state=_check_state,
+                check_best=_check_scales,
+            )
 
         tr = _tensors(train, cfg.device)
         va = _tensors(val, cfg.device)
         n = len(train)
         batches_per_epoch = max(1, math.ceil(n / cfg.batch_size))
-        report = trainer.TrainingProgress("bc-mlp", max_epochs, state["epoch"], "epoch", progress, log,
-                                          trainer.previous_log(out) if resume and out is not None else "")
+        report = trainer.TrainingProgress(
+            "bc-mlp",
+            max_epochs,
+            state["epoch"],
+            "epoch",
+            progress,
+            log,
+            trainer.previous_log(out) if resume and out is not None else "",
+        )
         t_start = time.perf_counter() - state["wall_time_s"]
         try:
             while state["epoch"] < max_epochs and state["bad_epochs"] < cfg.patience:
                 epoch = state["epoch"]
                 self.net.train()
-                gen = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)  # resumable shuffling
+                gen = torch.Generator().manual_seed(
+                    cfg.seed * 100_003 + epoch
+                )  # resumable shuffling
                 perm = torch.randperm(n, generator=gen)
                 running = 0.0
                 for i in range(0, n, cfg.batch_size):
@@ -300,7 +340,8 @@ class BCMLPAgent(GiverConditionedAgent):
                 val_loss = _eval_loss(self.net, va)
                 if not (math.isfinite(train_loss) and math.isfinite(val_loss)):
                     raise FloatingPointError(
-                        f"BC-MLP training diverged at epoch {epoch + 1} (train loss {train_loss}, validation "
+                        f"BC-MLP training diverged at epoch {epoch + 1} (train loss {train_loss}, "
+                        "validation "
                         f"loss {val_loss}); check the data's coordinates and the learning rate"
                     )
                 state["epoch"] = epoch + 1
@@ -312,11 +353,20 @@ class BCMLPAgent(GiverConditionedAgent):
                 state["stopped_early"] = state["bad_epochs"] >= cfg.patience
                 state["wall_time_s"] = time.perf_counter() - t_start
                 report.advance(1, train_loss)
-                report.validation(state, f"epoch {epoch + 1:3d}  train {train_loss:.5f}  val {val_loss:.5f}  "
-                                         f"best {state['best_val']:.5f} @ {state['best_epoch']}")
+                report.validation(
+                    state,
+                    f"epoch {epoch + 1:3d}  train {train_loss:.5f}  val {val_loss:.5f}  "
+                    f"best {state['best_val']:.5f} @ {state['best_epoch']}",
+                )
                 if out is not None:
-                    trainer.save_checkpoint(out, lambda stage, best=best, state=state: self._write_model(stage, best, state),
-                                            self.net, opt, state, report)
+                    trainer.save_checkpoint(
+                        out,
+                        lambda stage, best=best, state=state: self._write_model(stage, best, state),
+                        self.net,
+                        opt,
+                        state,
+                        report,
+                    )
         finally:
             report.close()
 
@@ -329,7 +379,9 @@ class BCMLPAgent(GiverConditionedAgent):
     # ------------------------------------------------------------------ inference
     def _require_fitted(self) -> None:
         if not self.fitted:
-            raise RuntimeError("BCMLPAgent is not trained: call fit(dataset) or BCMLPAgent.load(dir)")
+            raise RuntimeError(
+                "BCMLPAgent is not trained: call fit(dataset) or BCMLPAgent.load(dir)"
+            )
 
     @torch.no_grad()
     def predict_batch(self, env_state: np.ndarray, state: np.ndarray) -> np.ndarray:
@@ -337,7 +389,11 @@ class BCMLPAgent(GiverConditionedAgent):
         self._require_fitted()
         env = torch.as_tensor(np.asarray(env_state, dtype=np.float32), device=self.config.device)
         st = torch.as_tensor(np.asarray(state, dtype=np.float32), device=self.config.device)
-        if env.ndim != 2 or env.shape[1] != self.config.spec.env_dim or st.shape != (env.shape[0], 3):
+        if (
+            env.ndim != 2
+            or env.shape[1] != self.config.spec.env_dim
+            or st.shape != (env.shape[0], 3)
+        ):
             raise ValueError(
                 f"expected env_state (B, {self.config.spec.env_dim}) and state (B, 3), "
                 f"got {tuple(env.shape)} and {tuple(st.shape)}"
@@ -355,13 +411,21 @@ class BCMLPAgent(GiverConditionedAgent):
         """The config as JSON (what ``config.json`` holds under ``"config"``)."""
         return {**asdict(self.config), "hidden": list(self.config.hidden)}
 
-    def _write_model(self, stage: Path, weights: dict[str, torch.Tensor], state: dict | None) -> None:
+    def _write_model(
+        self, stage: Path, weights: dict[str, torch.Tensor], state: dict | None
+    ) -> None:
         """``model.safetensors`` (``weights``) and ``config.json`` into the staging folder."""
-        save_file({k: v.contiguous().cpu() for k, v in weights.items()}, stage / "model.safetensors")
-        write_json(stage / "config.json", trainer.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state))
+        save_file(
+            {k: v.contiguous().cpu() for k, v in weights.items()}, stage / "model.safetensors"
+        )
+        write_json(
+            stage / "config.json",
+            trainer.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state),
+        )
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write ``config.json`` + ``model.safetensors`` (weights and normalisation) to ``path``, as a unit."""
+        """Write ``config.json`` + ``model.safetensors`` (weights and normalisation) to ``path``, as
+        a unit."""
         self._require_fitted()
         out = Path(path)
         with staged_write(out) as stage:
@@ -379,7 +443,9 @@ class BCMLPAgent(GiverConditionedAgent):
         path = Path(path)
         trainer.recover_checkpoint(path)
         saved = _read_config(path)
-        cfg = BCMLPConfig.from_dict({**saved["config"], "device": device}, str(path / "config.json"))
+        cfg = BCMLPConfig.from_dict(
+            {**saved["config"], "device": device}, str(path / "config.json")
+        )
         agent = cls(cfg, **closed_loop_kwargs)
         weights = path / "model.safetensors"
         tensors = load_tensors(weights, expected_of(agent.net.state_dict()))
@@ -399,13 +465,16 @@ def _check_scales(tensors: dict[str, torch.Tensor], source: Path) -> None:
 
 
 def _check_state(state: object, source: Path) -> dict:
-    """A ``state.json`` whose fields have their types and agree with each other, or CheckpointError."""
+    """A ``state.json`` whose fields have their types and agree with each other, or
+    CheckpointError."""
     return trainer.check_state(state, source, "epoch", {"bad_epochs": int, "stopped_early": bool})
 
 
 def _read_config(path: Path) -> dict:
     """``config.json`` of a BC-MLP checkpoint folder, validated."""
-    return trainer.read_checkpoint_json(path, "config.json", CHECKPOINT_TYPE, CHECKPOINT_FORMAT, BCMLPConfig, "BC-MLP")
+    return trainer.read_checkpoint_json(
+        path, "config.json", CHECKPOINT_TYPE, CHECKPOINT_FORMAT, BCMLPConfig, "BC-MLP"
+    )
 
 
 __all__ = ["BCMLPAgent", "BCMLPConfig", "BCMLPNet"]

@@ -1,4 +1,5 @@
-"""Checkpoint folders of the learned baselines: written as one unit, read back only after validation.
+"""Checkpoint folders of the learned baselines: written as one unit, read back only after
+validation.
 
 **Atomic writes.** :func:`staged_write` gives the caller an empty ``<out>/.staging`` folder to write
 a whole checkpoint into (weights, optimizer, RNG, ``state.json``, configs). When the caller is done
@@ -110,7 +111,9 @@ def _apply(out: Path) -> None:
                                                   and ".." not in f.split("/") for f in files):
             raise ValueError("bad file list")
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise CheckpointError(f"{stage / COMMIT}: unreadable commit record ({exc}); delete {stage}") from None
+        raise CheckpointError(
+            f"{stage / COMMIT}: unreadable commit record ({exc}); delete {stage}"
+        ) from None
     for rel in files:
         src = stage / rel
         if src.exists():  # files already moved by an interrupted earlier pass are gone
@@ -162,12 +165,17 @@ def load_tensors(
     try:
         tensors = load_file(path)
     except Exception as exc:  # noqa: BLE001 - SafetensorError, OSError, ValueError on a damaged file
-        raise CheckpointError(f"{path}: not a readable safetensors file ({type(exc).__name__}: {exc})") from None
+        raise CheckpointError(
+            f"{path}: not a readable safetensors file ({type(exc).__name__}: {exc})"
+        ) from None
     if expected is not None:
         missing = sorted(set(expected) - set(tensors))
         extra = sorted(set(tensors) - set(expected))
         if missing or extra:
-            raise CheckpointError(f"{path}: keys do not match the model (missing {missing[:5]}, unexpected {extra[:5]})")
+            raise CheckpointError(
+                f"{path}: keys do not match the model (missing {missing[:5]}, unexpected "
+                f"{extra[:5]})"
+            )
         for key, (shape, dtype) in expected.items():
             t = tensors[key]
             if tuple(t.shape) != tuple(shape) or t.dtype != dtype:
@@ -181,7 +189,9 @@ def load_tensors(
     return tensors
 
 
-def expected_of(state_dict: dict[str, torch.Tensor]) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
+def expected_of(
+    state_dict: dict[str, torch.Tensor],
+) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
     """{key: (shape, dtype)} of a module's state dict, for :func:`load_tensors`."""
     return {k: (tuple(v.shape), v.dtype) for k, v in state_dict.items()}
 
@@ -193,7 +203,9 @@ def _type_ok(value: Any, hint: Any) -> bool:
     if hint is int:
         return isinstance(value, int) and not isinstance(value, bool)
     if hint is float:
-        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        return (
+            isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        )
     if hint is str:
         return isinstance(value, str)
     if origin is dict or hint is dict:  # a JSON object; its contents are the config's to check
@@ -220,11 +232,14 @@ def config_from_dict(cls: type, d: Any, source: str, ignore: frozenset[str] = fr
     unknown = sorted(set(d) - set(names))
     missing = sorted(set(names) - set(d) - ignore)
     if unknown or missing:
-        raise CheckpointError(f"{source}: config fields do not match (unknown {unknown}, missing {missing})")
+        raise CheckpointError(
+            f"{source}: config fields do not match (unknown {unknown}, missing {missing})"
+        )
     for name in names:
         if name in d and not _type_ok(d[name], hints[name]):
             raise CheckpointError(
-                f"{source}: config field {name} = {d[name]!r} is not a {getattr(hints[name], '__name__', hints[name])}"
+                f"{source}: config field {name} = {d[name]!r} is not a "
+                f"{getattr(hints[name], '__name__', hints[name])}"
             )
     try:
         return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
@@ -232,13 +247,16 @@ def config_from_dict(cls: type, d: Any, source: str, ignore: frozenset[str] = fr
         raise CheckpointError(f"{source}: invalid config ({exc})") from None
 
 
-def check_training_state(state: Any, source: Path, counter: str, best: str, extra: dict[str, type]) -> dict:
+def check_training_state(
+    state: Any, source: Path, counter: str, best: str, extra: dict[str, type]
+) -> dict:
     """A training ``state.json`` whose fields have their JSON types and agree with each other.
 
     Args:
         state: the parsed JSON.
         source: the file, for messages.
-        counter: the progress field (``"epoch"``: one validation pass each; ``"step"``: at most one).
+        counter: the progress field (``"epoch"``: one validation pass each; ``"step"``: at most
+            one).
         best: the field holding the counter value of the best validation pass.
         extra: further fields and their types.
 
@@ -254,7 +272,11 @@ def check_training_state(state: Any, source: Path, counter: str, best: str, extr
     for key, kind in keys.items():
         value = state[key]
         if kind is float:  # best_val is inf until the first validation pass
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and not math.isnan(value)
+            ok = (
+                isinstance(value, (int, float))
+                and not isinstance(value, bool)
+                and not math.isnan(value)
+            )
         else:
             ok = isinstance(value, kind) if kind in (list, dict) else _type_ok(value, kind)
         if not ok:
@@ -294,7 +316,11 @@ def save_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
     from safetensors.torch import save_file
 
     state = opt.state_dict()
-    flat = {f"state/{i}/{name}": t.contiguous() for i, s in state["state"].items() for name, t in s.items()}
+    flat = {
+        f"state/{i}/{name}": t.contiguous()
+        for i, s in state["state"].items()
+        for name, t in s.items()
+    }
     save_file(flat, folder / OPTIMIZER_STATE)
     write_json(folder / OPTIMIZER_PARAM_GROUPS, state["param_groups"])
 
@@ -314,7 +340,8 @@ def load_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
         raise CheckpointError(f"{groups_file}: expected {len(want)} param group(s)")
     if json.loads(json.dumps(want)) != groups:  # the optimizer was built from the same config
         raise CheckpointError(
-            f"{groups_file}: param groups (learning rate, betas, weight decay, ...) differ from the "
+            f"{groups_file}: param groups (learning rate, betas, weight decay, ...) differ from "
+            "the "
             f"optimizer this config builds"
         )
     params = [p for group in opt.param_groups for p in group["params"]]
@@ -327,8 +354,10 @@ def load_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
         index, name = int(m.group(1)), m.group(2)
         want_shape = () if name == "step" else tuple(params[index].shape)
         if tuple(tensor.shape) != want_shape or not tensor.is_floating_point():
-            raise CheckpointError(f"{folder / OPTIMIZER_STATE}: {key} has shape {tuple(tensor.shape)}, "
-                                  f"expected {want_shape}")
+            raise CheckpointError(
+                f"{folder / OPTIMIZER_STATE}: {key} has shape {tuple(tensor.shape)}, "
+                f"expected {want_shape}"
+            )
         if name == "step" and float(tensor) < 0:
             raise CheckpointError(f"{folder / OPTIMIZER_STATE}: {key} is negative")
         state.setdefault(index, {})[name] = tensor
@@ -341,11 +370,27 @@ def load_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
 # ---------------------------------------------------------------------- output folders
 #: What each kind of checkpoint writes into its folder (besides ``.staging``).
 CHECKPOINT_FILES = {
-    "act": ("config.json", "model.safetensors", "handover_act.json", "policy_preprocessor.json",
-            "policy_postprocessor.json", "training_state", "train_summary.json", "train_log.jsonl"),
-    "bc_mlp": ("config.json", "model.safetensors", "training_state", "train_summary.json", "train_log.jsonl"),
+    "act": (
+        "config.json",
+        "model.safetensors",
+        "handover_act.json",
+        "policy_preprocessor.json",
+        "policy_postprocessor.json",
+        "training_state",
+        "train_summary.json",
+        "train_log.jsonl",
+    ),
+    "bc_mlp": (
+        "config.json",
+        "model.safetensors",
+        "training_state",
+        "train_summary.json",
+        "train_log.jsonl",
+    ),
 }
-_ACT_STATE_FILE = re.compile(r"policy_(pre|post)processor_step_[0-9]+_[a-z_]+\.safetensors", re.ASCII)
+_ACT_STATE_FILE = re.compile(
+    r"policy_(pre|post)processor_step_[0-9]+_[a-z_]+\.safetensors", re.ASCII
+)
 #: Entries train.py may find in an --out that holds no checkpoint yet (an export made before the
 #: first checkpoint, an interrupted first write).
 _HARMLESS = {"lerobot_dataset", STAGING}
@@ -407,7 +452,8 @@ def check_out_dir(out: str | os.PathLike, kind: str, resume: bool, overwrite: bo
         others = sorted(p.name for p in out.iterdir() if p.name not in _HARMLESS)
         if others:
             raise CheckpointError(
-                f"--out {out} is not empty and holds no checkpoint of this project ({', '.join(others[:4])}"
+                f"--out {out} is not empty and holds no checkpoint of this project "
+                f"({', '.join(others[:4])}"
                 f"{', ...' if len(others) > 4 else ''}); choose a new or empty folder"
             )
         if resume:
@@ -416,7 +462,8 @@ def check_out_dir(out: str | os.PathLike, kind: str, resume: bool, overwrite: bo
     if found != kind:
         if resume or not overwrite:
             raise CheckpointError(
-                f"--out {out} holds a {label[found]} checkpoint, not {label[kind]}; pass --overwrite to "
+                f"--out {out} holds a {label[found]} checkpoint, not {label[kind]}; pass "
+                "--overwrite to "
                 f"replace it, or choose another --out"
             )
         remove_checkpoint(out, found)
@@ -425,7 +472,8 @@ def check_out_dir(out: str | os.PathLike, kind: str, resume: bool, overwrite: bo
         return
     if not overwrite:
         raise CheckpointError(
-            f"--out {out} already holds a {label[kind]} run; pass --resume to continue it or --overwrite "
+            f"--out {out} already holds a {label[kind]} run; pass --resume to continue it or "
+            "--overwrite "
             f"to start again"
         )
     remove_checkpoint(out, found)

@@ -36,4 +36,9 @@ class IAALAgent(NonparametricAgent):
         closed_loop: ClosedLoopConfig | None = None,
         layout: ObsLayout | None = None,
     ) -> None:
-        super().__init__(replace(config or NonparametricConfig(), exact=True, inducing_ratio=1.0), params, closed_loop, layout)
+        super().__init__(
+            replace(config or NonparametricConfig(), exact=True, inducing_ratio=1.0),
+            params,
+            closed_loop,
+            layout,
+        )

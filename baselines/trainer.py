@@ -1,4 +1,5 @@
-"""The training machinery BC-MLP and ACT share: state, best validation, checkpoints, resume, progress.
+"""The training machinery BC-MLP and ACT share: state, best validation, checkpoints, resume,
+progress.
 
 Each baseline keeps its own optimisation loop (BC-MLP runs epochs with early stopping, ACT runs
 steps through LeRobot's ``ACTPolicy.forward``); everything around the loop is here:
@@ -60,7 +61,15 @@ from baselines.checkpoint_io import (
 TRAINING_STATE = "training_state"
 LOG_FILE = "train_log.jsonl"
 #: The summary of a run kept in the checkpoint JSON (``"training"``), when present in the state.
-SUMMARY_KEYS = ("epoch", "step", "best_epoch", "best_step", "best_val", "stopped_early", "wall_time_s")
+SUMMARY_KEYS = (
+    "epoch",
+    "step",
+    "best_epoch",
+    "best_step",
+    "best_val",
+    "stopped_early",
+    "wall_time_s",
+)
 
 
 def clone_weights(module: torch.nn.Module) -> dict[str, torch.Tensor]:
@@ -70,12 +79,21 @@ def clone_weights(module: torch.nn.Module) -> dict[str, torch.Tensor]:
 
 def new_state(counter: str, split: dict[str, list[str]], **extra: Any) -> dict:
     """A fresh training state; ``counter`` is ``"epoch"`` or ``"step"``, ``extra`` adds fields."""
-    return {counter: 0, "best_val": math.inf, f"best_{counter}": -1, "train_loss": [], "val_loss": [],
-            "wall_time_s": 0.0, "split": split, **extra}
+    return {
+        counter: 0,
+        "best_val": math.inf,
+        f"best_{counter}": -1,
+        "train_loss": [],
+        "val_loss": [],
+        "wall_time_s": 0.0,
+        "split": split,
+        **extra,
+    }
 
 
 def record_validation(state: dict, counter: str, train_loss: float, val_loss: float) -> bool:
-    """Append one validation pass at the state's current ``counter``; True if it is the best so far."""
+    """Append one validation pass at the state's current ``counter``; True if it is the best so
+    far."""
     state["train_loss"].append(train_loss)
     state["val_loss"].append(val_loss)
     if val_loss < state["best_val"]:
@@ -117,9 +135,14 @@ class TrainingProgress:
     def validation(self, state: dict, text: str) -> None:
         """Record the validation pass just appended to ``state``; ``text`` is the log line."""
         best = f"best_{self.unit}"
-        record = {self.unit: state[self.unit], "train_loss": state["train_loss"][-1],
-                  "val_loss": state["val_loss"][-1], "best_val": state["best_val"], best: state[best],
-                  "wall_time_s": round(state["wall_time_s"], 3)}
+        record = {
+            self.unit: state[self.unit],
+            "train_loss": state["train_loss"][-1],
+            "val_loss": state["val_loss"][-1],
+            "best_val": state["best_val"],
+            best: state[best],
+            "wall_time_s": round(state["wall_time_s"], 3),
+        }
         self.lines.append(json.dumps(record))
         if self.log is not None:
             if self.bar is not None and self.log is print:
@@ -153,8 +176,10 @@ def save_checkpoint(
 
     Args:
         out: the checkpoint folder.
-        write_model: writes the model files (best weights, configs) into the staging folder it is given.
-        module: the model being trained (its current weights go to ``training_state/last.safetensors``).
+        write_model: writes the model files (best weights, configs) into the staging folder it is
+            given.
+        module: the model being trained (its current weights go to
+            ``training_state/last.safetensors``).
         opt: its optimizer (LeRobot's safetensors + JSON format).
         state: the training state (``training_state/state.json``).
         progress: its JSON lines become :data:`LOG_FILE`.
@@ -164,13 +189,18 @@ def save_checkpoint(
         write_model(stage)
         ts = stage / TRAINING_STATE
         ts.mkdir()
-        save_file({k: v.contiguous().cpu() for k, v in module.state_dict().items()}, ts / "last.safetensors")
+        save_file(
+            {k: v.contiguous().cpu() for k, v in module.state_dict().items()},
+            ts / "last.safetensors",
+        )
         if rng:
             save_file({"torch_rng": torch.get_rng_state()}, ts / "rng.safetensors")
         save_optimizer(opt, ts)
         write_json(ts / "state.json", state)
         if progress is not None:
-            (stage / LOG_FILE).write_text("".join(line + "\n" for line in progress.lines), encoding="utf-8")
+            (stage / LOG_FILE).write_text(
+                "".join(line + "\n" for line in progress.lines), encoding="utf-8"
+            )
 
 
 def load_training_state(
@@ -186,7 +216,8 @@ def load_training_state(
     check_best: Callable[[dict[str, torch.Tensor], Path], None] | None = None,
     rng: bool = False,
 ) -> tuple[dict, dict[str, torch.Tensor]]:
-    """Validated (state, best weights) of the checkpoint in ``out``; restores ``module``, ``opt`` (and the RNG).
+    """Validated (state, best weights) of the checkpoint in ``out``; restores ``module``, ``opt``
+    (and the RNG).
 
     Args:
         out: the checkpoint folder.
@@ -208,7 +239,9 @@ def load_training_state(
         raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
     state = check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
     if state["split"] != split:
-        raise CheckpointError(f"cannot resume from {out}: it was trained on a different dataset/split")
+        raise CheckpointError(
+            f"cannot resume from {out}: it was trained on a different dataset/split"
+        )
     expected = expected_of(module.state_dict())
     module.load_state_dict(load_tensors(ts / "last.safetensors", expected))
     best = load_tensors(out / "model.safetensors", expected)
@@ -221,18 +254,23 @@ def load_training_state(
         try:
             torch.set_rng_state(saved["torch_rng"])
         except (RuntimeError, ValueError) as exc:
-            raise CheckpointError(f"{ts / 'rng.safetensors'}: not a torch RNG state ({exc})") from None
+            raise CheckpointError(
+                f"{ts / 'rng.safetensors'}: not a torch RNG state ({exc})"
+            ) from None
     return state, best
 
 
-def check_state(state: Any, source: Path, counter: str, extra: dict[str, type] | None = None) -> dict:
+def check_state(
+    state: Any, source: Path, counter: str, extra: dict[str, type] | None = None
+) -> dict:
     """A ``state.json`` of :func:`new_state`'s fields (plus ``extra``), consistent with itself."""
     return check_training_state(state, source, counter, f"best_{counter}", extra or {})
 
 
 # ---------------------------------------------------------------------- checkpoint JSON
 def checkpoint_json(kind: str, fmt: int, config: Any, state: dict | None) -> dict:
-    """The record a checkpoint carries: type, format, config (a dataclass), features, run summary."""
+    """The record a checkpoint carries: type, format, config (a dataclass), features, run
+    summary."""
     d = {"type": kind, "format": fmt, "config": json.loads(json.dumps(asdict(config))),
          "features": config.spec.to_dict()}
     if state:
@@ -240,8 +278,11 @@ def checkpoint_json(kind: str, fmt: int, config: Any, state: dict | None) -> dic
     return d
 
 
-def read_checkpoint_json(path: Path, file: str, kind: str, fmt: int, config_cls: type, label: str) -> dict:
-    """``path/file`` as written by :func:`checkpoint_json`, validated; raises CheckpointError naming the file.
+def read_checkpoint_json(
+    path: Path, file: str, kind: str, fmt: int, config_cls: type, label: str
+) -> dict:
+    """``path/file`` as written by :func:`checkpoint_json`, validated; raises CheckpointError naming
+    the file.
 
     Args:
         path: the checkpoint folder.
@@ -261,7 +302,9 @@ def read_checkpoint_json(path: Path, file: str, kind: str, fmt: int, config_cls:
     if saved.get("type") != kind:
         raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {kind!r}")
     if saved.get("format") != fmt:
-        raise CheckpointError(f"{path}: checkpoint format {saved.get('format')}, this code reads {fmt}")
+        raise CheckpointError(
+            f"{path}: checkpoint format {saved.get('format')}, this code reads {fmt}"
+        )
     cfg = config_from_dict(config_cls, saved.get("config"), str(f))
     if saved.get("features") != cfg.spec.to_dict():
         raise CheckpointError(f"{f}: features {saved.get('features')!r} disagree with its config")
@@ -275,7 +318,9 @@ def recover_checkpoint(path: Path) -> None:
     try:
         recover(path)
     except OSError as exc:
-        raise CheckpointError(f"{path}: cannot finish an interrupted checkpoint write ({exc})") from None
+        raise CheckpointError(
+            f"{path}: cannot finish an interrupted checkpoint write ({exc})"
+        ) from None
 
 
 def out_path(out_dir: str | os.PathLike | None) -> Path | None:

@@ -77,12 +77,17 @@ def _agents(args, data) -> dict:
     try:
         out["BC-MLP"] = (BCMLPAgent.load(bc_dir), f"checkpoint {bc_dir}")
     except Exception:  # noqa: BLE001 - no usable checkpoint: a default-size model
-        out["BC-MLP"] = (BCMLPAgent(BCMLPConfig(max_epochs=1)).fit(small), "default size, untrained weights")
+        out["BC-MLP"] = (
+            BCMLPAgent(BCMLPConfig(max_epochs=1)).fit(small),
+            "default size, untrained weights",
+        )
     try:
         out["ACT"] = (ACTAgent.load(act_dir), f"checkpoint {act_dir}")
     except Exception:  # noqa: BLE001
         with tempfile.TemporaryDirectory() as tmp:
-            agent = ACTAgent(ACTAgentConfig(steps=1, eval_every=1)).fit(small, export_root=Path(tmp) / "lr")
+            agent = ACTAgent(ACTAgentConfig(steps=1, eval_every=1)).fit(
+                small, export_root=Path(tmp) / "lr"
+            )
         out["ACT"] = (agent, "default size, untrained weights")
     return out
 
@@ -92,18 +97,29 @@ def _fmt(x: np.ndarray) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="few episodes (for CI)")
-    parser.add_argument("--data", default=None, help="dataset for the replayed tracks (default: the dev copy "
-                        "if present, else the synthetic default)")
-    parser.add_argument("--bc-mlp", default=None, help="BC-MLP checkpoint folder (default runs/bc_mlp)")
+    parser.add_argument(
+        "--data",
+        default=None,
+        help="dataset for the replayed tracks (default: the dev copy "
+        "if present, else the synthetic default)",
+    )
+    parser.add_argument(
+        "--bc-mlp", default=None, help="BC-MLP checkpoint folder (default runs/bc_mlp)"
+    )
     parser.add_argument("--act", default=None, help="ACT checkpoint folder (default runs/act)")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     print(_pin_one_core(), "| torch threads 1", flush=True)
     path = args.data or (str(DEV_COPY) if DEV_COPY.is_dir() else None)
     data = load_any(path)
-    print(f"data: {len(data)} episodes, {data.n_frames} frames ({path or 'synthetic default'})", flush=True)
+    print(
+        f"data: {len(data)} episodes, {data.n_frames} frames ({path or 'synthetic default'})",
+        flush=True,
+    )
     agents = _agents(args, data)
     for name, (_, origin) in agents.items():
         print(f"{name}: {origin}")
@@ -138,7 +154,9 @@ def main(argv: list[str] | None = None) -> int:
     ratio = np.median(wall["ACT"]) / np.median(wall["BC-MLP"])
     print(f"\nratio ACT/BC-MLP per step: {ratio:.1f}x (wall medians)")
     for n in agents:
-        print(f"  {n}: {np.median(wall[n]) / (1 / 30):.1%} of the 33.3 ms frame budget (wall median)")
+        print(
+            f"  {n}: {np.median(wall[n]) / (1 / 30):.1%} of the 33.3 ms frame budget (wall median)"
+        )
     return 0
 
 

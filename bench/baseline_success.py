@@ -56,19 +56,29 @@ def run(agent, kind: str, n: int) -> dict:
         "success": len(ok) / n,
         "median_time": med("handover_time"),
         "median_release_force": med("release_force"),
-        "outcomes": {o: sum(i["outcome"] == o for i in infos) for o in sorted({i["outcome"] for i in infos})},
+        "outcomes": {
+            o: sum(i["outcome"] == o for i in infos) for o in sorted({i["outcome"] for i in infos})
+        },
         "wall_s": time.perf_counter() - t0,
     }
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="3 walkers per kind")
     parser.add_argument("--n", type=int, default=50, help="walkers per kind (default 50)")
-    parser.add_argument("--kinds", default="id", help="comma-separated receiver kinds: id, ood (default id)")
-    parser.add_argument("--bc-mlp", default=str(ROOT / "runs" / "bc_mlp"), help="BC-MLP checkpoint folder")
+    parser.add_argument(
+        "--kinds", default="id", help="comma-separated receiver kinds: id, ood (default id)"
+    )
+    parser.add_argument(
+        "--bc-mlp", default=str(ROOT / "runs" / "bc_mlp"), help="BC-MLP checkpoint folder"
+    )
     parser.add_argument("--act", default=str(ROOT / "runs" / "act"), help="ACT checkpoint folder")
-    parser.add_argument("--only", choices=["bc-mlp", "act"], default=None, help="run one agent only")
+    parser.add_argument(
+        "--only", choices=["bc-mlp", "act"], default=None, help="run one agent only"
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     n = 3 if args.quick else args.n
@@ -87,9 +97,13 @@ def main(argv: list[str] | None = None) -> int:
             continue
         for kind in args.kinds.split(","):
             r = run(agent, kind.strip(), n)
-            print(f"{name:6s} {kind:3s} n={n}: success {r['success']:.0%}, median handover time "
-                  f"{r['median_time']:.2f} s, median release force {r['median_release_force']:.1f} N, "
-                  f"outcomes {r['outcomes']} ({r['wall_s']:.0f} s)", flush=True)
+            print(
+                f"{name:6s} {kind:3s} n={n}: success {r['success']:.0%}, median handover time "
+                f"{r['median_time']:.2f} s, median release force {r['median_release_force']:.1f} "
+                "N, "
+                f"outcomes {r['outcomes']} ({r['wall_s']:.0f} s)",
+                flush=True,
+            )
     return 0
 
 

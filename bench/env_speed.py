@@ -2,7 +2,8 @@
 
 Both are measured in the same run, interleaved step by step, as CPU time of this thread
 (``time.thread_time``: on a shared machine wall time mostly measures the other processes; the wall
-clock figures are printed too): the env stepped by the reactive agent through whole episodes (agent time excluded),
+clock figures are printed too): the env stepped by the reactive agent through whole episodes (agent
+time excluded),
 and ``mj_step`` on the env's own ``MjModel``/``MjData`` from the same states. Target: env cost
 <= 2x raw physics.
 
@@ -55,10 +56,19 @@ def main(argv: list[str] | None = None) -> None:
                 break
     sim = env_steps * env.dt
     print(f"env steps: {env_steps} ({sim:.1f} simulated s, {FRAME_SKIP} physics steps each)")
-    print(f"env real-time factor:      {sim / env_time:8.1f}x  ({1e3 * env_time / env_steps:.3f} ms per env step)")
-    print(f"raw mj_step real-time fac: {sim / raw_time:8.1f}x  ({1e3 * raw_time / env_steps:.3f} ms per 20 steps)")
+    print(
+        f"env real-time factor:      {sim / env_time:8.1f}x  ({1e3 * env_time / env_steps:.3f} ms "
+        "per env step)"
+    )
+    print(
+        f"raw mj_step real-time fac: {sim / raw_time:8.1f}x  ({1e3 * raw_time / env_steps:.3f} ms "
+        "per 20 steps)"
+    )
     print(f"env cost / raw physics:    {env_time / raw_time:8.2f}x  (target <= 2x; CPU time)")
-    print(f"  (wall clock: env {sim / env_wall:.1f}x real time, raw {sim / raw_wall:.1f}x, ratio {env_wall / raw_wall:.2f}x)")
+    print(
+        f"  (wall clock: env {sim / env_wall:.1f}x real time, raw {sim / raw_wall:.1f}x, ratio "
+        f"{env_wall / raw_wall:.2f}x)"
+    )
 
 
 if __name__ == "__main__":

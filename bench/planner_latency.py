@@ -36,7 +36,14 @@ from agents.nonparametric import NonparametricAgent, NonparametricConfig  # noqa
 from baselines.iaal import IAALAgent  # noqa: E402
 from handover_env.data import load_any  # noqa: E402
 
-DEV_COPY = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "dynamic_handover_dataset" / "whole_motions"
+DEV_COPY = (
+    Path(__file__).resolve().parents[1]
+    / ".."
+    / "shared"
+    / "data"
+    / "dynamic_handover_dataset"
+    / "whole_motions"
+)
 RATIOS = (0.1, 0.2, 0.4, 0.6, 0.8, 1.0)
 
 
@@ -44,12 +51,16 @@ def _pin_one_core() -> str:
     try:
         cores = sorted(os.sched_getaffinity(0))
         os.sched_setaffinity(0, {cores[0]})
-        return f"pinned to core {cores[0]} of {len(cores)} available ({os.cpu_count()} in the machine)"
+        return (
+            f"pinned to core {cores[0]} of {len(cores)} available ({os.cpu_count()} in the machine)"
+        )
     except (AttributeError, OSError):
         return f"not pinned (no sched_setaffinity); {os.cpu_count()} cores"
 
 
-def _frame_costs(agents: list[NonparametricAgent], tracks: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+def _frame_costs(
+    agents: list[NonparametricAgent], tracks: list[np.ndarray]
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """(wall, cpu) seconds per frame for each agent, replaying ``tracks``.
 
     The agents take turns track by track (same machine load for both, in blocks long enough
@@ -76,9 +87,15 @@ def _fmt(x: np.ndarray) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="fewer replayed frames")
-    parser.add_argument("--data", default=None, help="dataset folder or .npz (default: the dev copy, else synthetic)")
+    parser.add_argument(
+        "--data",
+        default=None,
+        help="dataset folder or .npz (default: the dev copy, else synthetic)",
+    )
     parser.add_argument("--precision", default=None, choices=("float32", "float64"),
                         help="per-frame mat-vec precision (default: the planner's default)")
     args = parser.parse_args(argv)
@@ -86,13 +103,18 @@ def main(argv: list[str] | None = None) -> int:
     print(_pin_one_core(), flush=True)
     path = args.data or (str(DEV_COPY) if DEV_COPY.is_dir() else None)
     dataset = load_any(path)
-    print(f"data: {len(dataset)} episodes, {dataset.n_frames} frames ({path or 'synthetic default'})", flush=True)
+    print(
+        f"data: {len(dataset)} episodes, {dataset.n_frames} frames ({path or 'synthetic default'})",
+        flush=True,
+    )
     base = NonparametricConfig()
     if args.precision:
         base = replace(base, precision=args.precision)
     rng = np.random.default_rng(0)
     n_tracks = 2 if args.quick else 6
-    tracks = [dataset[int(i)].receiver_xy for i in rng.choice(len(dataset), n_tracks, replace=False)]
+    tracks = [
+        dataset[int(i)].receiver_xy for i in rng.choice(len(dataset), n_tracks, replace=False)
+    ]
     print(f"replaying {n_tracks} recorded receiver tracks, {sum(len(t) for t in tracks)} frames; "
           f"precision {base.precision}, K = {base.top_k}, H = {base.horizon}", flush=True)
 
@@ -110,11 +132,20 @@ def main(argv: list[str] | None = None) -> int:
     m = ours.bank.sizes.astype(np.float64)
     pred_var = float(np.sum(lengths**2) / np.sum(m**2))
     pred_mean = float(np.sum(lengths) / np.sum(m))
-    print(f"  ratio IAAL/ours: wall {np.median(iw) / np.median(ow):.2f}x, cpu {np.median(ic) / np.median(oc):.2f}x (medians)")
-    print(f"  predicted: variance mat-vec sum N_k^2 / sum M_k^2 = {pred_var:.2f}x, kernel + mean "
-          f"sum N_k / sum M_k = {pred_mean:.2f}x; stored entries per query (with padding) "
-          f"{iaal.bank.n_stored / ours.bank.n_stored:.2f}x ({iaal.bank.n_stored:,} vs {ours.bank.n_stored:,})")
-    print(f"  200 Hz budget is 5 ms; ours uses {np.median(ow) / 5e-3:.0%} of it (wall median)", flush=True)
+    print(
+        f"  ratio IAAL/ours: wall {np.median(iw) / np.median(ow):.2f}x, cpu "
+        f"{np.median(ic) / np.median(oc):.2f}x (medians)"
+    )
+    print(
+        f"  predicted: variance mat-vec sum N_k^2 / sum M_k^2 = {pred_var:.2f}x, kernel + mean "
+        f"sum N_k / sum M_k = {pred_mean:.2f}x; stored entries per query (with padding) "
+        f"{iaal.bank.n_stored / ours.bank.n_stored:.2f}x ({iaal.bank.n_stored:,} vs "
+        f"{ours.bank.n_stored:,})"
+    )
+    print(
+        f"  200 Hz budget is 5 ms; ours uses {np.median(ow) / 5e-3:.0%} of it (wall median)",
+        flush=True,
+    )
     # The flows alone (FlowBank.predict at one query: kernel + mean + variance for every demo),
     # without the shared per-frame costs (cosine terms, top-K blend, Python calls).
     xs = np.concatenate(tracks)
@@ -128,12 +159,19 @@ def main(argv: list[str] | None = None) -> int:
             times.append(time.thread_time() - c0)
         gp_cpu.append(times)
     go, gi = (np.median(g) for g in gp_cpu)
-    print(f"  flows only (FlowBank.predict): ours {go * 1e3:.3f} ms, IAAL {gi * 1e3:.3f} ms cpu median, "
-          f"ratio {gi / go:.2f}x; the rest of a frame costs ~{(np.median(oc) - go) * 1e3:.3f} ms for both",
-          flush=True)
+    print(
+        f"  flows only (FlowBank.predict): ours {go * 1e3:.3f} ms, IAAL {gi * 1e3:.3f} ms cpu "
+        "median, "
+        f"ratio {gi / go:.2f}x; the rest of a frame costs ~{(np.median(oc) - go) * 1e3:.3f} ms "
+        "for both",
+        flush=True,
+    )
 
     print("\ncost per frame against the inducing ratio (IAAL = exact GP for reference):")
-    print(f"  {'ratio':>5}  {'stored':>11}  {'wall median':>11}  {'wall p99':>9}  {'cpu median':>10}  {'IAAL/this':>9}")
+    print(
+        f"  {'ratio':>5}  {'stored':>11}  {'wall median':>11}  {'wall p99':>9}  "
+        f"{'cpu median':>10}  {'IAAL/this':>9}"
+    )
     ratios = (0.1, 0.4, 1.0) if args.quick else RATIOS
     for r in ratios:
         agent = NonparametricAgent(replace(base, inducing_ratio=r)).fit(dataset)

@@ -17,7 +17,8 @@ point to the gripper release (paper: dynamic 3.2 s, static 6.9 s, delay excluded
 A release counts as "without a pull" if it happened before the receiver grasped the object, at
 the same control tick as the grasp, or at a wrist force not above f_r.
 
-Usage: ``python bench/reactive_success.py [--quick] [--n 50] [--scenarios dynamic-id,dynamic-ood,static-id]``
+Usage: ``python bench/reactive_success.py [--quick] [--n 50] [--scenarios
+dynamic-id,dynamic-ood,static-id]``
 """
 
 from __future__ import annotations
@@ -64,7 +65,9 @@ def evaluate(scenario: str, n: int) -> dict:
     def med(key: str) -> float:
         return float(np.median([i[key] for i in ok])) if ok else float("nan")
 
-    outcomes = {o: sum(i["outcome"] == o for i in infos) for o in sorted({i["outcome"] for i in infos})}
+    outcomes = {
+        o: sum(i["outcome"] == o for i in infos) for o in sorted({i["outcome"] for i in infos})
+    }
     peaks = [i["peak_contact_force"] for i in infos]
     return {
         "n": n,
@@ -81,7 +84,9 @@ def evaluate(scenario: str, n: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--quick", action="store_true", help="10 walkers per scenario")
     parser.add_argument("--n", type=int, default=50)
     parser.add_argument("--scenarios", default=",".join(SCENARIOS))
@@ -96,12 +101,16 @@ def main(argv: list[str] | None = None) -> None:
         goal = f" (target >= {100 * target:.0f}%)" if target is not None else ""
         delay = (f" ({r['median_time_with_delay']:.2f} s with the 2 s delay)"
                  if name.startswith("static") else "")
-        print(f"{name:11s}: success {100 * r['success']:.0f}% of {n}{goal}, "
-              f"median handover time {r['median_time']:.2f} s{delay}, "
-              f"median release force {r['median_release_force']:.2f} N, "
-              f"peak force median {r['median_peak_force']:.1f} N / max {r['max_peak_force']:.1f} N, "
-              f"drops {r['drops']}, releases without a receiver pull > f_r {r['releases_without_pull']}, "
-              f"outcomes {r['outcomes']} [{time.perf_counter() - start:.0f} s]", flush=True)
+        print(
+            f"{name:11s}: success {100 * r['success']:.0f}% of {n}{goal}, "
+            f"median handover time {r['median_time']:.2f} s{delay}, "
+            f"median release force {r['median_release_force']:.2f} N, "
+            f"peak force median {r['median_peak_force']:.1f} N / max {r['max_peak_force']:.1f} N, "
+            f"drops {r['drops']}, releases without a receiver pull > f_r "
+            f"{r['releases_without_pull']}, "
+            f"outcomes {r['outcomes']} [{time.perf_counter() - start:.0f} s]",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

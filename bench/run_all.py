@@ -21,9 +21,15 @@ ORDER = ("env_speed", "planner_latency", "baseline_latency", "reactive_success")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="pass --quick to every benchmark (small sizes)")
-    parser.add_argument("--only", nargs="*", default=None, help="benchmark names to run (default: all)")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--quick", action="store_true", help="pass --quick to every benchmark (small sizes)"
+    )
+    parser.add_argument(
+        "--only", nargs="*", default=None, help="benchmark names to run (default: all)"
+    )
     args = parser.parse_args(argv)
     names = [n for n in ORDER if (BENCH_DIR / f"{n}.py").is_file()]
     if args.only:

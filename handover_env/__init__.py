@@ -15,8 +15,14 @@ from gymnasium.envs.registration import register, registry
 __version__ = "0.1.0"
 
 _ENVS = {
-    "handover_env/DynamicHandover-v0": ("handover_env.envs.dynamic_handover_v0:DynamicHandoverEnv", 450),
-    "handover_env/StaticHandover-v0": ("handover_env.envs.static_handover_v0:StaticHandoverEnv", 600),
+    "handover_env/DynamicHandover-v0": (
+        "handover_env.envs.dynamic_handover_v0:DynamicHandoverEnv",
+        450,
+    ),
+    "handover_env/StaticHandover-v0": (
+        "handover_env.envs.static_handover_v0:StaticHandoverEnv",
+        600,
+    ),
 }
 
 

@@ -102,28 +102,84 @@ GRIP = -1
 #: offset in the body frame, m at the template height) in the segment's rest frame; a == b is a
 #: sphere. A hand is a fist from the wrist to the grip point.
 _GEOMS: tuple[tuple[str, str, tuple[int, tuple], tuple[int, tuple], float], ...] = (
-    ("pelvis", "hips", (J["LEFT_HIP"], (-0.01, -0.03, 0.0)), (J["RIGHT_HIP"], (-0.01, 0.03, 0.0)), 0.11),
-    ("torso", "abdomen", (J["NAVAL_SPINE"], (0.0, 0.0, -0.02)), (J["CHEST_SPINE"], (0.0, 0.0, 0.0)), 0.12),
-    ("torso", "chest", (J["LEFT_SHOULDER"], (0.02, -0.10, -0.16)), (J["RIGHT_SHOULDER"], (0.02, 0.10, -0.16)),
-     0.10),
-    ("torso", "shoulders", (J["LEFT_SHOULDER"], (0.0, 0.0, -0.02)), (J["RIGHT_SHOULDER"], (0.0, 0.0, -0.02)),
-     0.055),
+    (
+        "pelvis",
+        "hips",
+        (J["LEFT_HIP"], (-0.01, -0.03, 0.0)),
+        (J["RIGHT_HIP"], (-0.01, 0.03, 0.0)),
+        0.11,
+    ),
+    (
+        "torso",
+        "abdomen",
+        (J["NAVAL_SPINE"], (0.0, 0.0, -0.02)),
+        (J["CHEST_SPINE"], (0.0, 0.0, 0.0)),
+        0.12,
+    ),
+    (
+        "torso",
+        "chest",
+        (J["LEFT_SHOULDER"], (0.02, -0.10, -0.16)),
+        (J["RIGHT_SHOULDER"], (0.02, 0.10, -0.16)),
+        0.10,
+    ),
+    (
+        "torso",
+        "shoulders",
+        (J["LEFT_SHOULDER"], (0.0, 0.0, -0.02)),
+        (J["RIGHT_SHOULDER"], (0.0, 0.0, -0.02)),
+        0.055,
+    ),
     ("head", "neck", (J["NECK"], (0.0, 0.0, 0.0)), (J["HEAD"], (0.0, 0.0, -0.08)), 0.05),
     ("head", "skull", (J["HEAD"], (0.01, 0.0, 0.02)), (J["HEAD"], (0.01, 0.0, 0.02)), 0.10),
-    ("upper_arm_r", "upper_arm_r", (J["RIGHT_SHOULDER"], (0, 0, 0)), (J["RIGHT_ELBOW"], (0, 0, 0)), 0.045),
+    (
+        "upper_arm_r",
+        "upper_arm_r",
+        (J["RIGHT_SHOULDER"], (0, 0, 0)),
+        (J["RIGHT_ELBOW"], (0, 0, 0)),
+        0.045,
+    ),
     ("forearm_r", "forearm_r", (J["RIGHT_ELBOW"], (0, 0, 0)), (J["RIGHT_WRIST"], (0, 0, 0)), 0.037),
     ("hand_r", "hand_r", (J["RIGHT_WRIST"], (0, 0, 0)), (GRIP, (0, 0, 0)), 0.035),
-    ("upper_arm_l", "upper_arm_l", (J["LEFT_SHOULDER"], (0, 0, 0)), (J["LEFT_ELBOW"], (0, 0, 0)), 0.045),
+    (
+        "upper_arm_l",
+        "upper_arm_l",
+        (J["LEFT_SHOULDER"], (0, 0, 0)),
+        (J["LEFT_ELBOW"], (0, 0, 0)),
+        0.045,
+    ),
     ("forearm_l", "forearm_l", (J["LEFT_ELBOW"], (0, 0, 0)), (J["LEFT_WRIST"], (0, 0, 0)), 0.037),
     ("hand_l", "hand_l", (J["LEFT_WRIST"], (0, 0, 0)), (GRIP, (0, 0, 0)), 0.035),
     ("thigh_r", "thigh_r", (J["RIGHT_HIP"], (0, 0, 0)), (J["RIGHT_KNEE"], (0, 0, 0)), 0.07),
-    ("shank_r", "shank_r", (J["RIGHT_KNEE"], (0, 0, 0)), (J["RIGHT_ANKLE"], (0, 0, -FOOT_DROP)), 0.05),
-    ("shank_r", "foot_r", (J["RIGHT_ANKLE"], (0, 0, -FOOT_DROP)), (J["RIGHT_FOOT"], (0, 0, -FOOT_DROP)),
-     0.035),
+    (
+        "shank_r",
+        "shank_r",
+        (J["RIGHT_KNEE"], (0, 0, 0)),
+        (J["RIGHT_ANKLE"], (0, 0, -FOOT_DROP)),
+        0.05,
+    ),
+    (
+        "shank_r",
+        "foot_r",
+        (J["RIGHT_ANKLE"], (0, 0, -FOOT_DROP)),
+        (J["RIGHT_FOOT"], (0, 0, -FOOT_DROP)),
+        0.035,
+    ),
     ("thigh_l", "thigh_l", (J["LEFT_HIP"], (0, 0, 0)), (J["LEFT_KNEE"], (0, 0, 0)), 0.07),
-    ("shank_l", "shank_l", (J["LEFT_KNEE"], (0, 0, 0)), (J["LEFT_ANKLE"], (0, 0, -FOOT_DROP)), 0.05),
-    ("shank_l", "foot_l", (J["LEFT_ANKLE"], (0, 0, -FOOT_DROP)), (J["LEFT_FOOT"], (0, 0, -FOOT_DROP)),
-     0.035),
+    (
+        "shank_l",
+        "shank_l",
+        (J["LEFT_KNEE"], (0, 0, 0)),
+        (J["LEFT_ANKLE"], (0, 0, -FOOT_DROP)),
+        0.05,
+    ),
+    (
+        "shank_l",
+        "foot_l",
+        (J["LEFT_ANKLE"], (0, 0, -FOOT_DROP)),
+        (J["LEFT_FOOT"], (0, 0, -FOOT_DROP)),
+        0.035,
+    ),
 )
 GEOM_NAMES = tuple(g[1] for g in _GEOMS)
 #: Calibration of the weld stiffness: measured quasi-static stiffness / target is 1 with this
@@ -132,12 +188,30 @@ GEOM_NAMES = tuple(g[1] for g in _GEOMS)
 #: forearm chain, about 1.1 kN/m however weak their own weld, so their gain is left out of
 #: :func:`calibrate_weld_gains` (measured 1.09 and 1.15 kN/m for the right and left arm).
 WELD_GAIN = {
-    "pelvis": 0.0952, "torso": 0.1288, "head": 0.2725, "upper_arm_r": 0.0255, "forearm_r": 0.1054,
-    "hand_r": 0.1492, "upper_arm_l": 0.0255, "forearm_l": 0.1054, "hand_l": 0.1492, "thigh_r": 0.2168,
-    "shank_r": 0.2744, "thigh_l": 0.2168, "shank_l": 0.2744,
+    "pelvis": 0.0952,
+    "torso": 0.1288,
+    "head": 0.2725,
+    "upper_arm_r": 0.0255,
+    "forearm_r": 0.1054,
+    "hand_r": 0.1492,
+    "upper_arm_l": 0.0255,
+    "forearm_l": 0.1054,
+    "hand_l": 0.1492,
+    "thigh_r": 0.2168,
+    "shank_r": 0.2744,
+    "thigh_l": 0.2168,
+    "shank_l": 0.2744,
 }
-_MATERIALS = {"pelvis": "trousers", "thigh_r": "trousers", "thigh_l": "trousers", "shank_r": "trousers",
-              "shank_l": "trousers", "head": "skin", "hand_r": "skin", "hand_l": "skin"}
+_MATERIALS = {
+    "pelvis": "trousers",
+    "thigh_r": "trousers",
+    "thigh_l": "trousers",
+    "shank_r": "trousers",
+    "shank_l": "trousers",
+    "head": "skin",
+    "hand_r": "skin",
+    "hand_l": "skin",
+}
 
 
 def segment_mass(name: str, height: float) -> float:
@@ -221,7 +295,8 @@ def _geometry(dims: BodyDims) -> _Geometry:
 
 def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: int = 2,
                  conaffinity: int = 1) -> None:
-    """Add the receiver's segments, their mocap targets and welds to ``world`` (rest pose at origin).
+    """Add the receiver's segments, their mocap targets and welds to ``world`` (rest pose at
+    origin).
 
     Args:
         world: the scene spec.
@@ -239,8 +314,12 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
         if s.parent < 0:
             body.add_freejoint(name=PREFIX + "root")
         else:
-            body.add_joint(name=PREFIX + s.name + "_ball", type=mujoco.mjtJoint.mjJNT_BALL, damping=0.5,
-                           armature=0.01)
+            body.add_joint(
+                name=PREFIX + s.name + "_ball",
+                type=mujoco.mjtJoint.mjJNT_BALL,
+                damping=0.5,
+                armature=0.01,
+            )
         bodies.append(body)
     seg_vol = np.zeros(N_SEGMENTS)
     for i, _, _, half, r in geo.geoms:
@@ -249,18 +328,29 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
         seg = SEGMENTS[i].name
         vol = math.pi * r * r * 2 * half + 4.0 / 3.0 * math.pi * r**3
         kind = mujoco.mjtGeom.mjGEOM_SPHERE if half < 1e-9 else mujoco.mjtGeom.mjGEOM_CAPSULE
-        bodies[i].add_geom(name=PREFIX + name, type=kind, pos=pos.tolist(), quat=quat.tolist(),
-                           size=[r, max(half, 1e-6), 0.0], contype=contype, conaffinity=conaffinity,
-                           mass=float(geo.mass[i] * vol / seg_vol[i]), material=_MATERIALS.get(seg, "shirt"),
-                           solref=[contact_timeconst(i), 1.0], solimp=list(CONTACT_SOLIMP),
-                           solmix=CONTACT_SOLMIX)
+        bodies[i].add_geom(
+            name=PREFIX + name,
+            type=kind,
+            pos=pos.tolist(),
+            quat=quat.tolist(),
+            size=[r, max(half, 1e-6), 0.0],
+            contype=contype,
+            conaffinity=conaffinity,
+            mass=float(geo.mass[i] * vol / seg_vol[i]),
+            material=_MATERIALS.get(seg, "shirt"),
+            solref=[contact_timeconst(i), 1.0],
+            solimp=list(CONTACT_SOLIMP),
+            solmix=CONTACT_SOLMIX,
+        )
     # The right hand's grip point: where it holds the object.
     hand = SEG["hand_r"]
     bodies[hand].add_site(name=PREFIX + "grip_r", pos=dims.grip("r").tolist(),
                           size=[0.01, 0.01, 0.01], group=4)
     rest = np.zeros((N_SEGMENTS, 3))
     for i, s in enumerate(SEGMENTS):
-        rest[i] = (np.array([*PARK_XY, dims.pelvis_z]) if s.parent < 0 else rest[s.parent] + offsets[i])
+        rest[i] = (
+            np.array([*PARK_XY, dims.pelvis_z]) if s.parent < 0 else rest[s.parent] + offsets[i]
+        )
         world.worldbody.add_body(name=PREFIX + "target_" + s.name, mocap=True, pos=rest[i].tolist())
         k, b = weld_solref(i, dims.height)
         com = geo.com[i].tolist()
@@ -297,7 +387,8 @@ class BodyIds:
         grip_site: site id of the right hand's grip point.
         root_qpos, root_dof: address of the pelvis free joint in qpos / qvel.
         dofs: slice of all the receiver's dofs in qvel.
-        ball_qpos: (S,) qpos address of each segment's ball joint (pelvis: its free joint's quaternion).
+        ball_qpos: (S,) qpos address of each segment's ball joint (pelvis: its free joint's
+            quaternion).
         inertia0: (S, 3) principal inertias of the compiled (template) body.
     """
 
@@ -324,7 +415,9 @@ def body_ids(model: mujoco.MjModel) -> BodyIds:
 
     B = mujoco.mjtObj.mjOBJ_BODY
     bodies = np.array([nid(B, s.name) for s in SEGMENTS], dtype=np.int64)
-    mocap = np.array([model.body_mocapid[nid(B, "target_" + s.name)] for s in SEGMENTS], dtype=np.int64)
+    mocap = np.array(
+        [model.body_mocapid[nid(B, "target_" + s.name)] for s in SEGMENTS], dtype=np.int64
+    )
     if not np.all(np.diff(mocap) == 1):
         raise RuntimeError("receiver mocap targets are not contiguous")
     geoms = np.array([nid(mujoco.mjtObj.mjOBJ_GEOM, n) for n in GEOM_NAMES], dtype=np.int64)
@@ -336,9 +429,13 @@ def body_ids(model: mujoco.MjModel) -> BodyIds:
     return BodyIds(
         bodies=bodies,
         mocap=slice(int(mocap[0]), int(mocap[-1]) + 1),
-        welds=np.array([nid(mujoco.mjtObj.mjOBJ_EQUALITY, "hold_" + s.name) for s in SEGMENTS], dtype=np.int64),
+        welds=np.array(
+            [nid(mujoco.mjtObj.mjOBJ_EQUALITY, "hold_" + s.name) for s in SEGMENTS], dtype=np.int64
+        ),
         geoms=geoms,
-        geom_segment=np.array([seg_of_body[int(model.geom_bodyid[g])] for g in geoms], dtype=np.int64),
+        geom_segment=np.array(
+            [seg_of_body[int(model.geom_bodyid[g])] for g in geoms], dtype=np.int64
+        ),
         grip_site=nid(mujoco.mjtObj.mjOBJ_SITE, "grip_r"),
         root_qpos=int(model.jnt_qposadr[root_joint]),
         root_dof=dof0,
@@ -445,7 +542,12 @@ def calibrate_weld_gains(iterations: int = 6) -> dict[str, float]:
                 continue
             k = 0.5 * sum(measure_stiffness(model, data, ids, i, axis=a) for a in (0, 1))
             gains[s.name] *= (target_stiffness(i) / k) ** 0.8
-    for left, right in (("upper_arm_l", "upper_arm_r"), ("forearm_l", "forearm_r"), ("hand_l", "hand_r"),
-                        ("thigh_l", "thigh_r"), ("shank_l", "shank_r")):
+    for left, right in (
+        ("upper_arm_l", "upper_arm_r"),
+        ("forearm_l", "forearm_r"),
+        ("hand_l", "hand_r"),
+        ("thigh_l", "thigh_r"),
+        ("shank_l", "shank_r"),
+    ):
         gains[left] = gains[right] = 0.5 * (gains[left] + gains[right])
     return {k: round(v, 4) for k, v in gains.items()}

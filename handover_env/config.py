@@ -1,4 +1,5 @@
-"""Handover parameters Theta = {K, B, t_f, f_r} (paper Sec. IV-B) with the paper's learned defaults."""
+"""Handover parameters Theta = {K, B, t_f, f_r} (paper Sec. IV-B) with the paper's learned
+defaults."""
 
 from __future__ import annotations
 
@@ -36,11 +37,17 @@ class HandoverParams:
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
-            if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, numbers.Real)
+                or not math.isfinite(value)
+            ):
                 raise ValueError(f"{name} must be a finite number, got {value!r}")
             object.__setattr__(self, name, float(value))
         if self.stiffness <= 0 or self.damping < 0:
-            raise ValueError(f"need stiffness > 0 and damping >= 0, got K={self.stiffness}, B={self.damping}")
+            raise ValueError(
+                f"need stiffness > 0 and damping >= 0, got K={self.stiffness}, B={self.damping}"
+            )
         if self.forecast_time < 0:
             raise ValueError(f"forecast_time must be >= 0, got {self.forecast_time}")
         if self.release_force <= 0:

@@ -14,7 +14,8 @@ We implement it as a torque controller, run every ``ticks`` physics steps on a g
   feed-forward ``Λ ẍ_d``; the measured acceleration is never differentiated. (The paper sets M to
   a constant "due to the system limitation"; on a torque-controlled arm the natural choice is Λ.)
 * **Rotation.** Fixed gains: ``Λ (ω_r² e_r + 2 ζ ω_r Δω)`` through the full 6x6 Λ, so the
-  rotational command does not push the TCP (``rot_omega``, ``rot_zeta``). The desired orientation keeps the
+  rotational command does not push the TCP (``rot_omega``, ``rot_zeta``). The desired orientation
+  keeps the
   gripper horizontal: its approach axis is ``(cos ψ, sin ψ, 0)`` and the finger axis vertical, so
   only the yaw ψ follows the target (paper Sec. IV-C).
 * **Torque.** ``τ = Jᵀ F + qfrc_bias + τ_payload + N τ_posture`` then clipped to the UR5e limits
@@ -78,13 +79,26 @@ class ControllerConfig:
     plan_ticks: int = 7
 
     def __post_init__(self) -> None:
-        vals = (self.rot_omega, self.rot_zeta, self.ref_omega, self.singular_damping,
-                self.posture_stiffness, self.posture_damping, self.max_linear_speed, self.max_linear_accel)
+        vals = (
+            self.rot_omega,
+            self.rot_zeta,
+            self.ref_omega,
+            self.singular_damping,
+            self.posture_stiffness,
+            self.posture_damping,
+            self.max_linear_speed,
+            self.max_linear_accel,
+        )
         if not all(math.isfinite(v) for v in vals):
             raise ValueError("ControllerConfig values must be finite")
         if self.ticks < 1 or self.plan_ticks < 1:
             raise ValueError(f"ticks must be >= 1, got {self.ticks}")
-        if min(vals) < 0 or self.ref_omega <= 0 or self.max_linear_speed <= 0 or self.max_linear_accel <= 0:
+        if (
+            min(vals) < 0
+            or self.ref_omega <= 0
+            or self.max_linear_speed <= 0
+            or self.max_linear_accel <= 0
+        ):
             raise ValueError("gains must be >= 0, ref_omega and max_linear_speed > 0")
 
 
@@ -141,7 +155,8 @@ def _rotation_error_map(rot_d: np.ndarray) -> np.ndarray:
 
 
 def _rotation_error_basis() -> np.ndarray:
-    """(3, 36): ``[1, cos ψ, sin ψ] @ basis`` is :func:`_rotation_error_map` of ``target_rotation(ψ)``.
+    """(3, 36): ``[1, cos ψ, sin ψ] @ basis`` is :func:`_rotation_error_map` of
+    ``target_rotation(ψ)``.
 
     ``target_rotation`` is linear in (cos ψ, sin ψ) and the error map is linear in R_d.
     """
@@ -180,8 +195,14 @@ class ImpedanceController:
     this size; numpy's ``dot`` with ``out=`` where a strided view is involved).
     """
 
-    def __init__(self, model: mujoco.MjModel, ids: SceneIds, params: HandoverParams,
-                 config: ControllerConfig | None = None, rest_qpos: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        ids: SceneIds,
+        params: HandoverParams,
+        config: ControllerConfig | None = None,
+        rest_qpos: np.ndarray | None = None,
+    ) -> None:
         self.model, self.ids = model, ids
         self.config = config or ControllerConfig()
         nv = model.nv
@@ -202,9 +223,14 @@ class ImpedanceController:
         # Jacobian are exactly zero and the products can run over all nv columns of the
         # contiguous buffers (MuJoCo's mju_* products have the lowest call overhead).
         arm = set(np.asarray(ids.arm_dof).tolist())
-        self._full_width = isinstance(self._dof, slice) and _chain_dofs(model, int(model.site_bodyid[ids.tcp_site])) <= arm
+        self._full_width = (
+            isinstance(self._dof, slice)
+            and _chain_dofs(model, int(model.site_bodyid[ids.tcp_site])) <= arm
+        )
         self._tau_full = np.zeros(nv)  # Jᵀ F over all dofs
-        self._tau_arm = self._tau_full[self._dof] if isinstance(self._dof, slice) else None  # a view
+        self._tau_arm = (
+            self._tau_full[self._dof] if isinstance(self._dof, slice) else None
+        )  # a view
         self._minv_jt = np.zeros((6, nv))
         self._x_minv = self._minv_jt[:, self._dof]
         self._lam_inv = np.zeros((6, 6))
@@ -251,12 +277,16 @@ class ImpedanceController:
         self.dt = model.opt.timestep * self.config.ticks
         self._inv_dt = 1.0 / self.dt
         w = self.config.ref_omega
-        self._max_step = min(self.config.max_linear_speed * math.e / w, self.config.max_linear_accel / w**2)
+        self._max_step = min(
+            self.config.max_linear_speed * math.e / w, self.config.max_linear_accel / w**2
+        )
         # Discrete critically damped filter on e = x_d - target: [e, v]_{k+1} = A [e, v]_k
         # (semi-implicit Euler), a_k = -w^2 e_k - 2 w v_k evaluated before the update.
         w, dt = self.config.ref_omega, self.dt
         acc = np.array([-w * w, -2.0 * w])
-        step = np.array([[1.0 + dt * dt * acc[0], dt + dt * dt * acc[1]], [dt * acc[0], 1.0 + dt * acc[1]]])
+        step = np.array(
+            [[1.0 + dt * dt * acc[0], dt + dt * dt * acc[1]], [dt * acc[0], 1.0 + dt * acc[1]]]
+        )
         rows, state = [], np.eye(2)
         for _ in range(n):
             a_row = acc @ state
@@ -398,7 +428,9 @@ class ImpedanceController:
         yaw_t = self.target_yaw
         dyaw = (self.yaw_d - yaw_t + math.pi) % (2 * math.pi) - math.pi
         v0, v1, v2 = self.v_d.tolist()
-        s0 = np.array(((x0 - t0, x1 - t1, x2 - t2, dyaw), (v0, v1, v2, self.yaw_rate_d), (t0, t1, t2, yaw_t)))
+        s0 = np.array(
+            ((x0 - t0, x1 - t1, x2 - t2, dyaw), (v0, v1, v2, self.yaw_rate_d), (t0, t1, t2, yaw_t))
+        )
         # (n, 3 rows: x_d, v, a; 4 columns: x, y, z, yaw)
         mujoco.mju_mulMatMat(self._traj_rows, self._powers_rows, s0)
         cs = self._cs
@@ -516,8 +548,16 @@ class ImpedanceController:
         return self.last_torque
 
 
-def inverse_kinematics(model: mujoco.MjModel, data: mujoco.MjData, ids: SceneIds, pos: np.ndarray,
-                       yaw: float, q0: np.ndarray, iters: int = 200, tol: float = 1e-5) -> np.ndarray:
+def inverse_kinematics(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    ids: SceneIds,
+    pos: np.ndarray,
+    yaw: float,
+    q0: np.ndarray,
+    iters: int = 200,
+    tol: float = 1e-5,
+) -> np.ndarray:
     """Damped least-squares IK for the TCP pose (pos, horizontal gripper at ``yaw``).
 
     Works on ``data`` (use a scratch ``MjData``); returns the 6 arm joint angles.
@@ -537,10 +577,15 @@ def inverse_kinematics(model: mujoco.MjModel, data: mujoco.MjData, ids: SceneIds
         x = data.site_xpos[ids.tcp_site]
         r_err = rot_d @ data.site_xmat[ids.tcp_site].reshape(3, 3).T
         err[:3] = pos - x
-        err[3:] = 0.5 * np.array([r_err[2, 1] - r_err[1, 2], r_err[0, 2] - r_err[2, 0], r_err[1, 0] - r_err[0, 1]])
+        err[3:] = 0.5 * np.array(
+            [r_err[2, 1] - r_err[1, 2], r_err[0, 2] - r_err[2, 0], r_err[1, 0] - r_err[0, 1]]
+        )
         if np.linalg.norm(err) < tol:
             return q
         mujoco.mj_jacSite(model, data, jac[:3], jac[3:], ids.tcp_site)
         j = jac[:, ids.arm_dof]
         q = q + j.T @ np.linalg.solve(j @ j.T + 1e-4 * np.eye(6), err)
-    raise ValueError(f"IK did not converge to pos={pos.tolist()}, yaw={yaw:.3f} (residual {np.linalg.norm(err):.2e})")
+    raise ValueError(
+        f"IK did not converge to pos={pos.tolist()}, yaw={yaw:.3f} (residual "
+        f"{np.linalg.norm(err):.2e})"
+    )

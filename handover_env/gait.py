@@ -50,7 +50,13 @@ def _rot_y(angle: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotation about the body's lateral (y, left) axis; positive tips z toward x."""
     c, s = np.cos(angle), np.sin(angle)
     out = np.zeros(np.shape(angle) + (3, 3))
-    out[..., 0, 0], out[..., 0, 2], out[..., 1, 1], out[..., 2, 0], out[..., 2, 2] = c, s, 1.0, -s, c
+    out[..., 0, 0], out[..., 0, 2], out[..., 1, 1], out[..., 2, 0], out[..., 2, 2] = (
+        c,
+        s,
+        1.0,
+        -s,
+        c,
+    )
     return out
 
 
@@ -61,7 +67,9 @@ def walking_pose(traj: BaseTrajectory, dims: BodyDims) -> BodyPose:
     """
     phase = np.asarray(traj.gait_phase, dtype=np.float64)
     n = phase.shape[0]
-    speed = np.linalg.norm(np.gradient(traj.xy, axis=0), axis=1) / max(float(np.median(np.diff(traj.t))), 1e-9)
+    speed = np.linalg.norm(np.gradient(traj.xy, axis=0), axis=1) / max(
+        float(np.median(np.diff(traj.t))), 1e-9
+    )
     moving = np.clip(speed / 0.5, 0.0, 1.0)  # no swing while standing (paused walkers)
     base = yaw_matrix(traj.heading)  # body x forward along the walking direction
     rot = np.empty((n, len(SEGMENTS), 3, 3))
@@ -85,7 +93,9 @@ def walking_pose(traj: BaseTrajectory, dims: BodyDims) -> BodyPose:
         rot[:, SEG["forearm_" + side]] = fore
         rot[:, SEG["hand_" + side]] = fore
     pelvis = np.concatenate(
-        [traj.xy, (dims.pelvis_z + BOB_AMPLITUDE * (np.cos(2.0 * phase) * moving - 1.0))[:, None]], axis=1)
+        [traj.xy, (dims.pelvis_z + BOB_AMPLITUDE * (np.cos(2.0 * phase) * moving - 1.0))[:, None]],
+        axis=1,
+    )
     return BodyPose(origin=forward_kinematics(pelvis, rot, dims), rot=rot)
 
 
@@ -120,7 +130,9 @@ def arm_pose(shoulder: np.ndarray, torso_rot: np.ndarray, grip: np.ndarray, dims
         rest_lower = grip_local + rest_fore  # elbow -> grip with a straight wrist
         end = grip
     else:
-        hand_dir = np.asarray(hand_dir, dtype=np.float64) / max(float(np.linalg.norm(hand_dir)), 1e-9)
+        hand_dir = np.asarray(hand_dir, dtype=np.float64) / max(
+            float(np.linalg.norm(hand_dir)), 1e-9
+        )
         rest_lower = rest_fore
         end = grip - float(np.linalg.norm(grip_local)) * hand_dir  # the wrist
     l1, l2 = float(np.linalg.norm(rest_upper)), float(np.linalg.norm(rest_lower))

@@ -42,19 +42,23 @@ def check_replaceable_root(path: str | os.PathLike) -> Path:
         raise UnsafePathError(f"refusing to replace {text!r}: it is {resolved}")
     for protected, what in ((home, "the home folder"), (cwd, "the current folder")):
         if resolved == protected or protected.is_relative_to(resolved):
-            raise UnsafePathError(f"refusing to replace {text!r}: it is or holds {what} ({protected})")
+            raise UnsafePathError(
+                f"refusing to replace {text!r}: it is or holds {what} ({protected})"
+            )
     return p
 
 
 def new_file_mode() -> int:
-    """The mode ``open()`` would give a new file under the current umask (temporary files get 0600)."""
+    """The mode ``open()`` would give a new file under the current umask (temporary files get
+    0600)."""
     umask = os.umask(0)
     os.umask(umask)
     return 0o666 & ~umask
 
 
 def sibling(path: Path, kind: str) -> Path:
-    """A fresh hidden sibling of ``path`` for a temporary (``partial``) or outgoing (``old``) folder."""
+    """A fresh hidden sibling of ``path`` for a temporary (``partial``) or outgoing (``old``)
+    folder."""
     return path.with_name(f".{path.name}.{kind}-{os.getpid()}-{os.urandom(4).hex()}")
 
 

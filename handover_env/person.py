@@ -88,7 +88,9 @@ class PersonMotion:
             raise ValueError("a motion needs at least 2 frames")
         for name in ("quat", "camera_xy", "heading", "arm_swing", "speed"):
             if getattr(self, name).shape[0] != n:
-                raise ValueError(f"PersonMotion.{name} has {getattr(self, name).shape[0]} frames, expected {n}")
+                raise ValueError(
+                    f"PersonMotion.{name} has {getattr(self, name).shape[0]} frames, expected {n}"
+                )
 
     @property
     def frames(self) -> int:
@@ -216,7 +218,10 @@ def recorded_motion(source: Any, height: float | None = None) -> PersonMotion:
     if skeleton is not None:
         joints = np.asarray(skeleton, dtype=np.float64)
         if joints.shape != (raw_xy.shape[0], 34, 3):
-            raise ValueError(f"replay receiver_pose must have shape ({raw_xy.shape[0]}, 34, 3), got {joints.shape}")
+            raise ValueError(
+                f"replay receiver_pose must have shape ({raw_xy.shape[0]}, 34, 3), got "
+                f"{joints.shape}"
+            )
         if not np.all(np.isfinite(joints)):
             raise ValueError("replay receiver_pose contains NaN or inf")
         joints = smooth_track(joints, RATE)
@@ -231,7 +236,9 @@ def recorded_motion(source: Any, height: float | None = None) -> PersonMotion:
     xy = smooth_track(raw_xy, RATE)
     heading = _heading(xy)
     pose = walking_pose(_gait_track(xy, heading, dims.height), dims)
-    return _from_pose(pose, dims, raw_xy, heading, _arm_swing(pose), kind="replay", source_id=source_id)
+    return _from_pose(
+        pose, dims, raw_xy, heading, _arm_swing(pose), kind="replay", source_id=source_id
+    )
 
 
 def resample(motion: PersonMotion, tau: np.ndarray) -> PersonMotion:

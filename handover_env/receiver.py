@@ -207,10 +207,14 @@ class Receiver:
         config: behaviour settings.
     """
 
-    def __init__(self, model: mujoco.MjModel, ids: SceneIds, config: ReceiverConfig | None = None) -> None:
+    def __init__(
+        self, model: mujoco.MjModel, ids: SceneIds, config: ReceiverConfig | None = None
+    ) -> None:
         self.model, self.ids, self.body = model, ids, ids.body
         self.config = config or ReceiverConfig()
-        self.grip = ArmGrip(model, int(ids.body.bodies[SEG["hand_r"]]), ids.body.grip_site, ids.object_body)
+        self.grip = ArmGrip(
+            model, int(ids.body.bodies[SEG["hand_r"]]), ids.body.grip_site, ids.object_body
+        )
         self._v6 = np.zeros(6)
         self.motion: PersonMotion | None = None
         self.kind, self.source_id, self.hand_mode = "id", "", "reach"
@@ -245,7 +249,9 @@ class Receiver:
             raise ValueError(f"speed must be in [0.1, 2.5] m/s, got {speed}")
         if kind == "replay":
             if episode is None:
-                raise ValueError("receiver='replay' needs options['episode'] (a Recording, Episode or dict)")
+                raise ValueError(
+                    "receiver='replay' needs options['episode'] (a Recording, Episode or dict)"
+                )
             motion = recorded_motion(episode, height)
             if hand_mode == "recorded" and not motion.has_skeleton:
                 raise ValueError("hand_mode='recorded' needs the recorded skeleton (a Recording or "
@@ -267,13 +273,20 @@ class Receiver:
         dims = motion.dims
         self._shoulder_local = dims.local(J["RIGHT_SHOULDER"], SEG["torso"])
         self._grip_local = dims.grip("r")
-        self._arm_reach = float(np.linalg.norm(dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"]))
-                                + np.linalg.norm(dims.grip("r") + dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])))
+        self._arm_reach = float(
+            np.linalg.norm(dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"]))
+            + np.linalg.norm(dims.grip("r") + dims.local(J["RIGHT_WRIST"], SEG["forearm_r"]))
+        )
         # Arm length as the recordings measure it (shoulder-elbow-wrist-hand joints) sets the
         # comfortable distance; the trunk's turn adds to the straight arm's reach.
-        arm_length = sum(float(np.linalg.norm(dims.joints[j] - dims.joints[J[p]]))
-                         for j, p in ((J["RIGHT_ELBOW"], "RIGHT_SHOULDER"), (J["RIGHT_WRIST"], "RIGHT_ELBOW"),
-                                      (J["RIGHT_HAND"], "RIGHT_WRIST")))
+        arm_length = sum(
+            float(np.linalg.norm(dims.joints[j] - dims.joints[J[p]]))
+            for j, p in (
+                (J["RIGHT_ELBOW"], "RIGHT_SHOULDER"),
+                (J["RIGHT_WRIST"], "RIGHT_ELBOW"),
+                (J["RIGHT_HAND"], "RIGHT_WRIST"),
+            )
+        )
         self._comfort = self.config.comfort_fraction * arm_length
         self._max_reach = (STRAIGHT_ARM * self._arm_reach
                            + float(np.linalg.norm(self._shoulder_local)) * math.sin(TRUNK_MAX_TURN))
@@ -389,7 +402,9 @@ class Receiver:
         self._gripper = None if gripper_pos is None else np.asarray(gripper_pos, dtype=np.float64)
         if self._gripper is not None and self.state == "holding" and released and not self._clear:
             self._clear = float(np.linalg.norm(object_pos - self._gripper)) > CLEAR_OF_GRIPPER
-        self._gripper_axis = None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
+        self._gripper_axis = (
+            None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
+        )
         self._object_axis = object_rot[:, 2].copy()
         grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
         # ---- how fast to walk on
@@ -419,7 +434,9 @@ class Receiver:
         u = np.array([math.cos(h), math.sin(h), 0.0])
         return shoulder, u, float(self._interp(m.speed, tau)) * self.rho
 
-    def _meeting(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> tuple[float, float, float]:
+    def _meeting(
+        self, grasp_point: np.ndarray, object_vel: np.ndarray
+    ) -> tuple[float, float, float]:
         """Where the object is along the person's walk and when they would meet it.
 
         Returns:
@@ -463,12 +480,16 @@ class Receiver:
                 self._pass(t)
             elif t_meet <= cfg.reach_lead_time and dist <= self._max_reach:
                 self._begin_reach(t, cfg.reach_duration)
-        elif self.state == "walking" and self.hand_mode == "recorded" and not self.present_after_walk:
+        elif (
+            self.state == "walking" and self.hand_mode == "recorded" and not self.present_after_walk
+        ):
             grip = self._recorded_grip(self.tau)
             centre = grasp_point - self._object_axis * (self._grasp_side * cfg.grasp_offset)
             if np.linalg.norm(grip - centre) <= cfg.close_radius:
                 # Close on the part of the object the hand comes from (its top or its bottom).
-                self._grasp_side = 1.0 if float((grip - centre) @ self._object_axis) >= 0.0 else -1.0
+                self._grasp_side = (
+                    1.0 if float((grip - centre) @ self._object_axis) >= 0.0 else -1.0
+                )
                 self._begin_reach(t, cfg.close_time)
         elif self.state == "walking" and self.present_after_walk and self.at_rest:
             self.state = "presenting"
@@ -477,7 +498,10 @@ class Receiver:
         elif self.state == "presenting" and t >= self._hand_goal_time:
             self.state = "presented"
             self.t_hand_raised = t
-        elif self.state == "presented" and np.linalg.norm(self._hand[0] - grasp_point) <= cfg.present_reach:
+        elif (
+            self.state == "presented"
+            and np.linalg.norm(self._hand[0] - grasp_point) <= cfg.present_reach
+        ):
             self._begin_reach(t, cfg.close_time)
         elif self.state == "reaching" and self.hand_mode == "reach" and not self.present_after_walk:
             fwd, _, dist = self._meeting(grasp_point, object_vel)
@@ -536,7 +560,9 @@ class Receiver:
         rot = _quat_to_mat(q / np.linalg.norm(q))
         return self._interp(m.origin[:, SEG["hand_r"]], tau) + rot @ self._grip_local
 
-    def _hand_target(self, tau: float, grasp: tuple[np.ndarray, np.ndarray, float] | None) -> np.ndarray | None:
+    def _hand_target(
+        self, tau: float, grasp: tuple[np.ndarray, np.ndarray, float] | None
+    ) -> np.ndarray | None:
         """Advance the modelled hand one env step; None when the arm follows the nominal motion."""
         cfg = self.config
         state = self.state
@@ -580,7 +606,9 @@ class Receiver:
             pelvis, rot, vel = self._pelvis(tau)
             pull = self._hold_rel.copy()
             reach = float(np.linalg.norm(pull[:2]))
-            pull[:2] *= max(reach - cfg.pull_distance, min(reach, CARRY_CLEARANCE)) / max(reach, 1e-6)
+            pull[:2] *= max(reach - cfg.pull_distance, min(reach, CARRY_CLEARANCE)) / max(
+                reach, 1e-6
+            )
             goal, goal_v = pelvis + rot @ pull, vel
         elif state == "holding":
             swing = self._swing_hand(tau)
@@ -638,7 +666,11 @@ class Receiver:
             shoulder = origin[SEG["torso"]] + torso @ self._shoulder_local
             elbow = shoulder + arm[0] @ dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"])
             wrist = elbow + arm[1] @ dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])
-            origin[RIGHT_ARM[0]], origin[RIGHT_ARM[1]], origin[RIGHT_ARM[2]] = shoulder, elbow, wrist
+            origin[RIGHT_ARM[0]], origin[RIGHT_ARM[1]], origin[RIGHT_ARM[2]] = (
+                shoulder,
+                elbow,
+                wrist,
+            )
         return origin, quat
 
     def _lean_toward(self, origin: np.ndarray, quat: np.ndarray, hand: np.ndarray) -> None:
@@ -725,7 +757,9 @@ class Receiver:
     def grasp_point(self, data: mujoco.MjData) -> np.ndarray:
         """Where the hand holds the object: on its axis, ``grasp_offset`` from its centre."""
         ob = self.ids.object_body
-        return data.xpos[ob] + data.xmat[ob].reshape(3, 3)[:, 2] * (self._grasp_side * self.config.grasp_offset)
+        return data.xpos[ob] + data.xmat[ob].reshape(3, 3)[:, 2] * (
+            self._grasp_side * self.config.grasp_offset
+        )
 
     @property
     def holding(self) -> bool:
@@ -752,14 +786,18 @@ class Receiver:
         self.t_grasp = float(data.time)
         self.grasp_pelvis_xy = data.xpos[self.body.bodies[0], :2].copy()
         pelvis, rot, _ = self._pelvis(self.tau)
-        self._hold_rel = rot.T @ (self._hand[0] - pelvis) if self._hand is not None else rot.T @ (grip - pelvis)
+        self._hold_rel = (
+            rot.T @ (self._hand[0] - pelvis) if self._hand is not None else rot.T @ (grip - pelvis)
+        )
         self._hand_goal_time = self.t_grasp + self.config.hold_time + self.config.pull_time
         return True
 
     # ------------------------------------------------------------------ effort
     def _track_effort(self, data: mujoco.MjData, dt: float) -> None:
         b = self.body
-        if self.state in ("reaching", "presenting", "presented") or (self.state == "holding" and not self._released):
+        if self.state in ("reaching", "presenting", "presented") or (
+            self.state == "holding" and not self._released
+        ):
             self.arm_out_time += dt
             shoulder = data.xpos[b.bodies[RIGHT_ARM[0]]]
             grip = data.site_xpos[b.grip_site]

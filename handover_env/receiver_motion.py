@@ -506,7 +506,8 @@ def _frame(heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def shoulder_position(
     base_xy: np.ndarray, heading: np.ndarray | float, height: np.ndarray | float
 ) -> np.ndarray:
-    """Right shoulder xyz (..., 3) for pelvis xy (..., 2), yaw (...) and body height (scalar or (...))."""
+    """Right shoulder xyz (..., 3) for pelvis xy (..., 2), yaw (...) and body height (scalar or
+    (...))."""
     base_xy = np.asarray(base_xy, dtype=np.float64)
     heading = np.asarray(heading, dtype=np.float64)
     height = np.asarray(height, dtype=np.float64)

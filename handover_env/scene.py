@@ -35,7 +35,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from handover_env.body_model import GEOM_NAMES, PREFIX as RECEIVER_PREFIX, BodyIds, add_receiver, body_ids
+from handover_env.body_model import GEOM_NAMES, BodyIds, add_receiver, body_ids
+from handover_env.body_model import PREFIX as RECEIVER_PREFIX
 from handover_env.menagerie import robotiq_2f85_xml, ur5e_xml
 
 ASSETS = Path(__file__).resolve().parent / "assets"
@@ -195,8 +196,14 @@ def scene_ids(model: mujoco.MjModel) -> SceneIds:
             raise KeyError(f"model has no {obj.name} named {name!r}")
         return i
 
-    J, A, S, B, G, E = (mujoco.mjtObj.mjOBJ_JOINT, mujoco.mjtObj.mjOBJ_ACTUATOR, mujoco.mjtObj.mjOBJ_SENSOR,
-                        mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_GEOM, mujoco.mjtObj.mjOBJ_EQUALITY)
+    J, A, S, B, G, E = (
+        mujoco.mjtObj.mjOBJ_JOINT,
+        mujoco.mjtObj.mjOBJ_ACTUATOR,
+        mujoco.mjtObj.mjOBJ_SENSOR,
+        mujoco.mjtObj.mjOBJ_BODY,
+        mujoco.mjtObj.mjOBJ_GEOM,
+        mujoco.mjtObj.mjOBJ_EQUALITY,
+    )
     joints = [nid(J, ARM_PREFIX + j) for j in ARM_JOINTS]
     acts = [nid(A, ARM_PREFIX + n) for n in
             ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")]
@@ -213,7 +220,9 @@ def scene_ids(model: mujoco.MjModel) -> SceneIds:
         arm_dof=model.jnt_dofadr[joints].astype(np.int64),
         arm_act=np.array(acts, dtype=np.int64),
         gripper_act=nid(A, ARM_PREFIX + GRIPPER_PREFIX + "fingers_actuator"),
-        gripper_driver_qpos=int(model.jnt_qposadr[nid(J, ARM_PREFIX + GRIPPER_PREFIX + "right_driver_joint")]),
+        gripper_driver_qpos=int(
+            model.jnt_qposadr[nid(J, ARM_PREFIX + GRIPPER_PREFIX + "right_driver_joint")]
+        ),
         tcp_site=nid(mujoco.mjtObj.mjOBJ_SITE, ARM_PREFIX + GRIPPER_PREFIX + "pinch"),
         ft_site=nid(mujoco.mjtObj.mjOBJ_SITE, ARM_PREFIX + GRIPPER_PREFIX + "ft_site"),
         ft_force_adr=int(model.sensor_adr[nid(S, ARM_PREFIX + GRIPPER_PREFIX + "ft_force")]),
@@ -261,7 +270,9 @@ def activate_weld(model: mujoco.MjModel, data: mujoco.MjData, eq_id: int, torque
     if zero_force:
         timeconst, dampratio = model.eq_solref[eq_id]
         if timeconst <= 0:
-            raise ValueError("zero_force needs a positive (timeconst, dampratio) solref on the weld")
+            raise ValueError(
+                "zero_force needs a positive (timeconst, dampratio) solref on the weld"
+            )
         v1, v2 = np.empty(6), np.empty(6)
         mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, b1, v1, 0)
         mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, b2, v2, 0)

@@ -152,7 +152,8 @@ class BodyDims:
         return out
 
     def local(self, joint: int, segment: int) -> np.ndarray:
-        """Rest position of BODY_34 ``joint`` in the frame of ``segment`` (relative to its origin)."""
+        """Rest position of BODY_34 ``joint`` in the frame of ``segment`` (relative to its
+        origin)."""
         return self.joints[joint] - self.joints[SEGMENTS[segment].origin]
 
     def grip(self, side: str = "r") -> np.ndarray:
@@ -235,15 +236,47 @@ def mat_to_quat(rot: np.ndarray) -> np.ndarray:
         return out.reshape(rot.shape[:-2] + (4,))
     m = rot
     tr = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
-    cands = np.stack([
-        np.stack([1 + tr, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1),
-        np.stack([m[..., 2, 1] - m[..., 1, 2], 1 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2],
-                  m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]], -1),
-        np.stack([m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0],
-                  1 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2], m[..., 1, 2] + m[..., 2, 1]], -1),
-        np.stack([m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1],
-                  1 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2]], -1),
-    ], axis=-2)
+    cands = np.stack(
+        [
+            np.stack(
+                [
+                    1 + tr,
+                    m[..., 2, 1] - m[..., 1, 2],
+                    m[..., 0, 2] - m[..., 2, 0],
+                    m[..., 1, 0] - m[..., 0, 1],
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    m[..., 2, 1] - m[..., 1, 2],
+                    1 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2],
+                    m[..., 0, 1] + m[..., 1, 0],
+                    m[..., 0, 2] + m[..., 2, 0],
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    m[..., 0, 2] - m[..., 2, 0],
+                    m[..., 0, 1] + m[..., 1, 0],
+                    1 - m[..., 0, 0] + m[..., 1, 1] - m[..., 2, 2],
+                    m[..., 1, 2] + m[..., 2, 1],
+                ],
+                -1,
+            ),
+            np.stack(
+                [
+                    m[..., 1, 0] - m[..., 0, 1],
+                    m[..., 0, 2] + m[..., 2, 0],
+                    m[..., 1, 2] + m[..., 2, 1],
+                    1 - m[..., 0, 0] - m[..., 1, 1] + m[..., 2, 2],
+                ],
+                -1,
+            ),
+        ],
+        axis=-2,
+    )
     diag = np.stack([tr, m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]], axis=-1)
     best = np.argmax(diag, axis=-1)
     q = np.take_along_axis(cands, best[..., None, None], axis=-2)[..., 0, :]
@@ -309,11 +342,28 @@ def _joint_owner() -> np.ndarray:
         owner[s.origin] = i if s.parent < 0 else s.parent
         if s.tip >= 0:
             owner[s.tip] = i
-    extra = {"NOSE": "head", "LEFT_EYE": "head", "RIGHT_EYE": "head", "LEFT_EAR": "head", "RIGHT_EAR": "head",
-             "CHEST_SPINE": "torso", "LEFT_CLAVICLE": "torso", "RIGHT_CLAVICLE": "torso",
-             "LEFT_SHOULDER": "torso", "RIGHT_SHOULDER": "torso", "LEFT_HIP": "pelvis", "RIGHT_HIP": "pelvis",
-             "LEFT_HAND": "hand_l", "RIGHT_HAND": "hand_r", "LEFT_THUMB": "hand_l", "RIGHT_THUMB": "hand_r",
-             "LEFT_FOOT": "shank_l", "RIGHT_FOOT": "shank_r", "LEFT_HEEL": "shank_l", "RIGHT_HEEL": "shank_r"}
+    extra = {
+        "NOSE": "head",
+        "LEFT_EYE": "head",
+        "RIGHT_EYE": "head",
+        "LEFT_EAR": "head",
+        "RIGHT_EAR": "head",
+        "CHEST_SPINE": "torso",
+        "LEFT_CLAVICLE": "torso",
+        "RIGHT_CLAVICLE": "torso",
+        "LEFT_SHOULDER": "torso",
+        "RIGHT_SHOULDER": "torso",
+        "LEFT_HIP": "pelvis",
+        "RIGHT_HIP": "pelvis",
+        "LEFT_HAND": "hand_l",
+        "RIGHT_HAND": "hand_r",
+        "LEFT_THUMB": "hand_l",
+        "RIGHT_THUMB": "hand_r",
+        "LEFT_FOOT": "shank_l",
+        "RIGHT_FOOT": "shank_r",
+        "LEFT_HEEL": "shank_l",
+        "RIGHT_HEEL": "shank_r",
+    }
     for name, seg in extra.items():
         owner[J[name]] = SEG[seg]
     return owner
@@ -330,7 +380,9 @@ def joints_of(pose: BodyPose, dims: BodyDims) -> np.ndarray:
     """
     owner = JOINT_OWNER
     local = np.stack([dims.local(j, int(owner[j])) for j in range(N_JOINTS)])
-    return pose.origin[..., owner, :] + np.einsum("...jab,jb->...ja", pose.rot[..., owner, :, :], local)
+    return pose.origin[..., owner, :] + np.einsum(
+        "...jab,jb->...ja", pose.rot[..., owner, :, :], local
+    )
 
 
 def measure_dims(joints: np.ndarray, height: float | None = None) -> BodyDims:

@@ -1,4 +1,5 @@
-"""Evaluation: the open-loop RMS protocol every method shares (:mod:`.openloop`) and result tables."""
+"""Evaluation: the open-loop RMS protocol every method shares (:mod:`.openloop`) and result
+tables."""
 
 from handover_eval.openloop import (
     EpisodeRecord,

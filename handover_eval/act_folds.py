@@ -90,21 +90,32 @@ class ACTRun:
 
 
 def episode_indices(dataset: HandoverDataset, part: HandoverDataset) -> np.ndarray:
-    """Indices in ``dataset`` of the episodes of ``part`` (a ``subset`` / ``subsample`` of it), in order."""
+    """Indices in ``dataset`` of the episodes of ``part`` (a ``subset`` / ``subsample`` of it), in
+    order."""
     where = {id(ep): i for i, ep in enumerate(dataset.episodes)}
     try:
         return np.array([where[id(ep)] for ep in part.episodes], dtype=np.int64)
     except KeyError as exc:
-        raise ValueError("the training set holds episodes that are not in the dataset being exported") from exc
+        raise ValueError(
+            "the training set holds episodes that are not in the dataset being exported"
+        ) from exc
 
 
 def export_key(dataset: HandoverDataset, history: int, horizon: int) -> str:
     """Cache key of a whole-dataset export: dataset fingerprint, W, H and the export format."""
     from handover_env.data.lerobot_export import EXPORT_FORMAT
 
-    src = json.dumps({"train": dataset_fingerprint(dataset), "n": len(dataset), "history": int(history),
-                      "horizon": int(horizon), "rate_hz": float(dataset.rate_hz), "format": EXPORT_FORMAT},
-                     sort_keys=True)
+    src = json.dumps(
+        {
+            "train": dataset_fingerprint(dataset),
+            "n": len(dataset),
+            "history": int(history),
+            "horizon": int(horizon),
+            "rate_hz": float(dataset.rate_hz),
+            "format": EXPORT_FORMAT,
+        },
+        sort_keys=True,
+    )
     return hashlib.sha1(src.encode()).hexdigest()[:16]
 
 
@@ -175,12 +186,21 @@ def train_job(job: ACTJob) -> dict:
     folder = fresh_folder(job.folder)
     t0 = time.perf_counter()
     agent = ACTAgent(ACTAgentConfig.from_dict(job.config))
-    agent.fit_lerobot(job.export_root, out_dir=folder, episodes=np.asarray(job.episodes, dtype=np.int64),
-                      progress=job.progress)
+    agent.fit_lerobot(
+        job.export_root,
+        out_dir=folder,
+        episodes=np.asarray(job.episodes, dtype=np.int64),
+        progress=job.progress,
+    )
     agent.save(folder)
     mark_complete(folder, job.key_src)
-    return {"label": job.label, "folder": str(folder), "seconds": time.perf_counter() - t0,
-            "best_step": int(agent.train_log["best_step"]), "best_val": float(agent.train_log["best_val"])}
+    return {
+        "label": job.label,
+        "folder": str(folder),
+        "seconds": time.perf_counter() - t0,
+        "best_step": int(agent.train_log["best_step"]),
+        "best_val": float(agent.train_log["best_val"]),
+    }
 
 
 def pretrain_act(
@@ -194,7 +214,8 @@ def pretrain_act(
     progress: bool = True,
     log: Callable[[str], None] | None = None,
 ) -> list[ACTRun]:
-    """Train the ACT checkpoints of ``train_sets`` (episode indices of ``dataset``) before the fold loop.
+    """Train the ACT checkpoints of ``train_sets`` (episode indices of ``dataset``) before the fold
+    loop.
 
     Checkpoints already complete under ``cache_dir`` are kept when ``reuse``; the others are
     trained on the shared whole-dataset export, in ``workers`` spawned processes (default
@@ -224,18 +245,33 @@ def pretrain_act(
         todo[folder] = (label, idx, key_src)
     done: dict[Path, dict] = {}
     if todo:
-        export_root, _ = ensure_export(dataset, cache_dir, agent.config.history, agent.config.horizon, progress)
-        jobs = [ACTJob(label, config, tuple(int(i) for i in idx), str(folder), key_src, str(export_root))
-                for folder, (label, idx, key_src) in todo.items()]
+        export_root, _ = ensure_export(
+            dataset, cache_dir, agent.config.history, agent.config.horizon, progress
+        )
+        jobs = [
+            ACTJob(
+                label, config, tuple(int(i) for i in idx), str(folder), key_src, str(export_root)
+            )
+            for folder, (label, idx, key_src) in todo.items()
+        ]
         done = _run_jobs(jobs, workers, progress, log)
     return [
-        ACTRun(folder, True, done[folder]["seconds"], done[folder]["best_step"], done[folder]["best_val"])
-        if folder in done else ACTRun(folder, False)
+        ACTRun(
+            folder,
+            True,
+            done[folder]["seconds"],
+            done[folder]["best_step"],
+            done[folder]["best_val"],
+        )
+        if folder in done
+        else ACTRun(folder, False)
         for _, folder, _ in slots
     ]
 
 
-def _run_jobs(jobs: list[ACTJob], workers: int, progress: bool, log: Callable[[str], None] | None) -> dict[Path, dict]:
+def _run_jobs(
+    jobs: list[ACTJob], workers: int, progress: bool, log: Callable[[str], None] | None
+) -> dict[Path, dict]:
     """Run ``jobs`` (in this process for one worker, else in a spawn pool); results by folder."""
     n_proc = 1 if workers == 1 or len(jobs) == 1 else min(workers, len(jobs))
     bar = tqdm(total=len(jobs), desc=f"act x{n_proc}", unit="model", disable=not progress)
@@ -278,7 +314,9 @@ def _run_jobs(jobs: list[ACTJob], workers: int, progress: bool, log: Callable[[s
                 # done (or one failed), so nothing would be reported while the folds train
                 finished, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for fut in finished:
-                    if fut.exception() is not None:  # stop: queued jobs are dropped, running ones finish
+                    if (
+                        fut.exception() is not None
+                    ):  # stop: queued jobs are dropped, running ones finish
                         pool.shutdown(wait=True, cancel_futures=True)
                         raise fut.exception()
                     res = fut.result()

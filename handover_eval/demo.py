@@ -36,10 +36,13 @@ def _fmt(v: float | None, unit: str) -> str:
 
 
 def _line(label: str, info: dict, wall: float) -> str:
-    return (f"{label:16s} {info['outcome']:17s} handover time {_fmt(info['handover_time'], 's'):>7s}"
-            f"  release {_fmt(info['release_force'], 'N'):>7s}  reach {info['reach_distance']:.2f} m"
-            f"  arm out {info['arm_extended_time']:.2f} s  body contact {info['body_contact_force']:5.1f} N"
-            f"  ({wall:.1f} s wall)")
+    return (
+        f"{label:16s} {info['outcome']:17s} handover time {_fmt(info['handover_time'], 's'):>7s}"
+        f"  release {_fmt(info['release_force'], 'N'):>7s}  reach {info['reach_distance']:.2f} m"
+        f"  arm out {info['arm_extended_time']:.2f} s  body contact "
+        f"{info['body_contact_force']:5.1f} N"
+        f"  ({wall:.1f} s wall)"
+    )
 
 
 def _write_video(frames: list[np.ndarray], out: Path) -> list[Path]:
@@ -47,7 +50,9 @@ def _write_video(frames: list[np.ndarray], out: Path) -> list[Path]:
 
     out.mkdir(parents=True, exist_ok=True)
     video = out / "handover.mp4"
-    with imageio.get_writer(video, fps=VIDEO_FPS, codec="libx264", quality=7, macro_block_size=8) as w:
+    with imageio.get_writer(
+        video, fps=VIDEO_FPS, codec="libx264", quality=7, macro_block_size=8
+    ) as w:
         for frame in frames:
             w.append_data(frame)
     picks = [frames[int(k)] for k in np.linspace(len(frames) * 0.35, len(frames) - 1, 3)]
@@ -56,16 +61,22 @@ def _write_video(frames: list[np.ndarray], out: Path) -> list[Path]:
     return [video, still]
 
 
-def run(n_id: int = 3, n_ood: int = 2, out: Path = Path("outputs/demo"), render: bool = True) -> list[dict]:
+def run(
+    n_id: int = 3, n_ood: int = 2, out: Path = Path("outputs/demo"), render: bool = True
+) -> list[dict]:
     """Fit the planner on the synthetic default and run the episodes; returns their final infos."""
     start = time.perf_counter()
     agent = NonparametricAgent().fit(load_any(None))
-    print(f"fitted the SPGP planner on the synthetic default in {time.perf_counter() - start:.1f} s")
+    print(
+        f"fitted the SPGP planner on the synthetic default in {time.perf_counter() - start:.1f} s"
+    )
     env = gym.make("handover_env/DynamicHandover-v0", render_mode="rgb_array" if render else None,
                    width=640, height=360, camera="walkby")
     results: list[dict] = []
     frames: list[np.ndarray] = []
-    for k, (kind, seed) in enumerate([("id", s) for s in range(n_id)] + [("ood", 100 + s) for s in range(n_ood)]):
+    for k, (kind, seed) in enumerate(
+        [("id", s) for s in range(n_id)] + [("ood", 100 + s) for s in range(n_ood)]
+    ):
         record = render and k == 0
 
         def grab(_step: int, _info: dict) -> None:
@@ -97,10 +108,18 @@ def run(n_id: int = 3, n_ood: int = 2, out: Path = Path("outputs/demo"), render:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--episodes-id", type=int, default=3, help="seeded ID walkers for the planner (default 3)")
-    parser.add_argument("--episodes-ood", type=int, default=2, help="seeded OOD walkers for the planner (default 2)")
-    parser.add_argument("--out", type=Path, default=Path("outputs/demo"), help="where the mp4 and PNG go")
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--episodes-id", type=int, default=3, help="seeded ID walkers for the planner (default 3)"
+    )
+    parser.add_argument(
+        "--episodes-ood", type=int, default=2, help="seeded OOD walkers for the planner (default 2)"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=Path("outputs/demo"), help="where the mp4 and PNG go"
+    )
     parser.add_argument("--no-video", action="store_true", help="do not render (no mp4 / PNG)")
     args = parser.parse_args()
     if args.episodes_id < 1 or args.episodes_ood < 0:

@@ -3,9 +3,12 @@
     python evaluate.py table1 --data PATH --folds 10 --seed 0     # Table I: RMS (mm), ID / OOD
     python evaluate.py sample-efficiency --data PATH              # RMS vs training-data ratio
     python evaluate.py tradeoff --data PATH                       # RMS vs per-frame inference time
-    python evaluate.py closed-loop --data PATH                    # every agent with the simulated person
-    python evaluate.py theta-sweep --data PATH                    # does each of K, B, t_f, f_r matter?
-    python evaluate.py user-study --participants 8 --trials 5     # H1-H3 with simulated participants
+    python evaluate.py closed-loop --data PATH                    # every agent with the simulated
+    person
+    python evaluate.py theta-sweep --data PATH                    # does each of K, B, t_f, f_r
+    matter?
+    python evaluate.py user-study --participants 8 --trials 5     # H1-H3 with simulated
+    participants
 
 PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
 omitted for the embedded synthetic default. Every method is scored by the same open-loop protocol
@@ -41,61 +44,134 @@ QUICK_EPISODES = 30
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="evaluate.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="evaluate.py",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    def common(p: argparse.ArgumentParser, default_methods: tuple[str, ...], default_folds: int) -> None:
-        p.add_argument("--data", default=None, metavar="PATH",
-                       help="public-dataset folder (whole_motions/), canonical .npz, or omit for the synthetic default")
-        p.add_argument("--out", default=None, metavar="DIR",
-                       help="output folder (default: results/<command>, or results/<command>-quick with --quick)")
-        p.add_argument("--methods", nargs="+", default=list(default_methods), metavar="NAME",
-                       help=f"methods to run, any of {list(METHODS)} (default: {' '.join(default_methods)})")
+    def common(
+        p: argparse.ArgumentParser, default_methods: tuple[str, ...], default_folds: int
+    ) -> None:
+        p.add_argument(
+            "--data",
+            default=None,
+            metavar="PATH",
+            help="public-dataset folder (whole_motions/), canonical .npz, or omit for the "
+                 "synthetic default",
+        )
+        p.add_argument(
+            "--out",
+            default=None,
+            metavar="DIR",
+            help="output folder (default: results/<command>, or results/<command>-quick with "
+                 "--quick)",
+        )
+        p.add_argument(
+            "--methods",
+            nargs="+",
+            default=list(default_methods),
+            metavar="NAME",
+            help=f"methods to run, any of {list(METHODS)} (default: {' '.join(default_methods)})",
+        )
         p.add_argument("--folds", type=int, default=default_folds,
                        help=f"k of the stratified (ID/OOD) k-fold split (default: {default_folds})")
-        p.add_argument("--seed", type=int, default=0, help="seed of the fold split and of the learned baselines")
-        p.add_argument("--horizon", type=int, default=30, help="predicted frames per query, 30 = 1 s (default: 30)")
-        p.add_argument("--stride", type=int, default=1, help="frames between open-loop queries (default: 1 = every frame)")
+        p.add_argument(
+            "--seed",
+            type=int,
+            default=0,
+            help="seed of the fold split and of the learned baselines",
+        )
+        p.add_argument(
+            "--horizon",
+            type=int,
+            default=30,
+            help="predicted frames per query, 30 = 1 s (default: 30)",
+        )
+        p.add_argument(
+            "--stride",
+            type=int,
+            default=1,
+            help="frames between open-loop queries (default: 1 = every frame)",
+        )
         p.add_argument("--first-query", type=int, default=5,
                        help="frames of receiver history before the first query (default: 5)")
         p.add_argument("--inducing-ratio", type=float, default=0.4,
                        help="SPGP inducing ratio of 'ours' (paper: 0.4)")
-        p.add_argument("--act-steps", type=int, default=None,
-                       help=f"ACT optimisation steps (default: {ACT_EVAL_STEPS} for the k-fold evaluations, "
-                            f"{QUICK_ACT_STEPS} with --quick; train.py keeps the agent's own 8000)")
-        p.add_argument("--bc-epochs", type=int, default=None, help="BC-MLP maximum epochs (default: the BC-MLP agent's)")
-        p.add_argument("--giver-state", action="store_true",
-                       help="also give BC-MLP and ACT the giver's position at the query frame (observation.state); "
-                            "off by default, as in the paper, where every module sees the receiver base pose only")
-        p.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="processes that train ACT's fold models, and then run the folds (table1) or "
-                            "the fold x ratio cells (sample-efficiency), in parallel, one torch thread each "
-                            "(default: one per core, at most 2; 1 runs everything in this process); the "
-                            "results do not depend on it. tradeoff always times on one core")
-        p.add_argument("--no-reuse", action="store_true", help="retrain BC-MLP/ACT even if a matching checkpoint exists")
-        p.add_argument("--quick", action="store_true",
-                       help=f"small fast run for tests: {QUICK_EPISODES} episodes, 3 folds, query stride 3, "
-                            "tiny training budgets; never for reported numbers")
+        p.add_argument(
+            "--act-steps",
+            type=int,
+            default=None,
+            help=f"ACT optimisation steps (default: {ACT_EVAL_STEPS} for the k-fold evaluations, "
+            f"{QUICK_ACT_STEPS} with --quick; train.py keeps the agent's own 8000)",
+        )
+        p.add_argument(
+            "--bc-epochs",
+            type=int,
+            default=None,
+            help="BC-MLP maximum epochs (default: the BC-MLP agent's)",
+        )
+        p.add_argument(
+            "--giver-state",
+            action="store_true",
+            help="also give BC-MLP and ACT the giver's position at the query frame "
+                 "(observation.state); "
+            "off by default, as in the paper, where every module sees the receiver base pose only",
+        )
+        p.add_argument(
+            "--workers",
+            type=int,
+            default=None,
+            metavar="N",
+            help="processes that train ACT's fold models, and then run the folds (table1) or "
+            "the fold x ratio cells (sample-efficiency), in parallel, one torch thread each "
+            "(default: one per core, at most 2; 1 runs everything in this process); the "
+            "results do not depend on it. tradeoff always times on one core",
+        )
+        p.add_argument(
+            "--no-reuse",
+            action="store_true",
+            help="retrain BC-MLP/ACT even if a matching checkpoint exists",
+        )
+        p.add_argument(
+            "--quick",
+            action="store_true",
+            help=f"small fast run for tests: {QUICK_EPISODES} episodes, 3 folds, query stride 3, "
+            "tiny training budgets; never for reported numbers",
+        )
         p.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
-    p = sub.add_parser("table1", help="Table I: stratified k-fold RMS of every method, ID and OOD",
-                       description="Stratified k-fold open-loop RMS (mm) of BC-MLP, ACT, IAAL and ours; writes "
-                                   "table1.md (with the paper's numbers beside ours), table1.csv, per-fold and "
-                                   "per-episode CSVs.")
+    p = sub.add_parser(
+        "table1",
+        help="Table I: stratified k-fold RMS of every method, ID and OOD",
+        description="Stratified k-fold open-loop RMS (mm) of BC-MLP, ACT, IAAL and ours; writes "
+        "table1.md (with the paper's numbers beside ours), table1.csv, per-fold and "
+        "per-episode CSVs.",
+    )
     common(p, METHODS, 10)
-    p = sub.add_parser("sample-efficiency", help="RMS vs training-data ratio (PNG + CSV)",
-                       description="For each fold and data ratio, train on that stratified fraction of the "
-                                   "training folds and score the test fold; writes sample_efficiency.png/.csv.")
+    p = sub.add_parser(
+        "sample-efficiency",
+        help="RMS vs training-data ratio (PNG + CSV)",
+        description="For each fold and data ratio, train on that stratified fraction of the "
+        "training folds and score the test fold; writes sample_efficiency.png/.csv.",
+    )
     common(p, METHODS, 5)
     p.add_argument("--ratios", nargs="+", type=float, default=[0.1, 0.25, 0.5, 0.75, 1.0],
                    help="training-data ratios in (0, 1] (default: 0.1 0.25 0.5 0.75 1.0)")
-    p = sub.add_parser("tradeoff", help="RMS vs per-frame inference time, ours at several inducing rates and IAAL",
-                       description="k-fold RMS and the median per-frame streaming cost (update + predict, one "
-                                   "core, same run) of ours at each inducing rate and of IAAL; tradeoff.png/.csv.")
+    p = sub.add_parser(
+        "tradeoff",
+        help="RMS vs per-frame inference time, ours at several inducing rates and IAAL",
+        description="k-fold RMS and the median per-frame streaming cost (update + predict, one "
+        "core, same run) of ours at each inducing rate and of IAAL; tradeoff.png/.csv.",
+    )
     common(p, ("ours", "iaal"), 10)
-    p.add_argument("--rates", nargs="+", type=float, default=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
-                   help="inducing rates of ours (default: 0.1 to 1.0 in steps of 0.1)")
+    p.add_argument(
+        "--rates",
+        nargs="+",
+        type=float,
+        default=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
+        help="inducing rates of ours (default: 0.1 to 1.0 in steps of 0.1)",
+    )
     p.add_argument("--timing-episodes", type=int, default=20,
                    help="test episodes streamed frame by frame to time each variant (default: 20)")
     closedloop_cli.add_parsers(sub)
@@ -118,8 +194,12 @@ def load_dataset(path: str | None, quick: bool, seed: int):
         n_ood = min(int(mask.sum()), QUICK_EPISODES // 5)
         import numpy as np
 
-        idx = np.concatenate([np.flatnonzero(~mask)[: QUICK_EPISODES - n_ood], np.flatnonzero(mask)[:n_ood]])
-        data = HandoverDataset([data[i] for i in np.sort(idx)], rate_hz=data.rate_hz, name=data.name + " (quick)")
+        idx = np.concatenate(
+            [np.flatnonzero(~mask)[: QUICK_EPISODES - n_ood], np.flatnonzero(mask)[:n_ood]]
+        )
+        data = HandoverDataset(
+            [data[i] for i in np.sort(idx)], rate_hz=data.rate_hz, name=data.name + " (quick)"
+        )
     return data
 
 
@@ -136,14 +216,28 @@ def main(argv: list[str] | None = None) -> int:
     try:
         methods = check_methods(args.methods)
         if args.command == "tradeoff" and not set(methods) <= {"ours", "iaal"}:
-            raise ValueError("tradeoff compares the nonparametric methods only: --methods ours [iaal]")
+            raise ValueError(
+                "tradeoff compares the nonparametric methods only: --methods ours [iaal]"
+            )
         folds, stride = (3, max(3, args.stride)) if args.quick else (args.folds, args.stride)
-        protocol = OpenLoopProtocol(horizon=args.horizon, first_query=args.first_query, stride=stride)
-        options = MethodOptions(seed=args.seed, quick=args.quick, inducing_ratio=args.inducing_ratio,
-                                act_steps=args.act_steps, bc_epochs=args.bc_epochs, horizon=args.horizon,
-                                giver_state=args.giver_state,
-                                workers=default_workers() if args.workers is None else args.workers)
-        out = Path(args.out) if args.out else Path("results") / (args.command + ("-quick" if args.quick else ""))
+        protocol = OpenLoopProtocol(
+            horizon=args.horizon, first_query=args.first_query, stride=stride
+        )
+        options = MethodOptions(
+            seed=args.seed,
+            quick=args.quick,
+            inducing_ratio=args.inducing_ratio,
+            act_steps=args.act_steps,
+            bc_epochs=args.bc_epochs,
+            horizon=args.horizon,
+            giver_state=args.giver_state,
+            workers=default_workers() if args.workers is None else args.workers,
+        )
+        out = (
+            Path(args.out)
+            if args.out
+            else Path("results") / (args.command + ("-quick" if args.quick else ""))
+        )
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out}: exists and is not a folder")
         dataset = load_dataset(args.data, args.quick, args.seed)
@@ -153,49 +247,142 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     progress = not args.no_progress
     n_ood = int(dataset.ood_mask.sum())
-    print(f"{args.command}: {len(dataset) - n_ood} ID + {n_ood} OOD episodes ({dataset.name}), {folds} folds, "
-          f"methods {methods}, {os.cpu_count()} cores", flush=True)
+    print(
+        f"{args.command}: {len(dataset) - n_ood} ID + {n_ood} OOD episodes ({dataset.name}), "
+        f"{folds} folds, "
+        f"methods {methods}, {os.cpu_count()} cores",
+        flush=True,
+    )
     start = time.perf_counter()
     try:
         if args.command == "table1":
-            rows = experiments.run_table1(dataset, methods, folds, args.seed, options, protocol, out,
-                                          reuse=not args.no_reuse, progress=progress)
-            print("\n" + markdown_table(
-                ["method", "ID 3D (mm)", "OOD 3D (mm)", "ID current frame", "OOD current frame", "ID paper",
-                 "OOD paper"],
-                [[METHOD_LABELS[r["method"]], mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
-                  mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
-                  mean_std(r["id_now_axis_mm"], r["id_now_axis_std_mm"]),
-                  mean_std(r["ood_now_axis_mm"], r["ood_now_axis_std_mm"]),
-                  mean_std(r["paper_id_mm"], r["paper_id_std_mm"]), mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"])]
-                 for r in rows]))
+            rows = experiments.run_table1(
+                dataset,
+                methods,
+                folds,
+                args.seed,
+                options,
+                protocol,
+                out,
+                reuse=not args.no_reuse,
+                progress=progress,
+            )
+            print(
+                "\n"
+                + markdown_table(
+                    [
+                        "method",
+                        "ID 3D (mm)",
+                        "OOD 3D (mm)",
+                        "ID current frame",
+                        "OOD current frame",
+                        "ID paper",
+                        "OOD paper",
+                    ],
+                    [
+                        [
+                            METHOD_LABELS[r["method"]],
+                            mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
+                            mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+                            mean_std(r["id_now_axis_mm"], r["id_now_axis_std_mm"]),
+                            mean_std(r["ood_now_axis_mm"], r["ood_now_axis_std_mm"]),
+                            mean_std(r["paper_id_mm"], r["paper_id_std_mm"]),
+                            mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"]),
+                        ]
+                        for r in rows
+                    ],
+                )
+            )
         elif args.command == "sample-efficiency":
-            rows = experiments.run_sample_efficiency(dataset, methods, args.ratios, folds, args.seed, options,
-                                                     protocol, out, reuse=not args.no_reuse, progress=progress)
-            print("\n" + markdown_table(
-                ["method", "ratio", "all 3D (mm)", "ID 3D (mm)", "OOD 3D (mm)", "all current frame (mm)"],
-                [[METHOD_LABELS[r["method"]], f"{r['ratio']:g}", mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
-                  mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]), mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
-                  mean_std(r["all_now_axis_mm"], r["all_now_axis_std_mm"])]
-                 for r in rows]))
-            horizon, now = experiments.degradation_pct(rows), experiments.degradation_pct(rows, "all_now_axis_mm")
+            rows = experiments.run_sample_efficiency(
+                dataset,
+                methods,
+                args.ratios,
+                folds,
+                args.seed,
+                options,
+                protocol,
+                out,
+                reuse=not args.no_reuse,
+                progress=progress,
+            )
+            print(
+                "\n"
+                + markdown_table(
+                    [
+                        "method",
+                        "ratio",
+                        "all 3D (mm)",
+                        "ID 3D (mm)",
+                        "OOD 3D (mm)",
+                        "all current frame (mm)",
+                    ],
+                    [
+                        [
+                            METHOD_LABELS[r["method"]],
+                            f"{r['ratio']:g}",
+                            mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
+                            mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
+                            mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+                            mean_std(r["all_now_axis_mm"], r["all_now_axis_std_mm"]),
+                        ]
+                        for r in rows
+                    ],
+                )
+            )
+            horizon, now = (
+                experiments.degradation_pct(rows),
+                experiments.degradation_pct(rows, "all_now_axis_mm"),
+            )
             if horizon:
                 lo, hi = min(args.ratios), max(args.ratios)
-                print(f"RMS at ratio {lo:g} vs {hi:g} (all episodes, 1 s horizon 3D / current frame): " + ", ".join(
-                    f"{METHOD_LABELS[m]} {horizon[m]:+.1f}% / {now[m]:+.1f}%" for m in horizon))
+                print(
+                    f"RMS at ratio {lo:g} vs {hi:g} (all episodes, 1 s horizon 3D / current "
+                    "frame): "
+                    + ", ".join(
+                        f"{METHOD_LABELS[m]} {horizon[m]:+.1f}% / {now[m]:+.1f}%" for m in horizon
+                    )
+                )
         else:
             rates = args.rates if "ours" in methods else []
-            rows = experiments.run_tradeoff(dataset, rates, folds, args.seed, options, protocol, out,
-                                            timing_episodes=args.timing_episodes,
-                                            include_iaal="iaal" in methods, progress=progress)
-            print("\n" + markdown_table(
-                ["method", "rate", "median ms/frame", "p99 ms/frame", "all 3D (mm)", "x faster than IAAL",
-                 "RMS vs IAAL"],
-                [[METHOD_LABELS[r["method"]], "" if r["inducing_rate"] is None else f"{r['inducing_rate']:g}",
-                  f"{r['frame_ms_median']:.3f}", f"{r['frame_ms_p99']:.3f}",
-                  mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
-                  f"{r.get('speedup_vs_iaal', float('nan')):.2f}", f"{r.get('rms_cost_vs_iaal_pct', float('nan')):+.2f}%"]
-                 for r in rows]))
+            rows = experiments.run_tradeoff(
+                dataset,
+                rates,
+                folds,
+                args.seed,
+                options,
+                protocol,
+                out,
+                timing_episodes=args.timing_episodes,
+                include_iaal="iaal" in methods,
+                progress=progress,
+            )
+            print(
+                "\n"
+                + markdown_table(
+                    [
+                        "method",
+                        "rate",
+                        "median ms/frame",
+                        "p99 ms/frame",
+                        "all 3D (mm)",
+                        "x faster than IAAL",
+                        "RMS vs IAAL",
+                    ],
+                    [
+                        [
+                            METHOD_LABELS[r["method"]],
+                            "" if r["inducing_rate"] is None else f"{r['inducing_rate']:g}",
+                            f"{r['frame_ms_median']:.3f}",
+                            f"{r['frame_ms_p99']:.3f}",
+                            mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
+                            f"{r.get('speedup_vs_iaal', float('nan')):.2f}",
+                            f"{r.get('rms_cost_vs_iaal_pct', float('nan')):+.2f}%",
+                        ]
+                        for r in rows
+                    ],
+                )
+            )
             print(f"timed on 1 core of {os.cpu_count()}")
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)

@@ -1,4 +1,5 @@
-"""The paper's simulation experiments: Table I, the sample-efficiency figure and the RMS / inference-time
+"""The paper's simulation experiments: Table I, the sample-efficiency figure and the RMS /
+inference-time
 trade-off figure (paper Sec. V-A). Every run uses the one open-loop protocol of :mod:`.openloop`.
 """
 
@@ -65,13 +66,22 @@ def _pretrain_act(
         return None
     from handover_eval.act_folds import pretrain_act
 
-    return pretrain_act(dataset, train_sets, options, out_dir / "checkpoints", reuse=reuse, workers=workers,
-                        labels=labels, progress=progress)
+    return pretrain_act(
+        dataset,
+        train_sets,
+        options,
+        out_dir / "checkpoints",
+        reuse=reuse,
+        workers=workers,
+        labels=labels,
+        progress=progress,
+    )
 
 
 @dataclass(frozen=True)
 class _FoldJob:
-    """What one fold job of :func:`map_folds` needs besides the dataset: its split and how to fit."""
+    """What one fold job of :func:`map_folds` needs besides the dataset: its split and how to
+    fit."""
 
     fold: int
     train_idx: np.ndarray  # training episodes, as indices of the dataset
@@ -124,9 +134,16 @@ def _table1_fold(dataset: HandoverDataset, job: _Table1Fold) -> tuple[list[dict]
             }
         )
         episode_rows += [
-            {"method": name, "fold": job.fold, "source_id": r.source_id, "is_ood": r.is_ood,
-             "rms_3d_mm": r.rms_3d_mm, "rms_axis_mm": r.rms_axis_mm, "rms_now_axis_mm": r.rms_now_axis_mm,
-             "n_queries": r.n_queries}
+            {
+                "method": name,
+                "fold": job.fold,
+                "source_id": r.source_id,
+                "is_ood": r.is_ood,
+                "rms_3d_mm": r.rms_3d_mm,
+                "rms_axis_mm": r.rms_axis_mm,
+                "rms_now_axis_mm": r.rms_now_axis_mm,
+                "n_queries": r.n_queries,
+            }
             for r in records
         ]
     return fold_rows, episode_rows
@@ -153,16 +170,41 @@ def run_table1(
     """
     methods = check_methods(list(methods))
     splits = _splits(dataset, folds, seed)
-    act_runs = _pretrain_act(dataset, methods, [tr for tr, _ in splits], [f"fold {f}" for f in range(folds)],
-                             options, out_dir, reuse, workers, progress)
+    act_runs = _pretrain_act(
+        dataset,
+        methods,
+        [tr for tr, _ in splits],
+        [f"fold {f}" for f in range(folds)],
+        options,
+        out_dir,
+        reuse,
+        workers,
+        progress,
+    )
     n_workers = options.workers if workers is None else int(workers)
     jobs = [
-        _Table1Fold(f, train_idx, test_idx, tuple(methods), options, protocol, out_dir / "checkpoints",
-                    reuse, None if act_runs is None or not act_runs[f].trained else act_runs[f].fit_seconds)
+        _Table1Fold(
+            f,
+            train_idx,
+            test_idx,
+            tuple(methods),
+            options,
+            protocol,
+            out_dir / "checkpoints",
+            reuse,
+            None if act_runs is None or not act_runs[f].trained else act_runs[f].fit_seconds,
+        )
         for f, (train_idx, test_idx) in enumerate(splits)
     ]
-    results = map_folds(_table1_fold, dataset, jobs, workers=n_workers, progress=progress, desc="table1",
-                        label=lambda job: f"fold {job.fold}")
+    results = map_folds(
+        _table1_fold,
+        dataset,
+        jobs,
+        workers=n_workers,
+        progress=progress,
+        desc="table1",
+        label=lambda job: f"fold {job.fold}",
+    )
     fold_rows = [row for fold, _ in results for row in fold]
     episode_rows = [row for _, eps in results for row in eps]
     rows = []
@@ -190,7 +232,10 @@ def run_table1(
     write_csv(rows, out_dir / "table1.csv")
     write_csv(fold_rows, out_dir / "table1_folds.csv")
     write_csv(episode_rows, out_dir / "table1_episodes.csv")
-    write_text(table1_markdown(rows, dataset, folds, seed, protocol, options.giver_state), out_dir / "table1.md")
+    write_text(
+        table1_markdown(rows, dataset, folds, seed, protocol, options.giver_state),
+        out_dir / "table1.md",
+    )
     return rows
 
 
@@ -203,8 +248,17 @@ def table1_markdown(
     giver_state: bool = False,
 ) -> str:
     """Table I in the paper's layout, with the paper's numbers beside ours."""
-    header = ["Method", "ID (ours, 3D)", "OOD (ours, 3D)", "ID (ours, per axis)", "OOD (ours, per axis)",
-              "ID (ours, current frame)", "OOD (ours, current frame)", "ID (paper)", "OOD (paper)"]
+    header = [
+        "Method",
+        "ID (ours, 3D)",
+        "OOD (ours, 3D)",
+        "ID (ours, per axis)",
+        "OOD (ours, per axis)",
+        "ID (ours, current frame)",
+        "OOD (ours, current frame)",
+        "ID (paper)",
+        "OOD (paper)",
+    ]
     body = [
         [
             METHOD_LABELS[r["method"]],
@@ -223,24 +277,35 @@ def table1_markdown(
     return (
         "# Table I: RMS error (mm) of the predicted giver trajectory\n\n"
         + markdown_table(header, body)
-        + f"\nDataset: {dataset.name or 'unnamed'} ({len(dataset) - n_ood} ID + {n_ood} OOD episodes, "
-        f"{dataset.n_frames} frames). Stratified {folds}-fold split by ID/OOD, seed {seed}; mean ± std over "
-        f"the {folds} folds of the per-fold mean episode RMS. Protocol: horizon {protocol.horizon} frames, "
-        f"queries every {protocol.stride} frame(s) from frame {protocol.first_query}. '3D' is the Euclidean "
-        "error over the whole horizon, 'per axis' the same divided by sqrt(3); 'current frame' is the per-axis "
-        "RMS of the first predicted row only (the giver position the planner commands now), the reading that "
+        + f"\nDataset: {dataset.name or 'unnamed'} ({len(dataset) - n_ood} ID + {n_ood} OOD "
+          "episodes, "
+        f"{dataset.n_frames} frames). Stratified {folds}-fold split by ID/OOD, seed {seed}; mean "
+        "± std over "
+        f"the {folds} folds of the per-fold mean episode RMS. Protocol: horizon "
+        f"{protocol.horizon} frames, "
+        f"queries every {protocol.stride} frame(s) from frame {protocol.first_query}. '3D' is the "
+        "Euclidean "
+        "error over the whole horizon, 'per axis' the same divided by sqrt(3); 'current frame' is "
+        "the per-axis "
+        "RMS of the first predicted row only (the giver position the planner commands now), the "
+        "reading that "
         "matches the paper's numbers (README, Evaluation protocol). The paper's "
-        "numbers are on its full public set (900 ID + 100 OOD). Inputs: every method sees the receiver base "
+        "numbers are on its full public set (900 ID + 100 OOD). Inputs: every method sees the "
+        "receiver base "
         "track up to the query frame"
-        + (", and BC-MLP / ACT also the giver's position at that frame (--giver-state).\n" if giver_state else
-           " and nothing else, as in the paper.\n")
+        + (
+            ", and BC-MLP / ACT also the giver's position at that frame (--giver-state).\n"
+            if giver_state
+            else " and nothing else, as in the paper.\n"
+        )
     )
 
 
 # ------------------------------------------------------------------------------ sample efficiency
 @dataclass(frozen=True)
 class _RatioJob(_FoldJob):
-    """One (fold, training ratio) cell of the sample-efficiency sweep; ``train_idx`` is subsampled."""
+    """One (fold, training ratio) cell of the sample-efficiency sweep; ``train_idx`` is
+    subsampled."""
 
     ratio: float
 
@@ -253,7 +318,9 @@ def _ratio_job(dataset: HandoverDataset, job: _RatioJob) -> list[dict]:
     train, test = dataset.subset(job.train_idx), dataset.subset(job.test_idx)
     rows = []
     for name in job.methods:
-        agent, _ = fit_agent(name, build_agent(name, job.options), train, job.cache_dir, job.reuse or name == "act")
+        agent, _ = fit_agent(
+            name, build_agent(name, job.options), train, job.cache_dir, job.reuse or name == "act"
+        )
         s = summarise(evaluate_openloop(agent, test, job.protocol, progress=False))
         rows.append({"method": name, "ratio": job.ratio, "fold": job.fold, "n_train": len(train),
                      **{f"{k}_rms_3d_mm": s[k]["rms_3d_mm"] for k in ("all", "id", "ood")},
@@ -288,20 +355,39 @@ def run_sample_efficiency(
     from handover_eval.act_folds import episode_indices
 
     train_idx = {key: episode_indices(dataset, t) for key, t in train_sets.items()}
-    _pretrain_act(dataset, methods, list(train_idx.values()), [f"fold {f} ratio {r:g}" for f, r in train_sets],
-                  options, out_dir, reuse, workers, progress)
+    _pretrain_act(
+        dataset,
+        methods,
+        list(train_idx.values()),
+        [f"fold {f} ratio {r:g}" for f, r in train_sets],
+        options,
+        out_dir,
+        reuse,
+        workers,
+        progress,
+    )
     jobs = [_RatioJob(f, train_idx[(f, ratio)], test_idx, tuple(methods), options, protocol,
                       out_dir / "checkpoints", reuse, ratio)
             for f, (_, test_idx) in enumerate(splits) for ratio in ratios]
-    results = map_folds(_ratio_job, dataset, jobs, workers=options.workers if workers is None else int(workers),
-                        progress=progress, desc="sample-efficiency",
-                        label=lambda job: f"fold {job.fold} ratio {job.ratio:g}")
+    results = map_folds(
+        _ratio_job,
+        dataset,
+        jobs,
+        workers=options.workers if workers is None else int(workers),
+        progress=progress,
+        desc="sample-efficiency",
+        label=lambda job: f"fold {job.fold} ratio {job.ratio:g}",
+    )
     per_fold = [row for rows_ in results for row in rows_]
     rows = []
     for name in methods:
         for ratio in ratios:
             mine = [r for r in per_fold if r["method"] == name and r["ratio"] == ratio]
-            row = {"method": name, "ratio": ratio, "n_train_mean": float(np.mean([r["n_train"] for r in mine]))}
+            row = {
+                "method": name,
+                "ratio": ratio,
+                "n_train_mean": float(np.mean([r["n_train"] for r in mine])),
+            }
             for k in ("all", "id", "ood"):
                 m, s = _fold_stats([r[f"{k}_rms_3d_mm"] for r in mine])
                 row[f"{k}_rms_3d_mm"], row[f"{k}_std_3d_mm"] = m, s
@@ -310,7 +396,9 @@ def run_sample_efficiency(
             rows.append(row)
     write_csv(rows, out_dir / "sample_efficiency.csv")
     write_csv(per_fold, out_dir / "sample_efficiency_folds.csv")
-    plot_sample_efficiency(rows, [m for m in methods if m != "bc_mlp"] or methods, out_dir / "sample_efficiency.png")
+    plot_sample_efficiency(
+        rows, [m for m in methods if m != "bc_mlp"] or methods, out_dir / "sample_efficiency.png"
+    )
     return rows
 
 
@@ -347,14 +435,26 @@ def plot_sample_efficiency(rows: list[dict], methods: Sequence[str], path: Path)
     for ax, (key, std_key, label) in zip(axes, panels, strict=True):
         for k, name in enumerate(methods):
             mine = sorted((r for r in rows if r["method"] == name), key=lambda r: r["ratio"])
-            dodge = 0.008 * (k - (len(methods) - 1) / 2)  # ours and IAAL nearly coincide: keep both visible
+            dodge = 0.008 * (
+                k - (len(methods) - 1) / 2
+            )  # ours and IAAL nearly coincide: keep both visible
             x = [r["ratio"] + dodge for r in mine]
             y = [r[key] for r in mine]
             e = [r[std_key] for r in mine]
-            line = ax.errorbar(x, y, yerr=e, marker=markers.get(name, "o"), capsize=3, label=METHOD_LABELS[name])
-            for xi, yi, ei in zip(x, y, e, strict=True):  # staggered so the methods' labels do not overlap
-                ax.annotate(mean_std(yi, ei, 1), (xi, yi), textcoords="offset points", xytext=(5, 6 + 8 * k),
-                            fontsize=6, color=line.lines[0].get_color())
+            line = ax.errorbar(
+                x, y, yerr=e, marker=markers.get(name, "o"), capsize=3, label=METHOD_LABELS[name]
+            )
+            for xi, yi, ei in zip(
+                x, y, e, strict=True
+            ):  # staggered so the methods' labels do not overlap
+                ax.annotate(
+                    mean_std(yi, ei, 1),
+                    (xi, yi),
+                    textcoords="offset points",
+                    xytext=(5, 6 + 8 * k),
+                    fontsize=6,
+                    color=line.lines[0].get_color(),
+                )
         ax.set_xlim(right=max(r["ratio"] for r in rows) + 0.15)  # room for the right-most labels
         ax.set_xlabel("training data ratio")
         ax.set_ylabel(label)
@@ -385,7 +485,8 @@ def _one_core():
 
 
 def time_streaming_frames(agent, episodes: Sequence, warmup: int = 3) -> np.ndarray:
-    """Seconds per 30 Hz frame (stream_update + stream_predict) of a streaming planner, all frames."""
+    """Seconds per 30 Hz frame (stream_update + stream_predict) of a streaming planner, all
+    frames."""
     times = []
     for ep in episodes:
         agent.stream_reset()
@@ -465,8 +566,16 @@ def plot_tradeoff(rows: list[dict], path: Path) -> Path:
                     textcoords="offset points", xytext=(4, 6), fontsize=7)
     for r in rows:
         if r["method"] == "iaal":
-            ax.errorbar([r["frame_ms_median"]], [r["all_rms_3d_mm"]], yerr=[r["all_std_3d_mm"]], marker="*",
-                        markersize=12, capsize=3, linestyle="none", label="IAAL (exact GP)")
+            ax.errorbar(
+                [r["frame_ms_median"]],
+                [r["all_rms_3d_mm"]],
+                yerr=[r["all_std_3d_mm"]],
+                marker="*",
+                markersize=12,
+                capsize=3,
+                linestyle="none",
+                label="IAAL (exact GP)",
+            )
     ax.set_xscale("log")
     ax.set_xlabel(f"inference time per 30 Hz frame (ms, median, 1 core of {os.cpu_count()})")
     ax.set_ylabel("RMS error (mm, 3D)")

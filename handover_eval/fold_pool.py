@@ -11,7 +11,6 @@ processes and returns exactly what the serial loop returns, in job order
 from __future__ import annotations
 
 import multiprocessing
-import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
@@ -52,7 +51,8 @@ def map_folds(
     weight: Callable[[J], int] | None = None,
     unit: str = "job",
 ) -> list[R]:
-    """``[fn(dataset, job) for job in jobs]``, in ``workers`` spawned processes when ``workers`` > 1.
+    """``[fn(dataset, job) for job in jobs]``, in ``workers`` spawned processes when ``workers`` >
+    1.
 
     ``fn`` must be a module-level function (it is pickled by reference). With more than one
     worker the pool uses the ``spawn`` start method, so a script that calls this needs the usual

@@ -27,7 +27,8 @@ LEARNED: frozenset[str] = frozenset({"act", "bc_mlp"})
 COMPLETE = "evaluate_complete.json"
 
 ACT_EVAL_STEPS = 3_000
-"""ACT optimisation steps of the k-fold evaluations (``MethodOptions.act_steps=None``); see MethodOptions."""
+"""ACT optimisation steps of the k-fold evaluations (``MethodOptions.act_steps=None``); see
+MethodOptions."""
 QUICK_ACT_STEPS = 40
 
 
@@ -110,18 +111,29 @@ def build_agent(name: str, options: MethodOptions, inducing_ratio: float | None 
         from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
 
         epochs = options.bc_epochs or (3 if options.quick else None)
-        kwargs = {"seed": options.seed, "horizon": options.horizon, "use_giver_state": options.giver_state}
+        kwargs = {
+            "seed": options.seed,
+            "horizon": options.horizon,
+            "use_giver_state": options.giver_state,
+        }
         if epochs:
             kwargs["max_epochs"] = epochs
         return BCMLPAgent(BCMLPConfig(**kwargs))
     from baselines.act import ACTAgent, ACTAgentConfig
 
-    kwargs = {"seed": options.seed, "horizon": options.horizon, "use_giver_state": options.giver_state}
+    kwargs = {
+        "seed": options.seed,
+        "horizon": options.horizon,
+        "use_giver_state": options.giver_state,
+    }
     steps = options.act_steps or (QUICK_ACT_STEPS if options.quick else ACT_EVAL_STEPS)
     kwargs["steps"] = steps
     kwargs["eval_every"] = max(1, steps // 8)  # 8 validation passes pick the best checkpoint
     if options.quick:
-        kwargs.update(policy=dict(dim_model=32, dim_feedforward=64, n_heads=2, n_encoder_layers=1), batch_size=32)
+        kwargs.update(
+            policy=dict(dim_model=32, dim_feedforward=64, n_heads=2, n_encoder_layers=1),
+            batch_size=32,
+        )
     return ACTAgent(ACTAgentConfig(**kwargs))
 
 
@@ -185,7 +197,8 @@ def fit_agent(
     reuse: bool = True,
     progress: bool = False,
 ) -> tuple[Agent, bool]:
-    """Fit ``agent`` on ``train``; learned baselines reuse a matching checkpoint under ``cache_dir``.
+    """Fit ``agent`` on ``train``; learned baselines reuse a matching checkpoint under
+    ``cache_dir``.
 
     Returns:
         ``(fitted agent, reused)`` where ``reused`` is True when a checkpoint was loaded.

@@ -1,4 +1,5 @@
-"""The open-loop RMS protocol (paper Sec. V-A, Table I and the sample-efficiency / trade-off figures).
+"""The open-loop RMS protocol (paper Sec. V-A, Table I and the sample-efficiency / trade-off
+figures).
 
 Every method (SPGP planner, IAAL, BC-MLP, ACT, ...) is scored by this one protocol:
 
@@ -109,16 +110,24 @@ def episode_errors(
     if times.size == 0:
         return float("nan"), float("nan"), 0
     pred = np.asarray(agent.predict_episode(episode, times), dtype=np.float64)
-    if pred.shape[0] != times.size or pred.ndim != 3 or pred.shape[2] != 3 or pred.shape[1] < protocol.horizon:
+    if (
+        pred.shape[0] != times.size
+        or pred.ndim != 3
+        or pred.shape[2] != 3
+        or pred.shape[1] < protocol.horizon
+    ):
         raise ValueError(
-            f"agent returned predictions of shape {pred.shape}, need ({times.size}, >= {protocol.horizon}, 3)"
+            f"agent returned predictions of shape {pred.shape}, need ({times.size}, >= "
+            f"{protocol.horizon}, 3)"
         )
     if not np.all(np.isfinite(pred)):
         raise ValueError(f"agent returned NaN/inf predictions on episode {episode.source_id!r}")
     giver = episode.giver_xyz
     rows = times[:, None] + np.arange(protocol.horizon)[None, :]  # (Q, H)
     valid = rows < episode.length
-    err2 = np.sum((pred[:, : protocol.horizon] - giver[np.minimum(rows, episode.length - 1)]) ** 2, axis=2)
+    err2 = np.sum(
+        (pred[:, : protocol.horizon] - giver[np.minimum(rows, episode.length - 1)]) ** 2, axis=2
+    )
     n = int(valid.sum())
     now_axis = float(np.sqrt(err2[:, 0].mean() / 3.0) * 1000.0)  # row 0 always exists (t_c < L)
     return float(np.sqrt(err2[valid].mean()) * 1000.0), now_axis, n
@@ -130,7 +139,8 @@ def evaluate_openloop(
     protocol: OpenLoopProtocol = OpenLoopProtocol(),
     progress: bool = True,
 ) -> list[EpisodeRecord]:
-    """Score a fitted agent on every episode of ``dataset`` (episodes without a query are skipped)."""
+    """Score a fitted agent on every episode of ``dataset`` (episodes without a query are
+    skipped)."""
     records = []
     start = time.perf_counter()
     for i, ep in enumerate(dataset):
@@ -138,12 +148,22 @@ def evaluate_openloop(
         if n_rows == 0:
             continue
         records.append(
-            EpisodeRecord(ep.source_id, ep.is_ood, rms, rms / SQRT3, int(query_times(ep.length, protocol).size), n_rows,
-                          now_axis)
+            EpisodeRecord(
+                ep.source_id,
+                ep.is_ood,
+                rms,
+                rms / SQRT3,
+                int(query_times(ep.length, protocol).size),
+                n_rows,
+                now_axis,
+            )
         )
         if progress and (i + 1) % 50 == 0:
-            print(f"  open-loop {i + 1}/{len(dataset)} episodes, {time.perf_counter() - start:.0f} s",
-                  file=sys.stderr, flush=True)
+            print(
+                f"  open-loop {i + 1}/{len(dataset)} episodes, {time.perf_counter() - start:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
     return records
 
 
@@ -162,12 +182,23 @@ def summarise(records: list[EpisodeRecord]) -> dict[str, dict[str, float]]:
     and ``n_episodes``.
     """
     out = {}
-    for name, keep in (("id", lambda r: not r.is_ood), ("ood", lambda r: r.is_ood), ("all", lambda r: True)):
+    for name, keep in (
+        ("id", lambda r: not r.is_ood),
+        ("ood", lambda r: r.is_ood),
+        ("all", lambda r: True),
+    ):
         sel = [r.rms_3d_mm for r in records if keep(r)]
         m, s = _mean_std(sel)
         now_m, now_s = _mean_std([r.rms_now_axis_mm for r in records if keep(r)])
-        out[name] = {"rms_3d_mm": m, "rms_3d_std": s, "rms_axis_mm": m / SQRT3, "rms_axis_std": s / SQRT3,
-                     "rms_now_axis_mm": now_m, "rms_now_axis_std": now_s, "n_episodes": len(sel)}
+        out[name] = {
+            "rms_3d_mm": m,
+            "rms_3d_std": s,
+            "rms_axis_mm": m / SQRT3,
+            "rms_axis_std": s / SQRT3,
+            "rms_now_axis_mm": now_m,
+            "rms_now_axis_std": now_s,
+            "n_episodes": len(sel),
+        }
     return out
 
 
@@ -192,7 +223,8 @@ def kfold_rms(
 
     Returns:
         ``{"id": (mean, std), "ood": (mean, std)}`` in mm 3D, the same per-axis under
-        ``"id_axis"``/``"ood_axis"``, the current-frame per-axis RMS under ``"id_now_axis"``/``"ood_now_axis"``, ``"per_fold"`` (list of :func:`summarise` dicts) and
+        ``"id_axis"``/``"ood_axis"``, the current-frame per-axis RMS under
+        ``"id_now_axis"``/``"ood_now_axis"``, ``"per_fold"`` (list of :func:`summarise` dicts) and
         ``"records"`` (all episode records).
     """
     splits = dataset.stratified_kfold(k, seed)
@@ -207,13 +239,20 @@ def kfold_rms(
         per_fold.append(summ)
         records.extend(recs)
         if progress:
-            print(f"  fold {f}: ID {summ['id']['rms_3d_mm']:.2f} mm, OOD {summ['ood']['rms_3d_mm']:.2f} mm "
-                  f"(3D), {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
+            print(
+                f"  fold {f}: ID {summ['id']['rms_3d_mm']:.2f} mm, OOD "
+                f"{summ['ood']['rms_3d_mm']:.2f} mm "
+                f"(3D), {time.perf_counter() - t0:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
     out: dict = {"per_fold": per_fold, "records": records, "k": k, "seed": seed, "folds": chosen}
     for name in ("id", "ood"):
         vals = [s[name]["rms_3d_mm"] for s in per_fold if s[name]["n_episodes"] > 0]
         m, s = _mean_std(vals)
         out[name] = (m, s)
         out[f"{name}_axis"] = (m / SQRT3, s / SQRT3)
-        out[f"{name}_now_axis"] = _mean_std([s_[name]["rms_now_axis_mm"] for s_ in per_fold if s_[name]["n_episodes"] > 0])
+        out[f"{name}_now_axis"] = _mean_std(
+            [s_[name]["rms_now_axis_mm"] for s_ in per_fold if s_[name]["n_episodes"] > 0]
+        )
     return out

@@ -44,9 +44,22 @@ AGENTS = ("ours", "reactive")
 RECEIVERS = ("id", "ood", "replay")
 #: ``info`` keys kept per episode (numbers or the outcome string).
 INFO_KEYS = (
-    "outcome", "handover_time", "handover_time_with_delay", "transfer_time", "release_time", "release_force",
-    "pull_force", "peak_wrist_force", "body_contact_force", "penetration", "reach_distance",
-    "arm_extended_time", "time_lost", "min_speed_factor", "path_deviation", "robot_jerk_rms",
+    "outcome",
+    "handover_time",
+    "handover_time_with_delay",
+    "transfer_time",
+    "release_time",
+    "release_force",
+    "pull_force",
+    "peak_wrist_force",
+    "body_contact_force",
+    "penetration",
+    "reach_distance",
+    "arm_extended_time",
+    "time_lost",
+    "min_speed_factor",
+    "path_deviation",
+    "robot_jerk_rms",
     "robot_jerk_peak",
 )
 CONTACT_PREFIX = "contact_force_"
@@ -125,8 +138,13 @@ class EpisodeRunner:
             if self._env is not None:
                 self._env.close()
             name = "handover_env/StaticHandover-v0" if static else "handover_env/DynamicHandover-v0"
-            self._env = gym.make(name, stiffness=theta.stiffness, damping=theta.damping,
-                                 forecast_time=theta.forecast_time, release_force=theta.release_force)
+            self._env = gym.make(
+                name,
+                stiffness=theta.stiffness,
+                damping=theta.damping,
+                forecast_time=theta.forecast_time,
+                release_force=theta.release_force,
+            )
             self._env_key = key
         return self._env
 
@@ -135,8 +153,13 @@ class EpisodeRunner:
             return participant.walk_options(self.receiver)
         data = self.dataset()
         if self._speeds is None:
-            self._speeds = np.array([float(np.median(np.linalg.norm(np.diff(ep.receiver_xy, axis=0), axis=1)))
-                                     * data.rate_hz for ep in data])
+            self._speeds = np.array(
+                [
+                    float(np.median(np.linalg.norm(np.diff(ep.receiver_xy, axis=0), axis=1)))
+                    * data.rate_hz
+                    for ep in data
+                ]
+            )
         order = np.argsort(np.abs(self._speeds - participant.body.speed), kind="stable")
         episode = data[int(order[seed % min(len(order), 50)])]
         return {"receiver": "replay", "episode": episode, "height": participant.body.height}
@@ -151,8 +174,15 @@ class EpisodeRunner:
 
         out = []
         for seed in seeds:
-            key = (participant.pid, participant.seed, self.receiver, self.agent_name, static, int(seed),
-                   tuple(round(v, 9) for v in theta.as_array()))
+            key = (
+                participant.pid,
+                participant.seed,
+                self.receiver,
+                self.agent_name,
+                static,
+                int(seed),
+                tuple(round(v, 9) for v in theta.as_array()),
+            )
             if key not in self.cache:
                 t0 = time.perf_counter()
                 env = self._make_env(theta, static)
@@ -164,7 +194,9 @@ class EpisodeRunner:
                     agent = self._static_agent
                 else:
                     agent = self._planner(theta)
-                info = run_episode(env, agent, seed=int(seed), options=self._options(participant, int(seed)))
+                info = run_episode(
+                    env, agent, seed=int(seed), options=self._options(participant, int(seed))
+                )
                 self.cache[key] = _keep(info)
                 self.episodes_run += 1
                 self.seconds += time.perf_counter() - t0
@@ -194,8 +226,11 @@ def summarise_outcomes(infos: Sequence[Mapping]) -> dict[str, float]:
         vals = [float(r[key]) for r in rows if r.get(key) is not None]
         return float(np.mean(vals)) if vals else math.nan
 
-    out = {"success_rate": len(ok) / len(infos) if infos else math.nan, "handover_time": mean("handover_time", ok),
-           "unstable": float(sum(i.get("outcome") == "unstable" for i in infos))}
+    out = {
+        "success_rate": len(ok) / len(infos) if infos else math.nan,
+        "handover_time": mean("handover_time", ok),
+        "unstable": float(sum(i.get("outcome") == "unstable" for i in infos)),
+    }
     for key in OUTCOME_COLUMNS[2:]:
         out[_RENAMED.get(key, key)] = mean(key, infos)
     return out
@@ -226,7 +261,9 @@ class PreferenceConfig:
 
     def __post_init__(self) -> None:
         if self.iterations < 1 or self.walks < 1:
-            raise ValueError(f"need iterations >= 1 and walks >= 1, got {self.iterations}, {self.walks}")
+            raise ValueError(
+                f"need iterations >= 1 and walks >= 1, got {self.iterations}, {self.walks}"
+            )
         if self.agent not in AGENTS or self.receiver not in RECEIVERS:
             raise ValueError(f"agent must be one of {AGENTS} and receiver one of {RECEIVERS}")
 
@@ -281,7 +318,9 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
                 memory[(p.pid, a)] = (float(judge(p, a)), {})
             else:
                 infos = lived(runner.run(p, HandoverParams(*grid[a]), seeds[p.pid]))
-                costs = {f"cost_{c}": float(np.mean([p.costs(i)[c] for i in infos])) for c in COST_NAMES}
+                costs = {
+                    f"cost_{c}": float(np.mean([p.costs(i)[c] for i in infos])) for c in COST_NAMES
+                }
                 memory[(p.pid, a)] = (p.utility(infos), {**summarise_outcomes(infos), **costs})
         return memory[(p.pid, a)]
 
@@ -289,12 +328,17 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
     if progress:
         from tqdm import tqdm
 
-        steps = tqdm(steps, desc=f"CoSpar ({len(participants)} participant{'s' * (len(participants) > 1)})",
-                     unit="iter")
+        steps = tqdm(
+            steps,
+            desc=f"CoSpar ({len(participants)} participant{'s' * (len(participants) > 1)})",
+            unit="iter",
+        )
     for it in steps:
         for p in participants:
             tried = learner.propose()
-            buffer = buffers[p.pid][-config.cospar.buffer_size:] if config.cospar.buffer_size else []
+            buffer = (
+                buffers[p.pid][-config.cospar.buffer_size :] if config.cospar.buffer_size else []
+            )
             compared = list(dict.fromkeys(tried + buffer))
             wins = dict.fromkeys(compared, 0)
             for i in range(len(compared)):
@@ -304,22 +348,42 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
                     winner, loser = (a, b) if p.prefers(ua, ub) else (b, a)
                     learner.add_preference(winner, loser)
                     wins[winner] += 1
-                    prefs.append({"iteration": it, "participant": p.pid,
-                                  **{f"winner_{n}": grid[winner][k] for k, n in enumerate(THETA_NAMES)},
-                                  **{f"loser_{n}": grid[loser][k] for k, n in enumerate(THETA_NAMES)},
-                                  "winner_index": winner, "loser_index": loser})
+                    prefs.append(
+                        {
+                            "iteration": it,
+                            "participant": p.pid,
+                            **{f"winner_{n}": grid[winner][k] for k, n in enumerate(THETA_NAMES)},
+                            **{f"loser_{n}": grid[loser][k] for k, n in enumerate(THETA_NAMES)},
+                            "winner_index": winner,
+                            "loser_index": loser,
+                        }
+                    )
             for a in compared:
                 utility, outcomes = experience(p, a)
-                history.append({"iteration": it, "participant": p.pid, "role": "new" if a in tried else "buffer",
-                                "action": a, **{n: grid[a][k] for k, n in enumerate(THETA_NAMES)},
-                                "comparisons_won": wins[a], "comparisons": len(compared) - 1,
-                                "hidden_utility": utility, **outcomes})
+                history.append(
+                    {
+                        "iteration": it,
+                        "participant": p.pid,
+                        "role": "new" if a in tried else "buffer",
+                        "action": a,
+                        **{n: grid[a][k] for k, n in enumerate(THETA_NAMES)},
+                        "comparisons_won": wins[a],
+                        "comparisons": len(compared) - 1,
+                        "hidden_utility": utility,
+                        **outcomes,
+                    }
+                )
             buffers[p.pid].extend(tried)
             learner.history.extend(tried)
             learner.update_posterior()
     return PreferenceResult(
-        theta_hat=learner.best(), theta_hat_grid=learner.best(tried_only=False), learner=learner,
-        history=history, preferences=prefs, episodes=runner.episodes_run, episode_seconds=runner.seconds,
+        theta_hat=learner.best(),
+        theta_hat_grid=learner.best(tried_only=False),
+        learner=learner,
+        history=history,
+        preferences=prefs,
+        episodes=runner.episodes_run,
+        episode_seconds=runner.seconds,
         seconds=time.perf_counter() - start,
     )
 
@@ -351,7 +415,8 @@ def posterior_marginals(learner: CoSpar) -> list[tuple[np.ndarray, np.ndarray, n
 
 
 def plot_marginals(learner: CoSpar, theta_hat: HandoverParams, path: Path, title: str) -> None:
-    """PNG: the posterior mean of the utility, averaged over the other three parameters, per parameter."""
+    """PNG: the posterior mean of the utility, averaged over the other three parameters, per
+    parameter."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -379,30 +444,54 @@ def theta_line(theta: HandoverParams) -> str:
     return f"[K {k:.1f}, B {b:.1f}, t_f {tf:.2f}, f_r {fr:.1f}]"
 
 
-def save_run(result: PreferenceResult, participants: Sequence[Participant], config: PreferenceConfig,
-             out: Path) -> list[Path]:
+def save_run(
+    result: PreferenceResult,
+    participants: Sequence[Participant],
+    config: PreferenceConfig,
+    out: Path,
+) -> list[Path]:
     """theta_hat.json, history.csv, preferences.csv, participants.csv, posterior_marginals.png."""
     import json
 
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / "theta_hat.json", out / "history.csv", out / "preferences.csv", out / "participants.csv",
-             out / "posterior_marginals.png"]
+    paths = [
+        out / "theta_hat.json",
+        out / "history.csv",
+        out / "preferences.csv",
+        out / "participants.csv",
+        out / "posterior_marginals.png",
+    ]
     iters = config.iterations
     record = {
         "source": "simulated participants (agents/participants.py), not people",
         "theta_hat": dict(zip(THETA_NAMES, result.theta_hat.as_array())),
         "theta_hat_whole_grid": dict(zip(THETA_NAMES, result.theta_hat_grid.as_array())),
         "paper_theta_hat": dict(zip(THETA_NAMES, PAPER_THETA)),
-        "participants": [p.pid for p in participants], "iterations": iters, "walks": config.walks,
-        "agent": config.agent, "receiver": config.receiver, "grid": list(config.cospar.points_per_dim),
-        "preferences": len(result.preferences), "episodes": result.episodes,
-        "episode_seconds": result.episode_seconds, "wall_seconds": result.seconds,
+        "participants": [p.pid for p in participants],
+        "iterations": iters,
+        "walks": config.walks,
+        "agent": config.agent,
+        "receiver": config.receiver,
+        "grid": list(config.cospar.points_per_dim),
+        "preferences": len(result.preferences),
+        "episodes": result.episodes,
+        "episode_seconds": result.episode_seconds,
+        "wall_seconds": result.seconds,
         "seconds_per_iteration": result.seconds / iters,
     }
     paths[0].write_text(json.dumps(record, indent=1))
     write_csv(paths[1], result.history)
     write_csv(paths[2], result.preferences)
     write_csv(paths[3], [p.describe() for p in participants])
-    who = f"participant {participants[0].pid}" if len(participants) == 1 else f"{len(participants)} participants pooled"
-    plot_marginals(result.learner, result.theta_hat, paths[4], f"CoSpar posterior after {iters} iterations, {who}")
+    who = (
+        f"participant {participants[0].pid}"
+        if len(participants) == 1
+        else f"{len(participants)} participants pooled"
+    )
+    plot_marginals(
+        result.learner,
+        result.theta_hat,
+        paths[4],
+        f"CoSpar posterior after {iters} iterations, {who}",
+    )
     return paths

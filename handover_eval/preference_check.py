@@ -83,16 +83,25 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
     try:
         for p in participants:
             seeds = p.walk_seeds(config.walks, 0)
-            bar = tqdm(grid, desc=f"brute force, participant {p.pid}", unit="Θ", disable=not progress)
-            utilities[p.pid] = np.array([p.utility(lived(runner.run(p, HandoverParams(*g), seeds))) for g in bar])
+            bar = tqdm(
+                grid, desc=f"brute force, participant {p.pid}", unit="Θ", disable=not progress
+            )
+            utilities[p.pid] = np.array(
+                [p.utility(lived(runner.run(p, HandoverParams(*g), seeds))) for g in bar]
+            )
     finally:
         _save_cache(runner, cache)
     rows = []
     for p in participants:
         u = utilities[p.pid]
-        result = run_preference([p], PreferenceConfig(iterations=config.iterations, walks=config.walks,
-                                                      cospar=cospar, seed=config.seed),
-                                runner=runner, judge=lambda q, a: float(utilities[q.pid][a]))
+        result = run_preference(
+            [p],
+            PreferenceConfig(
+                iterations=config.iterations, walks=config.walks, cospar=cospar, seed=config.seed
+            ),
+            runner=runner,
+            judge=lambda q, a: float(utilities[q.pid][a]),
+        )
         hat = result.learner.best_index()
         best = int(np.argmax(u))
         gain = float((u[hat] - u.mean()) / (u[best] - u.mean())) if u[best] > u.mean() else 1.0
@@ -106,24 +115,39 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
     write_csv(out / "check.csv", rows)
     passed = sum(r["passed"] for r in rows)
     lines = [
-        f"# CoSpar learns: Θ̂ after {config.iterations} iterations vs the brute-forced optimum (simulated participants)",
+        f"# CoSpar learns: Θ̂ after {config.iterations} iterations vs the brute-forced optimum "
+        "(simulated participants)",
         "",
-        (f"Grid {'x'.join(map(str, config.grid))} = {len(grid)} Θ over the paper's ranges, {config.walks} walks each, "
-        f"agent {config.agent}, receiver {config.receiver}. gain = (u(Θ̂) − mean u) / (max u − mean u); "
-        f"pass at ≥ {PASS_GAIN:.0%}."),
+        (
+            f"Grid {'x'.join(map(str, config.grid))} = {len(grid)} Θ over the paper's ranges, "
+            f"{config.walks} walks each, "
+            f"agent {config.agent}, receiver {config.receiver}. gain = (u(Θ̂) − mean u) / (max u "
+            "− mean u); "
+            f"pass at ≥ {PASS_GAIN:.0%}."
+        ),
         "",
-        "| participant | height (m) | speed (m/s) | best Θ | u best | u random | CoSpar Θ̂ | u Θ̂ | rank | gain | pass |",
+        "| participant | height (m) | speed (m/s) | best Θ | u best | u random | CoSpar Θ̂ | u Θ̂ "
+        "| rank | gain | pass |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         best = HandoverParams(*(r[f"best_{n}"] for n in THETA_NAMES))
         hat = HandoverParams(*(r[f"hat_{n}"] for n in THETA_NAMES))
-        lines.append(f"| {r['participant']} | {r['height']:.2f} | {r['speed']:.2f} | {theta_line(best)} | "
-                     f"{r['u_best']:.2f} | {r['u_random']:.2f} | {theta_line(hat)} | {r['u_hat']:.2f} | "
-                     f"{r['rank_of_hat']}/{len(grid)} | {r['gain']:.0%} | {'yes' if r['passed'] else 'no'} |")
-    lines += ["", (f"**{passed} of {len(rows)} participants reach ≥ {PASS_GAIN:.0%} of the achievable gain** "
-              f"(acceptance: ≥ 3 of 4). Episodes run now: {runner.episodes_run} ({runner.seconds:.0f} s); "
-              f"cached in `{cache.name}`.")]
+        lines.append(
+            f"| {r['participant']} | {r['height']:.2f} | {r['speed']:.2f} | {theta_line(best)} | "
+            f"{r['u_best']:.2f} | {r['u_random']:.2f} | {theta_line(hat)} | {r['u_hat']:.2f} | "
+            f"{r['rank_of_hat']}/{len(grid)} | {r['gain']:.0%} | {'yes' if r['passed'] else 'no'} |"
+        )
+    lines += [
+        "",
+        (
+            f"**{passed} of {len(rows)} participants reach ≥ {PASS_GAIN:.0%} of the achievable "
+            "gain** "
+            f"(acceptance: ≥ 3 of 4). Episodes run now: {runner.episodes_run} "
+            f"({runner.seconds:.0f} s); "
+            f"cached in `{cache.name}`."
+        ),
+    ]
     (out / "check.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return rows

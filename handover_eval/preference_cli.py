@@ -9,16 +9,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-PREFERENCE_HELP = """CoSpar (paper Sec. IV-B, V-B-1) tunes Theta = {K, B, t_f, f_r} over the paper's ranges from a
-simulated participant (agents/participants.py) who walks past the robot in the env and judges what
-happened: each iteration CoSpar proposes Theta, each is run as real episodes on the participant's
-walks, the participant states preferences (paper Eq. 2 noise), the Laplace posterior is updated.
-Prints Theta-hat beside the paper's and writes theta_hat.json, history.csv, preferences.csv,
-participants.csv and posterior_marginals.png. Results come from simulated participants, not people."""
+PREFERENCE_HELP = """CoSpar (paper Sec. IV-B, V-B-1) tunes Theta = {K, B, t_f, f_r} over the paper's
+ranges from a simulated participant (agents/participants.py) who walks past the robot in the env
+and judges what happened: each iteration CoSpar proposes Theta, each is run as real episodes on
+the participant's walks, the participant states preferences (paper Eq. 2 noise), the Laplace
+posterior is updated. Prints Theta-hat beside the paper's and writes theta_hat.json, history.csv,
+preferences.csv, participants.csv and posterior_marginals.png. Results come from simulated
+participants, not people."""
 
-CHECK_HELP = """Acceptance check: for each participant, brute-force their utility over a small grid of Theta
-(episodes cached in OUT/episodes.jsonl), run CoSpar on the same grid for 20 iterations and report the
-share of the achievable gain over a random Theta that its Theta-hat reaches (pass at >= 90 %)."""
+CHECK_HELP = """Acceptance check: for each participant, brute-force their utility over a small grid
+of Theta (episodes cached in OUT/episodes.jsonl), run CoSpar on the same grid for 20 iterations
+and report the share of the achievable gain over a random Theta that its Theta-hat reaches (pass
+at >= 90 %)."""
 
 
 def _int_at_least(low: int):
@@ -39,7 +41,9 @@ def _grid(text: str) -> tuple[int, int, int, int]:
     try:
         values = tuple(int(p) for p in parts)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 4 whole numbers like 7,6,6,7, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected 4 whole numbers like 7,6,6,7, got {text!r}"
+        ) from None
     if len(values) != 4 or min(values) < 2:
         raise argparse.ArgumentTypeError(f"expected 4 numbers >= 2 (K, B, t_f, f_r), got {text!r}")
     return values  # type: ignore[return-value]
@@ -48,40 +52,76 @@ def _grid(text: str) -> tuple[int, int, int, int]:
 def add_preference_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``train.py preference``."""
     who = p.add_mutually_exclusive_group()
-    who.add_argument("--participant", type=_int_at_least(0), default=None, metavar="SEED",
-                     help="the simulated participant (agents/participants.py) drawn with this seed (default 0)")
-    who.add_argument("--participants", type=_int_at_least(1), default=None, metavar="N",
-                     help="pool N participants (population seed --population-seed, 75%% male as in the "
-                          "paper) into one posterior, each making one step per iteration")
-    p.add_argument("--population-seed", type=_int_at_least(0), default=0,
-                   help="seed of the population for --participants (participant i has seed 1000*S+i)")
-    p.add_argument("--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (paper: 20)")
+    who.add_argument(
+        "--participant",
+        type=_int_at_least(0),
+        default=None,
+        metavar="SEED",
+        help="the simulated participant (agents/participants.py) drawn with this seed (default 0)",
+    )
+    who.add_argument(
+        "--participants",
+        type=_int_at_least(1),
+        default=None,
+        metavar="N",
+        help="pool N participants (population seed --population-seed, 75%% male as in the "
+        "paper) into one posterior, each making one step per iteration",
+    )
+    p.add_argument(
+        "--population-seed",
+        type=_int_at_least(0),
+        default=0,
+        help="seed of the population for --participants (participant i has seed 1000*S+i)",
+    )
+    p.add_argument(
+        "--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (paper: 20)"
+    )
     p.add_argument("--walks", type=_int_at_least(1), default=3,
                    help="episodes (walks of the participant) per proposed Theta (default 3)")
-    p.add_argument("--agent", choices=("ours", "reactive"), default="ours",
-                   help="the planner whose Theta is tuned (default ours: SPGP fitted on the synthetic default)")
+    p.add_argument(
+        "--agent",
+        choices=("ours", "reactive"),
+        default="ours",
+        help="the planner whose Theta is tuned (default ours: SPGP fitted on the synthetic "
+        "default)",
+    )
     p.add_argument("--receiver", choices=("id", "ood", "replay"), default="id",
                    help="id/ood: scripted walkers with the participant's body; replay: synthetic "
                         "demonstrations nearest their speed, at their height (default id)")
-    p.add_argument("--grid", type=_grid, default=(7, 6, 6, 7), metavar="NK,NB,NT,NF",
-                   help="CoSpar grid points per parameter over the paper's ranges (default 7,6,6,7)")
+    p.add_argument(
+        "--grid",
+        type=_grid,
+        default=(7, 6, 6, 7),
+        metavar="NK,NB,NT,NF",
+        help="CoSpar grid points per parameter over the paper's ranges (default 7,6,6,7)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of CoSpar's Thompson samples")
-    p.add_argument("--out", default=None, help="output folder (default results/preference/participant-SEED "
-                                               "or results/preference/pooled-N)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="output folder (default results/preference/participant-SEED "
+        "or results/preference/pooled-N)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no tqdm bar")
 
 
 def add_check_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``train.py preference-check``."""
-    p.add_argument("--participants", type=_int_at_least(1), default=4, help="participants checked (default 4)")
+    p.add_argument(
+        "--participants", type=_int_at_least(1), default=4, help="participants checked (default 4)"
+    )
     p.add_argument("--population-seed", type=_int_at_least(0), default=1,
                    help="their population seed (default 1: not the study's population 0)")
     p.add_argument("--grid", type=_grid, default=(3, 3, 3, 3), metavar="NK,NB,NT,NF",
                    help="the brute-forced grid, also CoSpar's (default 3,3,3,3 = 81 Theta)")
     p.add_argument("--walks", type=_int_at_least(1), default=3, help="walks per Theta (default 3)")
-    p.add_argument("--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (default 20)")
+    p.add_argument(
+        "--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (default 20)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of CoSpar's Thompson samples")
-    p.add_argument("--out", default="results/preference/check", help="output folder (episode cache, tables)")
+    p.add_argument(
+        "--out", default="results/preference/check", help="output folder (episode cache, tables)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no tqdm bars")
 
 
@@ -107,18 +147,38 @@ def run_preference_command(args: argparse.Namespace) -> None:
     out = Path(args.out) if args.out else default_out
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out}: exists and is not a folder")
-    config = PreferenceConfig(iterations=args.iterations, walks=args.walks, agent=args.agent,
-                              receiver=args.receiver, cospar=CoSparConfig(points_per_dim=args.grid), seed=args.seed)
+    config = PreferenceConfig(
+        iterations=args.iterations,
+        walks=args.walks,
+        agent=args.agent,
+        receiver=args.receiver,
+        cospar=CoSparConfig(points_per_dim=args.grid),
+        seed=args.seed,
+    )
     for p in participants:
         b = p.body
-        print(f"participant {p.pid}: {b.sex}, {b.height:.2f} m, walks {b.speed:.2f} m/s, passes at y = {b.pass_y:.2f} m")
+        print(
+            f"participant {p.pid}: {b.sex}, {b.height:.2f} m, walks {b.speed:.2f} m/s, passes at "
+            f"y = {b.pass_y:.2f} m"
+        )
     result = run_preference(participants, config, progress=not args.no_progress)
     paths = save_run(result, participants, config, out)
-    print(f"Θ̂ (argmax of the posterior mean over the tried actions): {theta_line(result.theta_hat)}")
-    print(f"    argmax over the whole grid:                          {theta_line(result.theta_hat_grid)}")
-    print(f"    the paper's Θ̂ (real participants):                  {theta_line(_params(PAPER_THETA))}")
-    print(f"{len(result.preferences)} preferences, {result.episodes} episodes ({result.episode_seconds:.0f} s), "
-          f"{result.seconds:.0f} s wall, {result.seconds / config.iterations:.1f} s per iteration")
+    print(
+        f"Θ̂ (argmax of the posterior mean over the tried actions): {theta_line(result.theta_hat)}"
+    )
+    print(
+        "    argmax over the whole grid:                          "
+        f"{theta_line(result.theta_hat_grid)}"
+    )
+    print(
+        "    the paper's Θ̂ (real participants):                  "
+        f"{theta_line(_params(PAPER_THETA))}"
+    )
+    print(
+        f"{len(result.preferences)} preferences, {result.episodes} episodes "
+        f"({result.episode_seconds:.0f} s), "
+        f"{result.seconds:.0f} s wall, {result.seconds / config.iterations:.1f} s per iteration"
+    )
     print("wrote " + ", ".join(str(p) for p in paths))
 
 
@@ -132,6 +192,12 @@ def run_check_command(args: argparse.Namespace) -> None:
     """``train.py preference-check``: does CoSpar find a brute-forced optimum?"""
     from handover_eval.preference_check import CheckConfig, run_check
 
-    config = CheckConfig(participants=args.participants, population_seed=args.population_seed, grid=args.grid,
-                         walks=args.walks, iterations=args.iterations, seed=args.seed)
+    config = CheckConfig(
+        participants=args.participants,
+        population_seed=args.population_seed,
+        grid=args.grid,
+        walks=args.walks,
+        iterations=args.iterations,
+        seed=args.seed,
+    )
     run_check(config, Path(args.out), progress=not args.no_progress)

@@ -8,7 +8,8 @@ import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
-# The paper's Table I (RMS error in mm, mean +- std over a stratified 10-fold split, full public set).
+# The paper's Table I (RMS error in mm, mean +- std over a stratified 10-fold split, full public
+# set).
 PAPER_TABLE1: dict[str, dict[str, tuple[float, float]]] = {
     "bc_mlp": {"id": (152.27, 289.11), "ood": (166.50, 311.60)},
     "act": {"id": (67.57, 5.06), "ood": (71.04, 7.14)},
@@ -16,7 +17,12 @@ PAPER_TABLE1: dict[str, dict[str, tuple[float, float]]] = {
     "ours": {"id": (55.13, 2.48), "ood": (61.83, 5.32)},
 }
 
-METHOD_LABELS: dict[str, str] = {"bc_mlp": "BC-MLP", "act": "ACT", "iaal": "IAAL", "ours": "Ours (SPGP)"}
+METHOD_LABELS: dict[str, str] = {
+    "bc_mlp": "BC-MLP",
+    "act": "ACT",
+    "iaal": "IAAL",
+    "ours": "Ours (SPGP)",
+}
 
 
 def mean_std(mean: float, std: float, digits: int = 2) -> str:

@@ -3,7 +3,8 @@
     python train.py bc-mlp --data PATH --out runs/bc_mlp
     python train.py act    --data PATH --out runs/act
     python train.py act    --smoke --out /tmp/act_smoke          # seconds, for tests
-    python train.py preference --participant 0 --iterations 20   # CoSpar tunes Theta from a simulated participant
+    python train.py preference --participant 0 --iterations 20   # CoSpar tunes Theta from a
+    simulated participant
     python train.py preference --participants 8                  # ... pooled over 8 participants
     python train.py preference-check                             # CoSpar vs a brute-forced optimum
 
@@ -82,13 +83,18 @@ def openloop_rms(agent, test: HandoverDataset) -> dict:
     """Open-loop RMS (mm, 3D and per axis; mean +- std over episodes, ID and OOD apart) on ``test``
     by the shared protocol (``handover_eval.openloop``: a query at every frame from
     frame 5, horizon 30, row 0 = the current frame). The protocol calls ``predict_episode``, through
-    which the baselines also read the giver position at the query frame (their ``observation.state``)."""
+    which the baselines also read the giver position at the query frame (their
+    ``observation.state``)."""
     from handover_eval.openloop import OpenLoopProtocol, evaluate_openloop, summarise
 
-    return summarise(evaluate_openloop(agent, test, OpenLoopProtocol(horizon=agent.horizon), progress=False))
+    return summarise(
+        evaluate_openloop(agent, test, OpenLoopProtocol(horizon=agent.horizon), progress=False)
+    )
 
 
-def report(name: str, agent, test: HandoverDataset | None, out: Path, t0: float, val_loss: float) -> None:
+def report(
+    name: str, agent, test: HandoverDataset | None, out: Path, t0: float, val_loss: float
+) -> None:
     import torch
 
     summary = {"method": name, "wall_time_s": time.perf_counter() - t0, "final_val_loss": val_loss,
@@ -97,8 +103,11 @@ def report(name: str, agent, test: HandoverDataset | None, out: Path, t0: float,
     if test is not None:
         summary["test_rms_mm"] = openloop_rms(agent, test)
         for split, r in summary["test_rms_mm"].items():
-            print(f"[{name}] held-out {split} (n={r['n_episodes']}): RMS 3D {r['rms_3d_mm']:.2f} +- "
-                  f"{r['rms_3d_std']:.2f} mm, per axis {r['rms_axis_mm']:.2f} +- {r['rms_axis_std']:.2f} mm")
+            print(
+                f"[{name}] held-out {split} (n={r['n_episodes']}): RMS 3D {r['rms_3d_mm']:.2f} +- "
+                f"{r['rms_3d_std']:.2f} mm, per axis {r['rms_axis_mm']:.2f} +- "
+                f"{r['rms_axis_std']:.2f} mm"
+            )
     (out / "train_summary.json").write_text(json.dumps(summary, indent=1))
 
 
@@ -125,8 +134,9 @@ def train_bc_mlp(args: argparse.Namespace) -> None:
     train, test = split_test(data, args.folds, args.test_fold, args.seed)
     print(f"[bc-mlp] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
     t0 = time.perf_counter()
-    agent = BCMLPAgent(cfg).fit(train, out_dir=args.out, resume=args.resume, progress=not args.no_progress,
-                                log=print)
+    agent = BCMLPAgent(cfg).fit(
+        train, out_dir=args.out, resume=args.resume, progress=not args.no_progress, log=print
+    )
     report("bc-mlp", agent, test, Path(args.out), t0, agent.train_log["best_val"])
 
 
@@ -134,7 +144,11 @@ def train_act(args: argparse.Namespace) -> None:
     from baselines.act import ACTAgent, ACTAgentConfig
     from baselines.checkpoint_io import check_out_dir
 
-    policy = dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4) if args.smoke else {}
+    policy = (
+        dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4)
+        if args.smoke
+        else {}
+    )
     for key in ("dim_model", "n_heads", "dim_feedforward", "n_encoder_layers", "n_decoder_layers"):
         if getattr(args, key) is not None:
             policy[key] = getattr(args, key)
@@ -184,25 +198,50 @@ def _fraction(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = p.add_subparsers(dest="method", required=True, metavar="{bc-mlp,act,preference,preference-check}")
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    sub = p.add_subparsers(
+        dest="method", required=True, metavar="{bc-mlp,act,preference,preference-check}"
+    )
 
     def common(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument("--data", default=None, help="a canonical .npz, a public-dataset folder, or omit for "
-                        "the embedded synthetic default (1000 episodes, 10%% OOD)")
-        sp.add_argument("--out", required=True, help="checkpoint folder (created; safetensors + JSON config)")
-        sp.add_argument("--resume", action="store_true", help="continue training from the state saved in --out "
-                        "(a finished run is extended by a larger --epochs / --steps)")
-        sp.add_argument("--overwrite", action="store_true", help="replace the run already in --out (its "
-                        "checkpoint files only; a folder of other files is always refused), and rebuild an "
-                        "--export-root that holds other data")
+        sp.add_argument(
+            "--data",
+            default=None,
+            help="a canonical .npz, a public-dataset folder, or omit for "
+            "the embedded synthetic default (1000 episodes, 10%% OOD)",
+        )
+        sp.add_argument(
+            "--out", required=True, help="checkpoint folder (created; safetensors + JSON config)"
+        )
+        sp.add_argument(
+            "--resume",
+            action="store_true",
+            help="continue training from the state saved in --out "
+            "(a finished run is extended by a larger --epochs / --steps)",
+        )
+        sp.add_argument(
+            "--overwrite",
+            action="store_true",
+            help="replace the run already in --out (its "
+            "checkpoint files only; a folder of other files is always refused), and rebuild an "
+            "--export-root that holds other data",
+        )
         sp.add_argument("--smoke", action="store_true", help=f"tiny fast configuration for tests: "
                         f"{SMOKE_EPISODES} episodes, a few epochs/steps, a small network")
-        sp.add_argument("--seed", type=int, default=0, help="seed of initialisation, sampling and splits")
+        sp.add_argument(
+            "--seed", type=int, default=0, help="seed of initialisation, sampling and splits"
+        )
         sp.add_argument("--device", default="cpu", help="torch device (default cpu)")
-        sp.add_argument("--threads", type=_positive(int), default=1, help="torch CPU threads (default 1: on a "
-                        "shared 2-core machine 2 threads oversubscribe and run ~10x slower; ACT always trains "
-                        "on one, so that a seed gives the same weights)")
+        sp.add_argument(
+            "--threads",
+            type=_positive(int),
+            default=1,
+            help="torch CPU threads (default 1: on a "
+            "shared 2-core machine 2 threads oversubscribe and run ~10x slower; ACT always trains "
+            "on one, so that a seed gives the same weights)",
+        )
         sp.add_argument("--batch-size", type=_positive(int), default=None, help="samples per step "
                         "(default 256 for bc-mlp, 64 for act)")
         sp.add_argument("--lr", type=_positive(float), default=None,
@@ -213,54 +252,117 @@ def build_parser() -> argparse.ArgumentParser:
                         help="H, frames of predicted giver xyz (default 30)")
         sp.add_argument("--val-fraction", type=_fraction, default=0.1,
                         help="fraction of training episodes held out for validation (default 0.1)")
-        sp.add_argument("--folds", type=_positive(int), default=10, help="number of stratified folds for --test-fold")
-        sp.add_argument("--test-fold", type=int, default=None, help="hold out this fold entirely and report "
-                        "the open-loop RMS (mm) on it after training (default: train on all episodes)")
+        sp.add_argument(
+            "--folds",
+            type=_positive(int),
+            default=10,
+            help="number of stratified folds for --test-fold",
+        )
+        sp.add_argument(
+            "--test-fold",
+            type=int,
+            default=None,
+            help="hold out this fold entirely and report "
+            "the open-loop RMS (mm) on it after training (default: train on all episodes)",
+        )
         sp.add_argument("--no-progress", action="store_true", help="no tqdm bars")
 
-    bc = sub.add_parser("bc-mlp", help="BC-MLP: torch MLP, receiver history -> 30-frame giver chunk",
-                        description="Train BC-MLP with early stopping on a validation split.")
+    bc = sub.add_parser(
+        "bc-mlp",
+        help="BC-MLP: torch MLP, receiver history -> 30-frame giver chunk",
+        description="Train BC-MLP with early stopping on a validation split.",
+    )
     common(bc)
-    bc.add_argument("--epochs", type=_positive(int), default=None, help="maximum epochs (default 50; 3 with --smoke)")
-    bc.add_argument("--patience", type=_positive(int), default=5, help="early-stopping patience in epochs (default 5)")
+    bc.add_argument(
+        "--epochs",
+        type=_positive(int),
+        default=None,
+        help="maximum epochs (default 50; 3 with --smoke)",
+    )
+    bc.add_argument(
+        "--patience",
+        type=_positive(int),
+        default=5,
+        help="early-stopping patience in epochs (default 5)",
+    )
     bc.add_argument("--hidden", type=_positive(int), nargs="+", default=None,
                     help="hidden widths (default 256 256 256; 64 64 with --smoke)")
-    bc.add_argument("--giver-state", action="store_true", help="also condition on the current giver/robot "
-                    "xyz; off by default (the receiver history alone, exactly what the planner sees: in the "
-                    "env the giver is the robot's own TCP, and a model trained with it copies it)")
+    bc.add_argument(
+        "--giver-state",
+        action="store_true",
+        help="also condition on the current giver/robot "
+        "xyz; off by default (the receiver history alone, exactly what the planner sees: in the "
+        "env the giver is the robot's own TCP, and a model trained with it copies it)",
+    )
     bc.set_defaults(func=train_bc_mlp)
 
-    act = sub.add_parser("act", help="ACT: LeRobot's ACTPolicy, state-only, trained on a LeRobot export",
-                         description="Train LeRobot's ACTPolicy on a LeRobotDataset export of the data.")
+    act = sub.add_parser(
+        "act",
+        help="ACT: LeRobot's ACTPolicy, state-only, trained on a LeRobot export",
+        description="Train LeRobot's ACTPolicy on a LeRobotDataset export of the data.",
+    )
     common(act)
     act.add_argument("--steps", type=_positive(int), default=None,
                      help="optimisation steps (default 8000; 20 with --smoke)")
     act.add_argument("--eval-every", type=_positive(int), default=None,
                      help="steps between validation/checkpoints (default 1000; 10 with --smoke)")
-    act.add_argument("--paper-scale", action="store_true", help="ACT's default size (dim 512, 8 heads, "
-                     "ffn 3200, 4 enc layers, VAE 4 layers, latent 32) instead of the CPU default "
-                     "(dim 128, 4 heads, ffn 512, 2 enc / 1 dec layers, VAE 1 layer, latent 16)")
+    act.add_argument(
+        "--paper-scale",
+        action="store_true",
+        help="ACT's default size (dim 512, 8 heads, "
+        "ffn 3200, 4 enc layers, VAE 4 layers, latent 32) instead of the CPU default "
+        "(dim 128, 4 heads, ffn 512, 2 enc / 1 dec layers, VAE 1 layer, latent 16)",
+    )
     act.add_argument("--no-vae", action="store_true", help="train without ACT's CVAE objective")
-    act.add_argument("--giver-state", action="store_true", help="also give ACT observation.state (the "
-                     "current giver/robot xyz); off by default: the receiver history alone, as in evaluate.py")
-    act.add_argument("--dim-model", type=_positive(int), default=None, help="override the transformer width")
-    act.add_argument("--n-heads", type=_positive(int), default=None, help="override the attention heads")
-    act.add_argument("--dim-feedforward", type=_positive(int), default=None, help="override the feed-forward width")
-    act.add_argument("--n-encoder-layers", type=_positive(int), default=None, help="override the encoder depth")
-    act.add_argument("--n-decoder-layers", type=_positive(int), default=None, help="override the decoder depth")
-    act.add_argument("--export-root", default=None, help="LeRobot export folder (default OUT/lerobot_dataset; "
-                     "reused only if it holds exactly this training set, else rebuilt (the default folder) "
-                     "or refused without --overwrite)")
+    act.add_argument(
+        "--giver-state",
+        action="store_true",
+        help="also give ACT observation.state (the "
+        "current giver/robot xyz); off by default: the receiver history alone, as in evaluate.py",
+    )
+    act.add_argument(
+        "--dim-model", type=_positive(int), default=None, help="override the transformer width"
+    )
+    act.add_argument(
+        "--n-heads", type=_positive(int), default=None, help="override the attention heads"
+    )
+    act.add_argument(
+        "--dim-feedforward",
+        type=_positive(int),
+        default=None,
+        help="override the feed-forward width",
+    )
+    act.add_argument(
+        "--n-encoder-layers", type=_positive(int), default=None, help="override the encoder depth"
+    )
+    act.add_argument(
+        "--n-decoder-layers", type=_positive(int), default=None, help="override the decoder depth"
+    )
+    act.add_argument(
+        "--export-root",
+        default=None,
+        help="LeRobot export folder (default OUT/lerobot_dataset; "
+        "reused only if it holds exactly this training set, else rebuilt (the default folder) "
+        "or refused without --overwrite)",
+    )
     act.set_defaults(func=train_act)
 
     from handover_eval import preference_cli as pref
 
-    sp = sub.add_parser("preference", help="CoSpar tunes Θ = {K, B, t_f, f_r} from simulated participants "
-                        "who judge real handovers in the env", description=pref.PREFERENCE_HELP)
+    sp = sub.add_parser(
+        "preference",
+        help="CoSpar tunes Θ = {K, B, t_f, f_r} from simulated participants "
+        "who judge real handovers in the env",
+        description=pref.PREFERENCE_HELP,
+    )
     pref.add_preference_arguments(sp)
     sp.set_defaults(func=pref.run_preference_command, threads=1, device="cpu")
-    sc = sub.add_parser("preference-check", help="acceptance: CoSpar's Θ̂ against the optimum brute-forced "
-                        "over a small grid (episodes cached)", description=pref.CHECK_HELP)
+    sc = sub.add_parser(
+        "preference-check",
+        help="acceptance: CoSpar's Θ̂ against the optimum brute-forced "
+        "over a small grid (episodes cached)",
+        description=pref.CHECK_HELP,
+    )
     pref.add_check_arguments(sc)
     sc.set_defaults(func=pref.run_check_command, threads=1, device="cpu")
     return p
@@ -274,8 +376,12 @@ def _check_device(name: str) -> None:
         device = torch.device(name)
     except (RuntimeError, ValueError) as exc:
         raise ValueError(f"--device {name!r}: not a torch device ({exc})") from None
-    available = {"cpu": True, "cuda": torch.cuda.is_available(),
-                 "mps": getattr(torch.backends, "mps", None) is not None and torch.backends.mps.is_available()}
+    available = {
+        "cpu": True,
+        "cuda": torch.cuda.is_available(),
+        "mps": getattr(torch.backends, "mps", None) is not None
+        and torch.backends.mps.is_available(),
+    }
     if not available.get(device.type, False):
         raise ValueError(f"--device {name!r}: not available on this machine")
 
@@ -297,8 +403,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.method.startswith("preference"):
             print("train.py: interrupted", file=sys.stderr)
             return 130
-        print(f"train.py: interrupted; the last checkpoint in {args.out} is intact (continue with --resume)",
-              file=sys.stderr)
+        print(
+            f"train.py: interrupted; the last checkpoint in {args.out} is intact (continue with "
+            "--resume)",
+            file=sys.stderr,
+        )
         return 130
     return 0
 

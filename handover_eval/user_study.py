@@ -1,4 +1,5 @@
-"""The paper's user study (Sec. V-B) with simulated participants: H1, H2, H3, and personalised Theta.
+"""The paper's user study (Sec. V-B) with simulated participants: H1, H2, H3, and personalised
+Theta.
 
 ``python evaluate.py user-study --participants 8 --trials 5`` runs, for a population drawn by
 :func:`agents.participants.sample_population` (75 % male, as the paper's 6 of 8):
@@ -47,9 +48,19 @@ from handover_eval.preference import (
 
 #: The paper's figures (Sec. V-B-2, V-B-3), shown beside ours.
 PAPER = {
-    "comfort_dynamic": (4.3, 0.45), "comfort_static": (3.1, 0.87), "comfort_p": "< 0.01", "comfort_d": 0.79,
-    "time_dynamic": (3.2, 0.50), "time_static": (6.9, 1.2), "time_p": "< 0.001", "time_d": 1.92,
-    "h3_share": 0.725, "h3_k": 29, "h3_n": 40, "h3_p": "< 0.01", "h3_h": 0.47,
+    "comfort_dynamic": (4.3, 0.45),
+    "comfort_static": (3.1, 0.87),
+    "comfort_p": "< 0.01",
+    "comfort_d": 0.79,
+    "time_dynamic": (3.2, 0.50),
+    "time_static": (6.9, 1.2),
+    "time_p": "< 0.001",
+    "time_d": 1.92,
+    "h3_share": 0.725,
+    "h3_k": 29,
+    "h3_n": 40,
+    "h3_p": "< 0.01",
+    "h3_h": 0.47,
 }
 UNSTABLE = "unstable"
 #: Walk-seed streams of a participant (never overlapping).
@@ -138,8 +149,13 @@ def binomial_stats(k: int, n: int) -> dict[str, float]:
     from scipy import stats
 
     share = k / n if n else math.nan
-    return {"k": k, "n": n, "share": share, "p": float(stats.binomtest(k, n, 0.5).pvalue) if n else math.nan,
-            "h": 2 * math.asin(math.sqrt(share)) - 2 * math.asin(math.sqrt(0.5)) if n else math.nan}
+    return {
+        "k": k,
+        "n": n,
+        "share": share,
+        "p": float(stats.binomtest(k, n, 0.5).pvalue) if n else math.nan,
+        "h": 2 * math.asin(math.sqrt(share)) - 2 * math.asin(math.sqrt(0.5)) if n else math.nan,
+    }
 
 
 def _reseed(people: Sequence[Participant], stream: int) -> None:
@@ -149,15 +165,23 @@ def _reseed(people: Sequence[Participant], stream: int) -> None:
         p.reseed(stream)
 
 
-def _cost_difference(trials: Sequence[dict[str, Any]], people: Sequence[Participant]) -> dict[str, float]:
+def _cost_difference(
+    trials: Sequence[dict[str, Any]], people: Sequence[Participant]
+) -> dict[str, float]:
     """Mean over participants of (static - dynamic) per cost term, comfort points: what each term
     contributes to the dynamic condition's advantage (negative: it favours static)."""
     out = {}
     for name in COST_NAMES:
         diffs = []
         for p in people:
-            rows = {c: [r[f"cost_{name}"] for r in trials if r["participant"] == p.pid and r["condition"] == c]
-                    for c in ("dynamic", "static")}
+            rows = {
+                c: [
+                    r[f"cost_{name}"]
+                    for r in trials
+                    if r["participant"] == p.pid and r["condition"] == c
+                ]
+                for c in ("dynamic", "static")
+            }
             diffs.append(float(np.nanmean(rows["static"]) - np.nanmean(rows["dynamic"])))
         out[name] = float(np.nanmean(diffs))
     return out
@@ -202,17 +226,29 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
             for cond, static in (("dynamic", False), ("static", True)):
                 info = runner.run(p, theta_pop, [seed], static=static)[0]
                 judged = info["outcome"] != UNSTABLE  # a numerical event is not rated (see lived())
-                result.trials.append({"participant": p.pid, "trial": t, "condition": cond, "walk_seed": seed,
-                                      "outcome": info["outcome"], "handover_time": info.get("handover_time"),
-                                      "handover_time_with_delay": info.get("handover_time_with_delay"),
-                                      "likert": p.likert(info) if judged else math.nan,
-                                      "satisfaction": p.satisfaction(info) if judged else math.nan,
-                                      **{f"cost_{k}": v if judged else math.nan for k, v in p.costs(info).items()}})
+                result.trials.append(
+                    {
+                        "participant": p.pid,
+                        "trial": t,
+                        "condition": cond,
+                        "walk_seed": seed,
+                        "outcome": info["outcome"],
+                        "handover_time": info.get("handover_time"),
+                        "handover_time_with_delay": info.get("handover_time_with_delay"),
+                        "likert": p.likert(info) if judged else math.nan,
+                        "satisfaction": p.satisfaction(info) if judged else math.nan,
+                        **{
+                            f"cost_{k}": v if judged else math.nan for k, v in p.costs(info).items()
+                        },
+                    }
+                )
     per = {cond: [] for cond in ("dynamic", "static")}
     times = {cond: [] for cond in ("dynamic", "static")}
     for p in people:
         for cond, ratings in per.items():
-            rows = [r for r in result.trials if r["participant"] == p.pid and r["condition"] == cond]
+            rows = [
+                r for r in result.trials if r["participant"] == p.pid and r["condition"] == cond
+            ]
             rated = [r["likert"] for r in rows if math.isfinite(r["likert"])]
             ratings.append(float(np.mean(rated)) if rated else math.nan)
             ok = [r["handover_time"] for r in rows if r["handover_time"] is not None]
@@ -237,11 +273,19 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
                 result.unjudged += 1
                 continue
             u_opt, u_rnd = p.satisfaction(opt), p.satisfaction(rnd)
-            result.choices.append({"participant": p.pid, "trial": t, "walk_seed": seed,
-                                   **{f"random_{n}": v for n, v in zip(THETA_NAMES, theta_r.as_array())},
-                                   "optimised_outcome": opt["outcome"], "random_outcome": rnd["outcome"],
-                                   "u_optimised": u_opt, "u_random": u_rnd,
-                                   "prefers_optimised": p.prefers(u_opt, u_rnd)})
+            result.choices.append(
+                {
+                    "participant": p.pid,
+                    "trial": t,
+                    "walk_seed": seed,
+                    **{f"random_{n}": v for n, v in zip(THETA_NAMES, theta_r.as_array())},
+                    "optimised_outcome": opt["outcome"],
+                    "random_outcome": rnd["outcome"],
+                    "u_optimised": u_opt,
+                    "u_random": u_rnd,
+                    "prefers_optimised": p.prefers(u_opt, u_rnd),
+                }
+            )
     k = sum(c["prefers_optimised"] for c in result.choices)
     result.h3 = binomial_stats(k, len(result.choices))
     timings["h3_s"] = time.perf_counter() - t0
@@ -252,21 +296,33 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
         for p in tqdm(people, desc="personalised CoSpar", unit="participant", disable=not progress):
             own = run_preference([p], pcfg, runner=runner).theta_hat
             seeds = p.walk_seeds(config.trials, HELD_OUT)
-            pairs = [(x, y) for x, y in zip(runner.run(p, own, seeds), runner.run(p, theta_pop, seeds))
-                     if UNSTABLE not in (x["outcome"], y["outcome"])]
+            pairs = [
+                (x, y)
+                for x, y in zip(runner.run(p, own, seeds), runner.run(p, theta_pop, seeds))
+                if UNSTABLE not in (x["outcome"], y["outcome"])
+            ]
             result.unjudged += len(seeds) - len(pairs)
             if not pairs:
                 continue
             a, b = [x for x, _ in pairs], [y for _, y in pairs]
             wins = sum(p.prefers(p.satisfaction(x), p.satisfaction(y)) for x, y in zip(a, b))
             oa, ob = summarise_outcomes(a), summarise_outcomes(b)
-            result.personal.append({
-                "participant": p.pid, "sex": p.body.sex, "height": p.body.height, "speed": p.body.speed,
-                "pass_y": p.body.pass_y, **{f"own_{n}": v for n, v in zip(THETA_NAMES, own.as_array())},
-                "prefers_own": wins, "comparisons": len(pairs),
-                "u_own": p.utility(a), "u_population": p.utility(b),
-                **{f"own_{k2}": v for k2, v in oa.items()}, **{f"pop_{k2}": v for k2, v in ob.items()},
-            })
+            result.personal.append(
+                {
+                    "participant": p.pid,
+                    "sex": p.body.sex,
+                    "height": p.body.height,
+                    "speed": p.body.speed,
+                    "pass_y": p.body.pass_y,
+                    **{f"own_{n}": v for n, v in zip(THETA_NAMES, own.as_array())},
+                    "prefers_own": wins,
+                    "comparisons": len(pairs),
+                    "u_own": p.utility(a),
+                    "u_population": p.utility(b),
+                    **{f"own_{k2}": v for k2, v in oa.items()},
+                    **{f"pop_{k2}": v for k2, v in ob.items()},
+                }
+            )
     timings["personalised_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - t_start
     timings["episodes"] = runner.episodes_run

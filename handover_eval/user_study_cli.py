@@ -16,24 +16,48 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``user-study`` on ``evaluate.py``'s subcommands."""
     from handover_eval import user_study
 
-    p = sub.add_parser("user-study", help="the paper's user study (H1, H2, H3) and personalised Θ with simulated "
-                       "participants", description=user_study.__doc__,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--participants", type=_int_at_least(2), default=8, help="simulated participants (paper: 8)")
+    p = sub.add_parser(
+        "user-study",
+        help="the paper's user study (H1, H2, H3) and personalised Θ with simulated participants",
+        description=user_study.__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--participants", type=_int_at_least(2), default=8, help="simulated participants (paper: 8)"
+    )
     p.add_argument("--trials", type=_int_at_least(1), default=5,
                    help="handovers per condition and A/B tests per participant (paper: 5)")
-    p.add_argument("--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (paper: 20)")
-    p.add_argument("--walks", type=_int_at_least(1), default=3, help="tuning walks per proposed Θ (default 3)")
+    p.add_argument(
+        "--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (paper: 20)"
+    )
+    p.add_argument(
+        "--walks", type=_int_at_least(1), default=3, help="tuning walks per proposed Θ (default 3)"
+    )
     p.add_argument("--grid", type=_grid, default=(7, 6, 6, 7), metavar="NK,NB,NT,NF",
                    help="CoSpar grid points per parameter (default 7,6,6,7)")
-    p.add_argument("--seed", type=_int_at_least(0), default=0, help="population, CoSpar and H3 seed (default 0)")
+    p.add_argument(
+        "--seed",
+        type=_int_at_least(0),
+        default=0,
+        help="population, CoSpar and H3 seed (default 0)",
+    )
     p.add_argument("--theta", type=float, nargs=4, default=None, metavar=("K", "B", "TF", "FR"),
                    help="use this population Θ̂ instead of running the pooled CoSpar")
-    p.add_argument("--no-personalised", action="store_true", help="skip the per-participant CoSpar comparison")
-    p.add_argument("--out", default=None, metavar="DIR",
-                   help="output folder (default results/user-study, or results/user-study-quick with --quick)")
-    p.add_argument("--quick", action="store_true", help="tiny run for tests: 2 participants, 2 trials, 2 "
-                   "iterations, 1 walk, a 3x3x3x3 grid; never for reported numbers")
+    p.add_argument(
+        "--no-personalised", action="store_true", help="skip the per-participant CoSpar comparison"
+    )
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="output folder (default results/user-study, or results/user-study-quick with --quick)",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="tiny run for tests: 2 participants, 2 trials, 2 "
+        "iterations, 1 walk, a 3x3x3x3 grid; never for reported numbers",
+    )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     return p
 
@@ -43,13 +67,26 @@ def run(args: argparse.Namespace) -> int:
     from handover_eval.user_study import StudyConfig, run_study
 
     try:
-        settings = {"participants": args.participants, "trials": args.trials, "iterations": args.iterations,
-                    "walks": args.walks, "grid": args.grid}
+        settings = {
+            "participants": args.participants,
+            "trials": args.trials,
+            "iterations": args.iterations,
+            "walks": args.walks,
+            "grid": args.grid,
+        }
         if args.quick:
             settings.update(QUICK)
-        config = StudyConfig(**settings, seed=args.seed, theta=tuple(args.theta) if args.theta else None,
-                             personalised=not args.no_personalised)
-        out = Path(args.out) if args.out else Path("results") / ("user-study-quick" if args.quick else "user-study")
+        config = StudyConfig(
+            **settings,
+            seed=args.seed,
+            theta=tuple(args.theta) if args.theta else None,
+            personalised=not args.no_personalised,
+        )
+        out = (
+            Path(args.out)
+            if args.out
+            else Path("results") / ("user-study-quick" if args.quick else "user-study")
+        )
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out}: exists and is not a folder")
     except ValueError as exc:

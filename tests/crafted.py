@@ -1,4 +1,5 @@
-"""Crafted and malicious dataset files, generated in a test's tmp_path (nothing of this is committed).
+"""Crafted and malicious dataset files, generated in a test's tmp_path (nothing of this is
+committed).
 
 Each builder writes one file and returns its path. The pickles are assembled opcode by opcode so
 that they say exactly what the attack needs and nothing else.
@@ -58,7 +59,8 @@ def deep_key_pickle(path: Path, depth: int = 200_000) -> Path:
 
 
 def huge_ndarray_pickle(path: Path, rows: int = 2**27) -> Path:
-    """``pose_object`` built by calling ``numpy.ndarray((rows, 3), float64)``: 3 GiB from 200 bytes."""
+    """``pose_object`` built by calling ``numpy.ndarray((rows, 3), float64)``: 3 GiB from 200
+    bytes."""
     dtype = _global("numpy", "dtype") + _u("f8") + b"\x89\x88\x87R"  # dtype('f8', False, True)
     shape = _int(rows) + b"K\x03" + b"\x86"  # (rows, 3)
     array = _global("numpy", "ndarray") + shape + dtype + b"\x86R"  # ndarray(shape, dtype)

@@ -50,7 +50,8 @@ class QuadraticUser:
         return float(-np.sum(self.sensitivity * z**2))
 
     def prefers(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """True when the user says handover ``a`` was better than ``b`` (paper Eq. 2 noise model)."""
+        """True when the user says handover ``a`` was better than ``b`` (paper Eq. 2 noise
+        model)."""
         margin = self.utility(a) - self.utility(b)
         if self.noise > 0:
             margin += np.sqrt(2.0) * self.noise * self._rng.standard_normal()

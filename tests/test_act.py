@@ -33,10 +33,20 @@ from baselines.checkpoint_io import CheckpointError  # noqa: E402
 from handover_env.data.features import FeatureSpec  # noqa: E402
 from handover_env.data.lerobot_export import export_lerobot  # noqa: E402
 
-TINY = dict(policy=dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4,
-                        optimizer_lr=1e-3),
-            batch_size=16, steps=40, eval_every=20,
-            use_giver_state=True)  # on this 8-episode toy set, receiver-only needs ~80 steps to improve
+TINY = dict(
+    policy=dict(
+        dim_model=32,
+        n_heads=2,
+        dim_feedforward=64,
+        n_encoder_layers=1,
+        latent_dim=4,
+        optimizer_lr=1e-3,
+    ),
+    batch_size=16,
+    steps=40,
+    eval_every=20,
+    use_giver_state=True,
+)  # on this 8-episode toy set, receiver-only needs ~80 steps to improve
 
 
 @pytest.fixture(scope="module")
@@ -70,8 +80,14 @@ def test_policy_is_lerobots_state_only_act():
     assert pc.pretrained_backbone_weights is None and not hasattr(agent.policy.model, "backbone")
     paper = ACTAgentConfig(paper_scale=True)
     model = paper.model()
-    assert (model["dim_model"], model["dim_feedforward"], model["n_encoder_layers"]) == (512, 3200, 4)
-    assert paper.policy_config().dim_model == 512 and ACTAgentConfig().policy_config().dim_model == 128
+    assert (model["dim_model"], model["dim_feedforward"], model["n_encoder_layers"]) == (
+        512,
+        3200,
+        4,
+    )
+    assert (
+        paper.policy_config().dim_model == 512 and ACTAgentConfig().policy_config().dim_model == 128
+    )
 
 
 def test_training_shows_a_tqdm_bar_of_its_steps(export, capsys):
@@ -86,7 +102,12 @@ def test_vectorised_samples_equal_lerobot_getitem(export):
     assert samples["observation.state"].shape[0] == len(ds)
     for i in (0, 1, 44, len(ds) // 2, len(ds) - 1):
         item = ds[i]
-        for key in ("observation.environment_state", "observation.state", "action", "action_is_pad"):
+        for key in (
+            "observation.environment_state",
+            "observation.state",
+            "action",
+            "action_is_pad",
+        ):
             assert torch.equal(item[key], samples[key][i]), (i, key)
 
 
@@ -114,7 +135,9 @@ def test_resume_continues_exactly(export, trained, tmp_path):
     ACTAgent(ACTAgentConfig(**TINY)).fit_lerobot(export, out_dir=tmp_path, steps=20)
     resumed = ACTAgent(ACTAgentConfig(**TINY)).fit_lerobot(export, out_dir=tmp_path, resume=True)
     assert resumed.train_log["step"] == 40
-    np.testing.assert_allclose(resumed.train_log["val_loss"], agent.train_log["val_loss"], rtol=1e-5)
+    np.testing.assert_allclose(
+        resumed.train_log["val_loss"], agent.train_log["val_loss"], rtol=1e-5
+    )
 
 
 def test_checkpoint_round_trip_and_predictions(data, trained, tmp_path):
@@ -125,8 +148,12 @@ def test_checkpoint_round_trip_and_predictions(data, trained, tmp_path):
     assert pred.shape == (times.size, 30, 3) and np.all(np.isfinite(pred))
     np.testing.assert_array_equal(ACTAgent.load(out).predict_episode(ep, times), pred)
     agent.save(tmp_path / "saved")
-    np.testing.assert_array_equal(ACTAgent.load(tmp_path / "saved").predict_episode(ep, times), pred)
-    np.testing.assert_allclose(agent.predict(ep.receiver_xy[:21], ep.giver_xyz[20]), pred[15], atol=1e-5)
+    np.testing.assert_array_equal(
+        ACTAgent.load(tmp_path / "saved").predict_episode(ep, times), pred
+    )
+    np.testing.assert_allclose(
+        agent.predict(ep.receiver_xy[:21], ep.giver_xyz[20]), pred[15], atol=1e-5
+    )
 
 
 def test_act_uses_lerobot_temporal_ensembler(trained):
@@ -155,7 +182,9 @@ def test_clear_errors(data, export, trained, tmp_path):
         ACTAgent.load(tmp_path / "half")
     with pytest.raises(CheckpointError, match="not 'act'"):
         (tmp_path / "bc").mkdir()
-        (tmp_path / "bc" / "handover_act.json").write_text(json.dumps({"type": "bc_mlp", "format": 1}))
+        (tmp_path / "bc" / "handover_act.json").write_text(
+            json.dumps({"type": "bc_mlp", "format": 1})
+        )
         ACTAgent.load(tmp_path / "bc")
     with pytest.raises(ValueError, match="horizon H=90 frames is longer than"):
         ACTAgent(ACTAgentConfig(**dict(TINY, horizon=90))).fit(data)
@@ -170,15 +199,20 @@ def test_clear_errors(data, export, trained, tmp_path):
 
 
 def test_receiver_only_variant_drops_the_state_feature(export, data):
-    agent = ACTAgent(ACTAgentConfig(**dict(TINY, steps=4, eval_every=4, use_giver_state=False))).fit_lerobot(export)
+    agent = ACTAgent(
+        ACTAgentConfig(**dict(TINY, steps=4, eval_every=4, use_giver_state=False))
+    ).fit_lerobot(export)
     assert agent.policy.config.robot_state_feature is None
     ep = data[1]
     pred = agent.predict(ep.receiver_xy[:15])
-    np.testing.assert_allclose(agent.predict_sequence(ep.receiver_xy, np.array([14]))[0], pred, atol=1e-5)
+    np.testing.assert_allclose(
+        agent.predict_sequence(ep.receiver_xy, np.array([14]))[0], pred, atol=1e-5
+    )
 
 
 def test_normalising_once_equals_the_per_batch_preprocessor(export):
-    """fit_lerobot normalises all samples up front; a batch of them is bitwise the pipeline's batch."""
+    """fit_lerobot normalises all samples up front; a batch of them is bitwise the pipeline's
+    batch."""
     from lerobot.policies.act.processor_act import make_act_pre_post_processors
 
     ds, _ = open_export(export, "local/handover", FeatureSpec(history=10))
@@ -199,7 +233,8 @@ def test_normalising_once_equals_the_per_batch_preprocessor(export):
 
 
 def test_training_on_export_episodes_equals_exporting_them(data, export, tmp_path):
-    """episodes=: split and statistics from those episodes only, the same model as their own export."""
+    """episodes=: split and statistics from those episodes only, the same model as their own
+    export."""
     chosen = np.array([0, 2, 3, 5, 6, 7])
     cfg = dict(TINY, steps=12, eval_every=6)
     sub = ACTAgent(ACTAgentConfig(**cfg)).fit_lerobot(
@@ -207,16 +242,23 @@ def test_training_on_export_episodes_equals_exporting_them(data, export, tmp_pat
     part = ACTAgent(ACTAgentConfig(**cfg)).fit_lerobot(export, episodes=chosen)
     ids = {data[i].source_id for i in chosen}
     split = part.train_log["split"]
-    assert set(split["train"]) | set(split["val"]) == ids and not set(split["train"]) & set(split["val"])
+    assert set(split["train"]) | set(split["val"]) == ids and not set(split["train"]) & set(
+        split["val"]
+    )
     assert split == sub.train_log["split"]
     for k, v in sub.policy.state_dict().items():
         assert torch.equal(v, part.policy.state_dict()[k]), k
     assert part.train_log["val_loss"] == sub.train_log["val_loss"]
-    # The normaliser's statistics are those of the chosen training episodes, not of the whole export.
+    # The normaliser's statistics are those of the chosen training episodes, not of the whole
+    # export.
     ds, _ = open_export(export, "local/handover", FeatureSpec(history=10))
     train_ep = [i for i in chosen if data[i].source_id in set(split["train"])]
-    mean = feature_stats(lerobot_samples(ds, np.array(train_ep)))["observation.environment_state"]["mean"]
-    every = feature_stats(lerobot_samples(ds, np.arange(len(data))))["observation.environment_state"]["mean"]
+    mean = feature_stats(lerobot_samples(ds, np.array(train_ep)))["observation.environment_state"][
+        "mean"
+    ]
+    every = feature_stats(lerobot_samples(ds, np.arange(len(data))))[
+        "observation.environment_state"
+    ]["mean"]
     got = part.preprocessor.steps[-1].stats["observation.environment_state"]["mean"]
     np.testing.assert_allclose(np.asarray(got), mean, rtol=1e-6)
     assert not np.allclose(np.asarray(got), every, rtol=1e-3)
@@ -241,7 +283,9 @@ def test_fast_dropout_is_bernoulli_dropout():
     masks.reseed(5)
     a = masks.noise(torch.Size([4, 1000]), 0.1, torch.float32)
     masks.reseed(5)
-    assert torch.equal(a, masks.noise(torch.Size([4, 1000]), 0.1, torch.float32))  # resumable: (seed, step)
+    assert torch.equal(
+        a, masks.noise(torch.Size([4, 1000]), 0.1, torch.float32)
+    )  # resumable: (seed, step)
     masks.reseed(6)
     assert not torch.equal(a, masks.noise(torch.Size([4, 1000]), 0.1, torch.float32))
     # Rows are independent: adjacent rows of one draw do not repeat each other.

@@ -26,17 +26,32 @@ import numpy as np, torch
 torch.set_num_threads(int(sys.argv[3]))
 torch.rand(int(sys.argv[4])); np.random.rand(int(sys.argv[4])); random.random()
 from baselines.act import ACTAgent, ACTAgentConfig
-config = ACTAgentConfig(policy=dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1, latent_dim=4,
+config = ACTAgentConfig(policy=dict(dim_model=32, n_heads=2, dim_feedforward=64, n_encoder_layers=1,
+                                   latent_dim=4,
                                    optimizer_lr=1e-3), batch_size=16, steps=6, eval_every=3, seed=7)
 agent = ACTAgent(config).fit_lerobot(sys.argv[1], out_dir=sys.argv[2])
 assert torch.get_num_threads() == int(sys.argv[3])  # the caller's setting is restored
 """
 
 
-def _train(export: Path, out: Path, threads: int, consumed: int, hash_seed: str) -> dict[str, torch.Tensor]:
-    env = {**os.environ, "PYTHONPATH": str(REPO), "PYTHONHASHSEED": hash_seed, "OMP_NUM_THREADS": str(threads)}
-    result = subprocess.run([sys.executable, "-c", TRAIN, str(export), str(out), str(threads), str(consumed)],
-                            cwd=REPO, env=env, capture_output=True, text=True, timeout=300, check=False)
+def _train(
+    export: Path, out: Path, threads: int, consumed: int, hash_seed: str
+) -> dict[str, torch.Tensor]:
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(REPO),
+        "PYTHONHASHSEED": hash_seed,
+        "OMP_NUM_THREADS": str(threads),
+    }
+    result = subprocess.run(
+        [sys.executable, "-c", TRAIN, str(export), str(out), str(threads), str(consumed)],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     return load_file(out / "training_state" / "last.safetensors")
 
@@ -51,5 +66,8 @@ def test_two_processes_train_identical_weights(tmp_path: Path) -> None:
     assert a.keys() == b.keys() and len(a) > 10
     differing = [k for k in a if not torch.equal(a[k], b[k])]
     assert not differing, f"{len(differing)} of {len(a)} tensors differ, e.g. {differing[:3]}"
-    best_a, best_b = load_file(tmp_path / "a" / "model.safetensors"), load_file(tmp_path / "b" / "model.safetensors")
+    best_a, best_b = (
+        load_file(tmp_path / "a" / "model.safetensors"),
+        load_file(tmp_path / "b" / "model.safetensors"),
+    )
     assert all(torch.equal(best_a[k], best_b[k]) for k in best_a)

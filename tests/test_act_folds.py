@@ -1,4 +1,5 @@
-"""ACT fold pre-training: one shared export, fold models in worker processes, reused by fit_agent."""
+"""ACT fold pre-training: one shared export, fold models in worker processes, reused by
+fit_agent."""
 
 from __future__ import annotations
 
@@ -53,14 +54,21 @@ def _predictions(agent, data) -> np.ndarray:
 
 def test_export_is_made_once_and_reused(data, tmp_path):
     root, reused = ensure_export(data, tmp_path, history=10, horizon=30)
-    assert not reused and root.name.startswith(EXPORT_PREFIX) and (root / "meta" / "handover.json").is_file()
+    assert (
+        not reused
+        and root.name.startswith(EXPORT_PREFIX)
+        and (root / "meta" / "handover.json").is_file()
+    )
     stamp = (root / "meta" / "info.json").stat().st_mtime_ns
     again, reused = ensure_export(data, tmp_path, history=10, horizon=30)
     assert reused and again == root and (root / "meta" / "info.json").stat().st_mtime_ns == stamp
     # Another W, or another dataset, is another export.
     other, _ = ensure_export(data, tmp_path, history=6, horizon=30)
     assert other != root
-    assert ensure_export(data.subset(range(10)), tmp_path, history=10, horizon=30)[0] not in (root, other)
+    assert ensure_export(data.subset(range(10)), tmp_path, history=10, horizon=30)[0] not in (
+        root,
+        other,
+    )
     # An export whose sidecar disagrees with the dataset (e.g. damaged) is rebuilt, not trusted.
     (root / "meta" / "handover.json").unlink()
     rebuilt, reused = ensure_export(data, tmp_path, history=10, horizon=30)
@@ -79,7 +87,8 @@ def test_episode_indices_of_subsets(data):
 
 
 def test_parallel_pretraining_equals_fit_agent_and_is_reused(data, folds, tmp_path):
-    """2 spawned workers on one export give bitwise the models fit_agent trains from per-fold exports."""
+    """2 spawned workers on one export give bitwise the models fit_agent trains from per-fold
+    exports."""
     cache = tmp_path / "parallel"
     sets = [train for train, _ in folds]
     runs = pretrain_act(data, sets, OPTIONS, cache, workers=2, progress=False)
@@ -93,16 +102,22 @@ def test_parallel_pretraining_equals_fit_agent_and_is_reused(data, folds, tmp_pa
         assert reused
         assert loaded.train_log["step"] == 16 and loaded.train_log["best_step"] == run.best_step
         # The classic path: fit_agent exports this fold's training set alone and trains in-process.
-        classic, reused = fit_agent("act", build_agent("act", OPTIONS), train, tmp_path / f"classic{f}")
+        classic, reused = fit_agent(
+            "act", build_agent("act", OPTIONS), train, tmp_path / f"classic{f}"
+        )
         assert not reused
         np.testing.assert_array_equal(_predictions(loaded, data), _predictions(classic, data))
     # A second call finds every checkpoint complete and trains nothing (no export needed either).
     again = pretrain_act(data, sets, OPTIONS, cache, workers=2, progress=False)
-    assert [r.folder for r in again] == [r.folder for r in runs] and not any(r.trained for r in again)
+    assert [r.folder for r in again] == [r.folder for r in runs] and not any(
+        r.trained for r in again
+    )
     # reuse=False retrains (here in this process: workers=1), to the same model.
     before = _predictions(_load_act(runs[0].folder), data)
     lines: list[str] = []
-    fresh = pretrain_act(data, sets[:1], OPTIONS, cache, reuse=False, workers=1, progress=False, log=lines.append)
+    fresh = pretrain_act(
+        data, sets[:1], OPTIONS, cache, reuse=False, workers=1, progress=False, log=lines.append
+    )
     assert fresh[0].trained and fresh[0].folder == runs[0].folder
     assert "1 process" in lines[0] and "best val L1" in lines[-1]
     np.testing.assert_array_equal(_predictions(_load_act(runs[0].folder), data), before)
@@ -116,8 +131,9 @@ def _load_act(folder: Path):
 
 def test_identical_training_sets_share_one_model(data, folds, tmp_path):
     train = folds[0][0]
-    runs = pretrain_act(data, [train, train.copy()], OPTIONS, tmp_path, workers=2, labels=["a", "b"],
-                        progress=False)
+    runs = pretrain_act(
+        data, [train, train.copy()], OPTIONS, tmp_path, workers=2, labels=["a", "b"], progress=False
+    )
     assert runs[0].folder == runs[1].folder and runs[0].trained and runs[1].trained
     assert len(list(tmp_path.glob("act-*"))) == 2  # one checkpoint + the export
 
@@ -138,8 +154,17 @@ def test_a_failing_worker_stops_the_pretraining(tmp_path):
     from handover_eval.act_folds import ACTJob, _run_jobs
 
     config = asdict(build_agent("act", OPTIONS).config)
-    jobs = [ACTJob(f"job {i}", config, (0, 1, 2), str(tmp_path / f"ck{i}"), "{}", str(tmp_path / "no-export"))
-            for i in range(3)]
+    jobs = [
+        ACTJob(
+            f"job {i}",
+            config,
+            (0, 1, 2),
+            str(tmp_path / f"ck{i}"),
+            "{}",
+            str(tmp_path / "no-export"),
+        )
+        for i in range(3)
+    ]
     with pytest.raises(FileNotFoundError, match="not a handover LeRobot export"):
         _run_jobs(jobs, workers=2, progress=False, log=None)
     assert not any((tmp_path / f"ck{i}" / COMPLETE).exists() for i in range(3))
@@ -152,8 +177,9 @@ def test_sample_efficiency_pretrains_every_fold_and_ratio(tmp_path):
 
     data = generate_synthetic(n=16, ood_fraction=0.25, seed=5)
     protocol = OpenLoopProtocol(stride=5)
-    rows = run_sample_efficiency(data, ["act"], [0.5, 1.0], 2, 0, OPTIONS, protocol, tmp_path, progress=False,
-                                 workers=2)
+    rows = run_sample_efficiency(
+        data, ["act"], [0.5, 1.0], 2, 0, OPTIONS, protocol, tmp_path, progress=False, workers=2
+    )
     assert [(r["method"], r["ratio"]) for r in rows] == [("act", 0.5), ("act", 1.0)]
     assert all(np.isfinite(r["all_rms_3d_mm"]) for r in rows)
     ckpt = tmp_path / "checkpoints"

@@ -8,15 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-import torch as _torch  # noqa: E402
 
-_torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
+torch.set_num_threads(1)  # 2 threads on a shared 2-core box run ~10x slower
 
-from baselines_toy import toy_dataset
+from baselines_toy import toy_dataset  # noqa: E402
 
-from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
-from baselines.checkpoint_io import CheckpointError
-from handover_env.data.features import (
+from baselines.bc_mlp import BCMLPAgent, BCMLPConfig  # noqa: E402
+from baselines.checkpoint_io import CheckpointError  # noqa: E402
+from handover_env.data.features import (  # noqa: E402
     FeatureSpec,
     encode_history,
     encode_receiver,
@@ -66,7 +65,9 @@ def test_loss_decreases_and_early_stopping_state_is_saved(trained):
 
 
 def test_early_stopping_stops_on_patience(data):
-    agent = BCMLPAgent(BCMLPConfig(hidden=(8,), batch_size=64, max_epochs=200, patience=1, lr=0.5)).fit(data)
+    agent = BCMLPAgent(
+        BCMLPConfig(hidden=(8,), batch_size=64, max_epochs=200, patience=1, lr=0.5)
+    ).fit(data)
     assert agent.train_log["stopped_early"] and agent.train_log["epoch"] < 200
 
 
@@ -83,7 +84,9 @@ def test_resume_continues_exactly(data, tmp_path):
     BCMLPAgent(BCMLPConfig(**cfg)).fit(data, out_dir=tmp_path, max_epochs=2)
     resumed = BCMLPAgent(BCMLPConfig(**cfg)).fit(data, out_dir=tmp_path, resume=True)
     assert resumed.train_log["epoch"] == 4
-    np.testing.assert_allclose(resumed.train_log["val_loss"], straight.train_log["val_loss"], rtol=1e-6)
+    np.testing.assert_allclose(
+        resumed.train_log["val_loss"], straight.train_log["val_loss"], rtol=1e-6
+    )
 
 
 # ----------------------------------------------------------------- inference and checkpoints
@@ -95,10 +98,14 @@ def test_checkpoint_round_trip_gives_identical_predictions(data, trained, tmp_pa
     assert pred.shape == (times.size, 30, 3)
     np.testing.assert_array_equal(BCMLPAgent.load(out).predict_episode(ep, times), pred)
     agent.save(tmp_path / "saved")
-    np.testing.assert_array_equal(BCMLPAgent.load(tmp_path / "saved").predict_episode(ep, times), pred)
+    np.testing.assert_array_equal(
+        BCMLPAgent.load(tmp_path / "saved").predict_episode(ep, times), pred
+    )
     # predict / predict_sequence agree with the batched episode path
     t = 20
-    np.testing.assert_allclose(agent.predict(ep.receiver_xy[: t + 1], ep.giver_xyz[t]), pred[t - 5], atol=1e-6)
+    np.testing.assert_allclose(
+        agent.predict(ep.receiver_xy[: t + 1], ep.giver_xyz[t]), pred[t - 5], atol=1e-6
+    )
     seq = agent.predict_sequence(ep.receiver_xy, times, giver_xyz=ep.giver_xyz)
     np.testing.assert_array_equal(seq, pred)
 
@@ -145,13 +152,24 @@ def test_receiver_only_variant_needs_no_giver(data):
     pred = agent.predict(ep.receiver_xy[:15])
     assert pred.shape == (30, 3)
     np.testing.assert_allclose(agent.predict_episode(ep, np.array([14]))[0], pred, atol=1e-6)
-    np.testing.assert_allclose(agent.predict_sequence(ep.receiver_xy, np.array([14]))[0], pred, atol=1e-6)
+    np.testing.assert_allclose(
+        agent.predict_sequence(ep.receiver_xy, np.array([14]))[0], pred, atol=1e-6
+    )
 
 
-REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "dynamic_handover_dataset" / "whole_motions"
+REAL = (
+    Path(__file__).resolve().parents[1]
+    / ".."
+    / "shared"
+    / "data"
+    / "dynamic_handover_dataset"
+    / "whole_motions"
+)
 
 
-@pytest.mark.skipif(not REAL.is_dir(), reason="the development copy of the public dataset is absent")
+@pytest.mark.skipif(
+    not REAL.is_dir(), reason="the development copy of the public dataset is absent"
+)
 def test_learns_real_recordings_by_the_shared_protocol():
     from handover_env.data.public import load_public_dataset
     from handover_eval.openloop import evaluate_openloop, summarise

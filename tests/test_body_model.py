@@ -57,7 +57,9 @@ def test_parked_away_and_upright(body):
     assert np.abs(data.qvel[ids.dofs]).max() < 1e-6  # at rest under gravity (compensated)
 
 
-@pytest.mark.parametrize("segment", ["pelvis", "torso", "head", "thigh_l", "forearm_r", "hand_r", "upper_arm_l"])
+@pytest.mark.parametrize(
+    "segment", ["pelvis", "torso", "head", "thigh_l", "forearm_r", "hand_r", "upper_arm_l"]
+)
 def test_quasi_static_stiffness_is_the_documented_value(body, segment):
     """A horizontal push at a segment's centre of mass deflects it by force / K: within 10 %
     averaged over the two horizontal directions (what the weld gains are calibrated to); each
@@ -75,7 +77,9 @@ def test_quasi_static_stiffness_is_the_documented_value(body, segment):
         assert k == ISO_REGIONS[SEGMENTS[i].region][0] * 1000.0
     kx, ky = (measure_stiffness(model, data, ids, i, axis=a, force=40.0) for a in (0, 1))
     # The upper arm is held by the shoulder and the forearm chain (WELD_GAIN's note): ~1.1 kN/m.
-    assert 0.5 * (kx + ky) == pytest.approx(k, rel=0.20 if segment.startswith("upper_arm") else 0.10)
+    assert 0.5 * (kx + ky) == pytest.approx(
+        k, rel=0.20 if segment.startswith("upper_arm") else 0.10
+    )
     assert k / 2.0 < min(kx, ky) and max(kx, ky) < 2.0 * k
 
 
@@ -119,7 +123,9 @@ def test_resizing_changes_lengths_masses_and_keeps_contacts_found():
     skull = ids.geoms[list(GEOM_NAMES).index("skull")]
     head_above_pelvis = data.geom_xpos[skull, 2] - data.xpos[ids.bodies[0], 2]
     template = BodyDims.from_height(1.725)
-    assert head_above_pelvis == pytest.approx((template.joints[J["HEAD"], 2] + 0.02) * 2.0 / 1.725, rel=1e-6)
+    assert head_above_pelvis == pytest.approx(
+        (template.joints[J["HEAD"], 2] + 0.02) * 2.0 / 1.725, rel=1e-6
+    )
     # A sphere where only the resized (taller) head reaches is touched: the bounding volumes
     # MuJoCo's collision detection reads were updated with the geometry.
     spec = mujoco.MjSpec()

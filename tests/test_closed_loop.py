@@ -60,7 +60,9 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
     assert len(receivers) == 2 + 2 + 3  # --quick: 2 walkers per set, 3 replays of fold 0
     for agent in AGENTS:
         mine = {(r["set"], r["receiver"]) for r in rows if r["agent"] == agent}
-        expected = {k for k in receivers if k[0] == "replay"} if agent == "giver-replay" else receivers
+        expected = (
+            {k for k in receivers if k[0] == "replay"} if agent == "giver-replay" else receivers
+        )
         assert mine == expected, agent
     for r in rows:
         assert r["env"] == ("static" if r["agent"] == "static" else "dynamic")
@@ -72,11 +74,21 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
             assert float(r["transfer_time"]) <= float(r["release_time"])
         else:
             assert math.isnan(float(r["handover_time"]))
-        if r["agent"] in ("ours", "iaal", "bc-mlp", "act"):  # fold models: fold 0 for everything here
+        if r["agent"] in (
+            "ours",
+            "iaal",
+            "bc-mlp",
+            "act",
+        ):  # fold models: fold 0 for everything here
             assert r["model_fold"] == "0"
         else:
             assert r["model_fold"] == ""
-        assert (float(r["K"]), float(r["B"]), float(r["t_f"]), float(r["f_r"])) == (114.3, 17.1, 0.14, 7.1)
+        assert (float(r["K"]), float(r["B"]), float(r["t_f"]), float(r["f_r"])) == (
+            114.3,
+            17.1,
+            0.14,
+            7.1,
+        )
         assert (r["body_contact"] == "True") == (float(r["body_contact_force"]) > 0)
         assert int(r["steps"]) >= 1 and int(r["sim_unstable"]) >= 0
     agg = _rows(quick_run / "closed_loop.csv")
@@ -88,9 +100,17 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
         assert float(a["success_low"]) <= float(a["success_rate"]) <= float(a["success_high"])
     pairs = _rows(quick_run / "closed_loop_paired.csv")
     assert {p["agent"] for p in pairs} == set(AGENTS) - {"reactive"}
-    assert {p["metric"] for p in pairs} >= {"success", "handover_time", "time_lost", "arm_extended_time",
-                                            "reach_distance", "pull_force", "body_contact_force",
-                                            "body_contact", "robot_jerk_rms"}
+    assert {p["metric"] for p in pairs} >= {
+        "success",
+        "handover_time",
+        "time_lost",
+        "arm_extended_time",
+        "reach_distance",
+        "pull_force",
+        "body_contact_force",
+        "body_contact",
+        "robot_jerk_rms",
+    }
     for p in pairs:
         if int(p["n_pairs"]):
             assert float(p["diff_low"]) <= float(p["diff"]) <= float(p["diff_high"])
@@ -109,7 +129,9 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
 
 def test_lagging_agent_hands_over_later_than_reactive(quick_run: Path) -> None:
     """The 0.5 s lag shows up in the paired handover time on the receivers both served."""
-    pairs = {(p["agent"], p["set"], p["metric"]): p for p in _rows(quick_run / "closed_loop_paired.csv")}
+    pairs = {
+        (p["agent"], p["set"], p["metric"]): p for p in _rows(quick_run / "closed_loop_paired.csv")
+    }
     diffs = [float(pairs[("lagging", s, "handover_time")]["diff"]) for s in ("id", "ood", "replay")]
     assert all(d > 0 for d in diffs)
 
@@ -125,7 +147,9 @@ def test_results_do_not_depend_on_the_number_of_workers(tmp_path: Path) -> None:
                        for r in _rows(tmp_path / workers / "closed_loop_episodes.csv")])
     assert len(tables[0]) == 5 * 7 + 3
     assert tables[0] == tables[1]
-    assert _rows(tmp_path / "1" / "closed_loop_paired.csv") == _rows(tmp_path / "2" / "closed_loop_paired.csv")
+    assert _rows(tmp_path / "1" / "closed_loop_paired.csv") == _rows(
+        tmp_path / "2" / "closed_loop_paired.csv"
+    )
 
 
 def test_replays_of_fold_f_meet_the_fold_f_model() -> None:
@@ -134,7 +158,9 @@ def test_replays_of_fold_f_meet_the_fold_f_model() -> None:
     splits = data.stratified_kfold(3, 0)
     specs = walkers(2) + replays(data, folds, (1, 2), {}, max_per_fold=2)
     config = ClosedLoopConfig(walkers=2, folds=3, chunk=3)
-    jobs = plan_jobs(config, specs, splits, MethodOptions(quick=True, workers=1), Path("unused"), "t")
+    jobs = plan_jobs(
+        config, specs, splits, MethodOptions(quick=True, workers=1), Path("unused"), "t"
+    )
     for job in jobs:
         for spec in job.receivers:
             if job.agent in ("ours", "iaal", "bc-mlp", "act"):
@@ -172,19 +198,41 @@ def test_episode_row_flattens_info_and_marks_timeouts_and_ghost_releases() -> No
     row = episode_row(job, spec, info, 450, 1.5)
     assert row["outcome"] == "timeout" and row["release_before_grasp"]
     assert math.isnan(row["transfer_pelvis_x"]) and math.isnan(row["transfer_object_z"])
-    assert math.isnan(row["delta_t"]) and row["steps"] == 450 and row["receiver_id"] == "replay:rec_1"
-    info.update(outcome="success", is_success=True, handover_time=2.5, release_time=2.5,
-                transfer_time=2.2, transfer_pelvis_xy=(0.55, -0.9), transfer_object_pos=(0.3, -0.5, 1.2))
+    assert (
+        math.isnan(row["delta_t"]) and row["steps"] == 450 and row["receiver_id"] == "replay:rec_1"
+    )
+    info.update(
+        outcome="success",
+        is_success=True,
+        handover_time=2.5,
+        release_time=2.5,
+        transfer_time=2.2,
+        transfer_pelvis_xy=(0.55, -0.9),
+        transfer_object_pos=(0.3, -0.5, 1.2),
+    )
     row = episode_row(job, spec, info, 80, 0.2)
     assert row["outcome"] == "success" and not row["release_before_grasp"]
     assert row["delta_t"] == pytest.approx(0.2) and row["delta_x"] == pytest.approx(0.15)
-    assert (row["transfer_object_x"], row["transfer_object_y"], row["transfer_object_z"]) == (0.3, -0.5, 1.2)
+    assert (row["transfer_object_x"], row["transfer_object_y"], row["transfer_object_z"]) == (
+        0.3,
+        -0.5,
+        1.2,
+    )
     assert (row["fold"], row["model_fold"], row["hand_mode"]) == (5, "", "reach")
 
 
 def test_quick_theta_sweep_f_r_moves_the_release_force(tmp_path: Path) -> None:
-    argv = ["theta-sweep", "--quick", "--no-progress", "--agent", "reactive", "--out", str(tmp_path),
-            "--checkpoints", str(tmp_path / "checkpoints")]
+    argv = [
+        "theta-sweep",
+        "--quick",
+        "--no-progress",
+        "--agent",
+        "reactive",
+        "--out",
+        str(tmp_path),
+        "--checkpoints",
+        str(tmp_path / "checkpoints"),
+    ]
     assert evaluate.main(argv) == 0
     rows = _rows(tmp_path / "theta_sweep_episodes.csv")
     assert len(rows) == 4 * 3 * 4  # 4 parameters x 3 values x (2 ID + 2 OOD walkers)
@@ -236,16 +284,43 @@ def test_help_explains_every_flag(capsys: pytest.CaptureFixture) -> None:
         with pytest.raises(SystemExit):
             evaluate.main([command, "--help"])
         text = capsys.readouterr().out
-        for flag in ("--data", "--replay-folds", "--hand-mode", "--theta", "--checkpoints", "--workers",
-                     "--quick", "--bootstrap", "--walkers"):
+        for flag in (
+            "--data",
+            "--replay-folds",
+            "--hand-mode",
+            "--theta",
+            "--checkpoints",
+            "--workers",
+            "--quick",
+            "--bootstrap",
+            "--walkers",
+        ):
             assert flag in text, (command, flag)
 
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="development copy of the public dataset not present")
 def test_giver_replay_on_recordings_is_compared_with_the_recorded_transfer(tmp_path: Path) -> None:
-    argv = ["closed-loop", "--data", str(DATA), "--agents", "giver-replay", "reactive", "--sets", "replay",
-            "--replays-per-fold", "2", "--replay-folds", "5", "--hand-mode", "recorded", "--workers", "1",
-            "--no-progress", "--out", str(tmp_path)]
+    argv = [
+        "closed-loop",
+        "--data",
+        str(DATA),
+        "--agents",
+        "giver-replay",
+        "reactive",
+        "--sets",
+        "replay",
+        "--replays-per-fold",
+        "2",
+        "--replay-folds",
+        "5",
+        "--hand-mode",
+        "recorded",
+        "--workers",
+        "1",
+        "--no-progress",
+        "--out",
+        str(tmp_path),
+    ]
     assert evaluate.main(argv) == 0
     rows = _rows(tmp_path / "closed_loop_episodes.csv")
     assert len(rows) == 4 and {r["hand_mode"] for r in rows} == {"recorded"}

@@ -138,23 +138,66 @@ def test_paired_rows_match_receivers_not_row_order() -> None:
 
 def test_aggregate_and_ghosts_count_what_they_say() -> None:
     rows = [
-        _row("x", "id", "1", "success", handover_time=2.0, penetration=0.001, body_contact_force=0.0,
-             peak_contact_force=10.0, transfer_pelvis_x=0.5),
-        _row("x", "id", "2", "success", handover_time=4.0, penetration=0.004, body_contact_force=30.0,
-             peak_contact_force=30.0, transfer_pelvis_x=0.7),
-        _row("x", "id", "3", "premature_release", handover_time=None, penetration=0.0,
-             body_contact_force=5.0, peak_contact_force=12.0, transfer_pelvis_x=None,
-             release_before_grasp=True),
-        _row("x", "id", "4", "timeout", handover_time=None, penetration=0.02, body_contact_force=0.0,
-             peak_contact_force=9.0, transfer_pelvis_x=None),
+        _row(
+            "x",
+            "id",
+            "1",
+            "success",
+            handover_time=2.0,
+            penetration=0.001,
+            body_contact_force=0.0,
+            peak_contact_force=10.0,
+            transfer_pelvis_x=0.5,
+        ),
+        _row(
+            "x",
+            "id",
+            "2",
+            "success",
+            handover_time=4.0,
+            penetration=0.004,
+            body_contact_force=30.0,
+            peak_contact_force=30.0,
+            transfer_pelvis_x=0.7,
+        ),
+        _row(
+            "x",
+            "id",
+            "3",
+            "premature_release",
+            handover_time=None,
+            penetration=0.0,
+            body_contact_force=5.0,
+            peak_contact_force=12.0,
+            transfer_pelvis_x=None,
+            release_before_grasp=True,
+        ),
+        _row(
+            "x",
+            "id",
+            "4",
+            "timeout",
+            handover_time=None,
+            penetration=0.02,
+            body_contact_force=0.0,
+            peak_contact_force=9.0,
+            transfer_pelvis_x=None,
+        ),
     ]
     (agg,) = aggregate(rows)
     assert agg["n"] == 4 and agg["success_rate"] == 0.5
     assert (agg["success_low"], agg["success_high"]) == pytest.approx(
         (0.150036, 0.849964), abs=1e-5)  # Wilson 2/4
-    assert (agg["n_success"], agg["n_premature_release"], agg["n_timeout"], agg["n_missed"]) == (2, 1, 1, 0)
+    assert (agg["n_success"], agg["n_premature_release"], agg["n_timeout"], agg["n_missed"]) == (
+        2,
+        1,
+        1,
+        0,
+    )
     assert agg["handover_time_n"] == 2 and agg["handover_time_median"] == 3.0  # successes only
-    assert median_iqr(np.array([0.5, 0.7]))[0] == agg["transfer_pelvis_x_median"] == pytest.approx(0.6)
+    assert (
+        median_iqr(np.array([0.5, 0.7]))[0] == agg["transfer_pelvis_x_median"] == pytest.approx(0.6)
+    )
     assert agg["penetration_max"] == 0.02
     assert agg["release_before_grasp_successes"] == 0  # the premature release is not a success
     g = {r["agent"]: r for r in ghosts(rows)}

@@ -38,9 +38,17 @@ def test_the_giver_state_default_is_receiver_only_everywhere():
 
 
 def test_importing_the_library_leaves_the_hugging_face_variables_alone():
-    modules = ["handover_env", "handover_env.data.lerobot_export", "handover_env.data.__main__", "agents.nonparametric",
-               "handover_eval.methods", "handover_eval.act_folds", "handover_eval.evaluate_cli",
-               "handover_eval.train_cli", "handover_eval.closedloop"]
+    modules = [
+        "handover_env",
+        "handover_env.data.lerobot_export",
+        "handover_env.data.__main__",
+        "agents.nonparametric",
+        "handover_eval.methods",
+        "handover_eval.act_folds",
+        "handover_eval.evaluate_cli",
+        "handover_eval.train_cli",
+        "handover_eval.closedloop",
+    ]
     try:
         import torch  # noqa: F401
 
@@ -49,18 +57,26 @@ def test_importing_the_library_leaves_the_hugging_face_variables_alone():
         pass
     code = (f"import importlib, os\nfor m in {modules!r}: importlib.import_module(m)\n"
             "print(sorted(k for k in os.environ if k.startswith('HF_') and k.endswith('OFFLINE')))")
-    env = {k: v for k, v in os.environ.items() if not (k.startswith("HF_") and k.endswith("OFFLINE"))}
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300, cwd=ROOT)
+    env = {
+        k: v for k, v in os.environ.items() if not (k.startswith("HF_") and k.endswith("OFFLINE"))
+    }
+    res = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300, cwd=ROOT
+    )
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "[]"
 
 
 def test_the_cli_entry_points_set_offline_mode():
-    env = {k: v for k, v in os.environ.items() if not (k.startswith("HF_") and k.endswith("OFFLINE"))}
+    env = {
+        k: v for k, v in os.environ.items() if not (k.startswith("HF_") and k.endswith("OFFLINE"))
+    }
     code = ("import os, sys\nfrom handover_eval.evaluate_cli import main\n"
             "try:\n    main(['table1', '--methods', 'nope'])\nexcept SystemExit:\n    pass\n"
             "print(os.environ.get('HF_HUB_OFFLINE'), os.environ.get('HF_DATASETS_OFFLINE'))")
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300, cwd=ROOT)
+    res = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300, cwd=ROOT
+    )
     assert res.stdout.strip().splitlines()[-1] == "1 1", res.stderr
 
 

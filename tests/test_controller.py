@@ -9,7 +9,12 @@ import numpy as np
 import pytest
 
 from handover_env.config import HandoverParams
-from handover_env.controller import ControllerConfig, ImpedanceController, inverse_kinematics, target_rotation
+from handover_env.controller import (
+    ControllerConfig,
+    ImpedanceController,
+    inverse_kinematics,
+    target_rotation,
+)
 from handover_env.menagerie import MenagerieNotFoundError, model_path
 from handover_env.scene import (
     TORQUE_LIMITS,
@@ -31,7 +36,9 @@ def model():
 def _setup(model, pos=READY, yaw=-math.pi / 2, with_object=True, params=None):
     ids = scene_ids(model)
     data = mujoco.MjData(model)
-    q = inverse_kinematics(model, mujoco.MjData(model), ids, pos, yaw, np.array([-2.3, -1.8, 2.1, -0.3, -3.9, 0.0]))
+    q = inverse_kinematics(
+        model, mujoco.MjData(model), ids, pos, yaw, np.array([-2.3, -1.8, 2.1, -0.3, -3.9, 0.0])
+    )
     data.qpos[ids.arm_qpos] = q
     data.ctrl[ids.gripper_act] = 255.0
     mujoco.mj_forward(model, data)
@@ -113,8 +120,13 @@ def test_step_target_settles_without_overshoot(model):
 
 def test_never_exceeds_torque_limits_on_a_large_jump(model):
     ids, data, ctrl = _setup(model)
-    stiff = ImpedanceController(model, ids, HandoverParams(stiffness=140.0, damping=10.0),
-                                ControllerConfig(max_linear_speed=5.0, ref_omega=80.0), rest_qpos=data.qpos[ids.arm_qpos])
+    stiff = ImpedanceController(
+        model,
+        ids,
+        HandoverParams(stiffness=140.0, damping=10.0),
+        ControllerConfig(max_linear_speed=5.0, ref_omega=80.0),
+        rest_qpos=data.qpos[ids.arm_qpos],
+    )
     stiff.reset(data)
     stiff.payload_mass = ctrl.payload_mass
     stiff.set_target(np.array([0.5, -0.8, 1.36]), 0.0)
@@ -123,8 +135,19 @@ def test_never_exceeds_torque_limits_on_a_large_jump(model):
     assert np.all(np.abs(stiff.last_torque) <= TORQUE_LIMITS + 1e-9)
 
 
-@pytest.mark.parametrize("corner", [(0.5, -0.3, 1.0), (0.5, -0.3, 1.36), (0.5, -0.8, 1.0), (0.5, -0.8, 1.36),
-                                    (0.0, -0.8, 1.0), (0.0, -0.8, 1.36), (0.25, -0.55, 1.2), (0.2, -0.45, 1.0)])
+@pytest.mark.parametrize(
+    "corner",
+    [
+        (0.5, -0.3, 1.0),
+        (0.5, -0.3, 1.36),
+        (0.5, -0.8, 1.0),
+        (0.5, -0.8, 1.36),
+        (0.0, -0.8, 1.0),
+        (0.0, -0.8, 1.36),
+        (0.25, -0.55, 1.2),
+        (0.2, -0.45, 1.0),
+    ],
+)
 def test_workspace_covers_the_dataset_handover_box(model, corner):
     """Handovers happen at x 0..0.5, y -0.3..-0.8, z 1.0..1.36 (data README); the gripper points
     toward the receiver's path (-y). Only points whose wrist would fall into the column around the

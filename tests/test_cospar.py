@@ -1,4 +1,5 @@
-"""CoSpar preference learning: the Laplace posterior against its defining equations, and learning."""
+"""CoSpar preference learning: the Laplace posterior against its defining equations, and
+learning."""
 
 from __future__ import annotations
 
@@ -68,7 +69,9 @@ def test_grid_spans_paper_ranges() -> None:
     grid = action_grid(SMALL)
     assert grid.shape == (4 * 3 * 4 * 4, 4)
     for j, name in enumerate(("stiffness", "damping", "forecast_time", "release_force")):
-        assert grid[:, j].min() == THETA_RANGES[name][0] and grid[:, j].max() == THETA_RANGES[name][1]
+        assert (
+            grid[:, j].min() == THETA_RANGES[name][0] and grid[:, j].max() == THETA_RANGES[name][1]
+        )
 
 
 def test_config_validation() -> None:
@@ -93,8 +96,12 @@ def test_cospar_finds_a_noiseless_users_ideal() -> None:
 def test_cospar_beats_random_parameters_for_simulated_participants() -> None:
     users = sample_users(4, seed=3)
     rng = np.random.default_rng(0)
-    lows = np.array([THETA_RANGES[n][0] for n in ("stiffness", "damping", "forecast_time", "release_force")])
-    highs = np.array([THETA_RANGES[n][1] for n in ("stiffness", "damping", "forecast_time", "release_force")])
+    lows = np.array(
+        [THETA_RANGES[n][0] for n in ("stiffness", "damping", "forecast_time", "release_force")]
+    )
+    highs = np.array(
+        [THETA_RANGES[n][1] for n in ("stiffness", "damping", "forecast_time", "release_force")]
+    )
     wins = 0
     for i, user in enumerate(users):
         learned = np.array(CoSpar(SMALL, seed=i).run(user.prefers, iterations=15).as_array())
@@ -106,6 +113,8 @@ def test_cospar_beats_random_parameters_for_simulated_participants() -> None:
 def test_cospar_is_deterministic_under_a_seed() -> None:
     runs = []
     for _ in range(2):
-        user = QuadraticUser(ideal=np.array([100.0, 12.0, 0.6, 15.0]), sensitivity=np.ones(4), noise=0.05, seed=7)
+        user = QuadraticUser(
+            ideal=np.array([100.0, 12.0, 0.6, 15.0]), sensitivity=np.ones(4), noise=0.05, seed=7
+        )
         runs.append(CoSpar(SMALL, seed=1).run(user.prefers, iterations=5))
     assert runs[0] == runs[1]

@@ -29,11 +29,15 @@ botorch_models = pytest.importorskip("botorch.models")
 kernels = pytest.importorskip("gpytorch.kernels")
 
 
-def _botorch_map(x: np.ndarray, prefs: np.ndarray, lengthscale: np.ndarray, s2: float, sigma: float) -> np.ndarray:
+def _botorch_map(
+    x: np.ndarray, prefs: np.ndarray, lengthscale: np.ndarray, s2: float, sigma: float
+) -> np.ndarray:
     cov = kernels.ScaleKernel(kernels.RBFKernel(ard_num_dims=x.shape[1])).double()
     cov.base_kernel.lengthscale = torch.tensor(lengthscale, dtype=torch.float64)
     cov.outputscale = torch.tensor(s2 / sigma**2, dtype=torch.float64)
-    model = botorch_models.PairwiseGP(torch.tensor(x, dtype=torch.float64), torch.tensor(prefs), covar_module=cov)
+    model = botorch_models.PairwiseGP(
+        torch.tensor(x, dtype=torch.float64), torch.tensor(prefs), covar_module=cov
+    )
     return model.utility.detach().numpy() * sigma
 
 

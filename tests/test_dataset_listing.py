@@ -1,4 +1,5 @@
-"""Issue 16 item 14: every entry named like a dataset file is loaded or refused by name, never skipped silently."""
+"""Issue 16 item 14: every entry named like a dataset file is loaded or refused by name, never
+skipped silently."""
 
 from __future__ import annotations
 
@@ -46,7 +47,9 @@ REASONS = {
 
 def test_every_bad_entry_is_reported_by_name(folder: Path) -> None:
     report = LoadReport()
-    ds = load_public_dataset(folder, skip_bad=True, progress=False, report=report, on_skip=lambda *a: None)
+    ds = load_public_dataset(
+        folder, skip_bad=True, progress=False, report=report, on_skip=lambda *a: None
+    )
     assert [ep.source_id for ep in ds] == ["motion_normal_0", "motion_variation_0"]
     assert len({ep.source_id for ep in ds}) == len(ds)  # no duplicate episode ids
     skipped = dict(report.skipped)
@@ -54,7 +57,9 @@ def test_every_bad_entry_is_reported_by_name(folder: Path) -> None:
     for name, reason in REASONS.items():
         assert reason in skipped[name], (name, skipped[name])
     assert report.summary().startswith("loaded 2 file(s), skipped 8")
-    assert len(report.summary().splitlines()) == 1 + 8  # the name with a newline is quoted, one line each
+    assert (
+        len(report.summary().splitlines()) == 1 + 8
+    )  # the name with a newline is quoted, one line each
 
 
 def test_without_skip_bad_the_first_bad_entry_is_an_error(folder: Path) -> None:

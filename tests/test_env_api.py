@@ -11,7 +11,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-pytest.importorskip("handover_env.receiver_motion", reason="the shared receiver motion model is not in the tree yet")
+pytest.importorskip(
+    "handover_env.receiver_motion", reason="the shared receiver motion model is not in the tree yet"
+)
 
 import handover_env  # noqa: E402,F401  (registers the ids)
 
@@ -43,8 +45,10 @@ def test_mujoco_reset_state():
 
 
 def test_fresh_subprocess_make():
-    code = ("import gymnasium as gym; e = gym.make('handover_env:handover_env/DynamicHandover-v0'); "
-            "o, _ = e.reset(seed=0); print(o.shape, e.spec.max_episode_steps)")
+    code = (
+        "import gymnasium as gym; e = gym.make('handover_env:handover_env/DynamicHandover-v0'); "
+        "o, _ = e.reset(seed=0); print(o.shape, e.spec.max_episode_steps)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "450" in out.stdout
@@ -94,7 +98,9 @@ def test_options_unknown_ignored_bad_rejected():
     with pytest.raises(ValueError, match="height"):
         env.reset(seed=0, options={"height": 5.0})
     with pytest.raises(ValueError, match="receiver_xy"):
-        env.reset(seed=0, options={"receiver": "replay", "episode": {"receiver_xy": np.zeros((5, 3))}})
+        env.reset(
+            seed=0, options={"receiver": "replay", "episode": {"receiver_xy": np.zeros((5, 3))}}
+        )
     with pytest.raises(ValueError, match="action"):
         env.reset(seed=0)
         env.step(np.array([np.nan, 0, 0, 0], dtype=np.float32))
@@ -112,8 +118,15 @@ def test_replay_from_arrays():
 def test_info_keys_on_reset_and_step():
     env = gym.make(IDS[1])
     _, info = env.reset(seed=0)
-    keys = {"is_success", "handover_time", "handover_time_with_delay", "release_force", "peak_contact_force",
-            "receiver_id", "outcome"}
+    keys = {
+        "is_success",
+        "handover_time",
+        "handover_time_with_delay",
+        "release_force",
+        "peak_contact_force",
+        "receiver_id",
+        "outcome",
+    }
     assert keys <= set(info)
     _, _, _, _, info = env.step(env.action_space.sample())
     assert keys <= set(info)
@@ -133,7 +146,9 @@ def test_ppo_smoke():
     from stable_baselines3 import PPO
 
     env = gym.make(IDS[0])
-    model = PPO("MlpPolicy", env, n_steps=256, batch_size=64, n_epochs=1, seed=0, device="cpu", verbose=0)
+    model = PPO(
+        "MlpPolicy", env, n_steps=256, batch_size=64, n_epochs=1, seed=0, device="cpu", verbose=0
+    )
     model.learn(total_timesteps=1024)
     action, _ = model.predict(env.reset(seed=1)[0], deterministic=True)
     assert env.action_space.contains(action)

@@ -1,4 +1,5 @@
-"""Real handovers under physics in DynamicHandover-v0: success, misses, no release, unsafe force, replay, OOD."""
+"""Real handovers under physics in DynamicHandover-v0: success, misses, no release, unsafe force,
+replay, OOD."""
 
 from __future__ import annotations
 
@@ -22,7 +23,9 @@ def _run(env, agent=None, options=None, seed=0, fixed_action=None):
         agent.reset()
     steps = 0
     while True:
-        action = agent.act(obs) if fixed_action is None else np.asarray(fixed_action, dtype=np.float32)
+        action = (
+            agent.act(obs) if fixed_action is None else np.asarray(fixed_action, dtype=np.float32)
+        )
         obs, _, term, trunc, info = env.step(action)
         steps += 1
         if term or trunc:
@@ -37,7 +40,9 @@ def _record_ticks(env):
 
     def recording_tick() -> None:
         tick()
-        rows.append((float(u.data.time), float(np.linalg.norm(u.f_ext)), u.receiver.state, u.released))
+        rows.append(
+            (float(u.data.time), float(np.linalg.norm(u.f_ext)), u.receiver.state, u.released)
+        )
 
     u._tick = recording_tick
     return rows
@@ -111,7 +116,9 @@ def test_replay_from_arrays_with_a_standing_start():
     t = np.arange(120) / 30.0
     walk = np.stack([2.2 - 0.9 * t, np.full_like(t, -0.9)], axis=1)
     xy = np.concatenate([np.tile(walk[:1], (15, 1)), walk])  # stands 0.5 s, then walks at 0.9 m/s
-    info, *_ = _run(env, ReactiveAgent(), options={"receiver": "replay", "episode": {"receiver_xy": xy}})
+    info, *_ = _run(
+        env, ReactiveAgent(), options={"receiver": "replay", "episode": {"receiver_xy": xy}}
+    )
     assert info["outcome"] == "success" and info["receiver_id"] == "replay:replay"
     assert abs(u.receiver.t_depart - 0.5) <= 2.0 / 30.0
     assert info["handover_time"] == pytest.approx(u.t_release - u.receiver.t_depart)
@@ -121,8 +128,11 @@ def test_replay_from_arrays_with_a_standing_start():
 def test_ood_walkers_wander_and_pause(mode):
     env = gym.make(ENV_ID)
     u = env.unwrapped
-    seed = next(s for s in range(10_000, 10_050)
-                if env.reset(seed=s, options={"receiver": "ood"}) and u.receiver.walker.ood_mode == mode)
+    seed = next(
+        s
+        for s in range(10_000, 10_050)
+        if env.reset(seed=s, options={"receiver": "ood"}) and u.receiver.walker.ood_mode == mode
+    )
     info, *_ = _run(env, ReactiveAgent(), options={"receiver": "ood"}, seed=seed)
     assert u.receiver.walker.ood_mode == mode
     assert info["outcome"] == "success" and info["release_force"] > F_R

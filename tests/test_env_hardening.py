@@ -25,7 +25,9 @@ def test_step_before_reset_and_after_a_failed_reset_raise_clearly():
         env.reset(seed=0, options={"height": 9.0})
     assert env.data.time == clock  # the failed reset touched nothing ...
     with pytest.raises(RuntimeError, match="reset"):
-        env.step(np.array([0.3, -0.4, 1.15, 0.0], dtype=np.float32))  # ... but the env must be reset
+        env.step(
+            np.array([0.3, -0.4, 1.15, 0.0], dtype=np.float32)
+        )  # ... but the env must be reset
 
 
 def test_a_copy_of_a_running_env_is_a_fresh_env_that_says_so():
@@ -39,10 +41,17 @@ def test_a_copy_of_a_running_env_is_a_fresh_env_that_says_so():
         assert twin.observation_space.contains(obs)
 
 
-@pytest.mark.parametrize("action", [
-    np.zeros((2, 2), dtype=np.float32), np.zeros((1, 4), dtype=np.float32), np.zeros((4, 1), dtype=np.float32),
-    np.array(["0.3", "-0.4", "1.1", "0"]), np.array([0.3, -0.4, 1.1, 1j]), np.array([0.3, np.inf, 1.1, 0.0]),
-])
+@pytest.mark.parametrize(
+    "action",
+    [
+        np.zeros((2, 2), dtype=np.float32),
+        np.zeros((1, 4), dtype=np.float32),
+        np.zeros((4, 1), dtype=np.float32),
+        np.array(["0.3", "-0.4", "1.1", "0"]),
+        np.array([0.3, -0.4, 1.1, 1j]),
+        np.array([0.3, np.inf, 1.1, 0.0]),
+    ],
+)
 def test_malformed_actions_are_refused(action):
     env = gym.make(ENV_ID).unwrapped
     env.reset(seed=0)
@@ -51,7 +60,9 @@ def test_malformed_actions_are_refused(action):
 
 
 def test_constructor_checks():
-    gym.make(ENV_ID, stiffness=np.float32(100.0), damping=np.float64(15.0))  # numpy numbers are numbers
+    gym.make(
+        ENV_ID, stiffness=np.float32(100.0), damping=np.float64(15.0)
+    )  # numpy numbers are numbers
     with pytest.raises(ValueError, match="history"):
         gym.make(ENV_ID, history=2.5)
     for kw in ({"width": 0}, {"height": -1}, {"width": 12.5}):

@@ -1,4 +1,5 @@
-"""evaluate.py: Table I, sample efficiency and trade-off in --quick mode, checkpoint reuse, bad input."""
+"""evaluate.py: Table I, sample efficiency and trade-off in --quick mode, checkpoint reuse, bad
+input."""
 
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ import pytest
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from handover_eval import evaluate_cli as evaluate  # noqa: E402
 from handover_env.data import generate_synthetic  # noqa: E402
+from handover_eval import evaluate_cli as evaluate  # noqa: E402
 from handover_eval.methods import MethodOptions, build_agent, fit_agent  # noqa: E402
 
 
@@ -29,12 +30,18 @@ def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture)
     for r in rows:
         for key in ("id_rms_3d_mm", "ood_rms_3d_mm"):
             assert math.isfinite(float(r[key])) and float(r[key]) > 0
-        assert float(r["id_rms_axis_mm"]) == pytest.approx(float(r["id_rms_3d_mm"]) / math.sqrt(3), rel=1e-4)
+        assert float(r["id_rms_axis_mm"]) == pytest.approx(
+            float(r["id_rms_3d_mm"]) / math.sqrt(3), rel=1e-4
+        )
     folds = _rows(tmp_path / "table1_folds.csv")
     assert len(folds) == 4 * 3  # methods x folds
-    for r in rows:  # the current-frame column is the mean over folds of each fold's row-0 per-axis RMS
+    for (
+        r
+    ) in rows:  # the current-frame column is the mean over folds of each fold's row-0 per-axis RMS
         mine = [float(f["id_now_axis_mm"]) for f in folds if f["method"] == r["method"]]
-        assert float(r["id_now_axis_mm"]) == pytest.approx(sum(mine) / len(mine), rel=1e-4)  # CSV keeps 6 digits
+        assert float(r["id_now_axis_mm"]) == pytest.approx(
+            sum(mine) / len(mine), rel=1e-4
+        )  # CSV keeps 6 digits
         assert 0 < float(r["id_now_axis_mm"]) < float(r["id_rms_3d_mm"])
     episodes = _rows(tmp_path / "table1_episodes.csv")
     assert len(episodes) == 4 * 30  # every episode is tested exactly once per method
@@ -49,8 +56,18 @@ def test_table1_folds_in_two_processes_equal_the_serial_loop(tmp_path: Path) -> 
     tables = []
     for workers in ("1", "2"):
         out = tmp_path / workers
-        argv = ["table1", "--quick", "--no-progress", "--methods", "ours", "bc_mlp", "--workers", workers,
-                "--out", str(out)]
+        argv = [
+            "table1",
+            "--quick",
+            "--no-progress",
+            "--methods",
+            "ours",
+            "bc_mlp",
+            "--workers",
+            workers,
+            "--out",
+            str(out),
+        ]
         assert evaluate.main(argv) == 0
         tables.append(_rows(out / "table1_episodes.csv"))
     assert len(tables[0]) == 2 * 30
@@ -71,7 +88,9 @@ def test_sample_efficiency_quick(tmp_path: Path, capsys: pytest.CaptureFixture) 
 
     typed = [{k: (v if k == "method" else float(v)) for k, v in r.items()} for r in rows]
     pct = degradation_pct(typed)
-    assert pct["ours"] == pytest.approx(100 * (float(half["all_rms_3d_mm"]) / float(full["all_rms_3d_mm"]) - 1))
+    assert pct["ours"] == pytest.approx(
+        100 * (float(half["all_rms_3d_mm"]) / float(full["all_rms_3d_mm"]) - 1)
+    )
     assert "RMS at ratio 0.5 vs 1" in capsys.readouterr().out
     assert (tmp_path / "sample_efficiency.png").stat().st_size > 10_000
 
@@ -100,9 +119,13 @@ def test_learned_checkpoint_is_reused(tmp_path: Path) -> None:
     assert reused
     ep = data[0]
     times = np.arange(5, 20)
-    np.testing.assert_array_equal(first.predict_episode(ep, times), second.predict_episode(ep, times))
+    np.testing.assert_array_equal(
+        first.predict_episode(ep, times), second.predict_episode(ep, times)
+    )
     # Another training set is another checkpoint.
-    _, reused = fit_agent("bc_mlp", build_agent("bc_mlp", options), data.subset(range(10)), tmp_path)
+    _, reused = fit_agent(
+        "bc_mlp", build_agent("bc_mlp", options), data.subset(range(10)), tmp_path
+    )
     assert not reused
 
 
@@ -116,12 +139,19 @@ def test_learned_checkpoint_is_reused(tmp_path: Path) -> None:
         (["table1", "--act-steps", "0"], "act_steps"),
     ],
 )
-def test_bad_input_gives_clear_error(argv: list[str], message: str, capsys: pytest.CaptureFixture) -> None:
+def test_bad_input_gives_clear_error(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture
+) -> None:
     assert evaluate.main(argv + ["--no-progress"]) == 2
     assert message in capsys.readouterr().err
 
 
 def test_dataset_too_small_for_folds(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     path = generate_synthetic(n=6, ood_fraction=0.34, seed=1).save(tmp_path / "tiny.npz")
-    assert evaluate.main(["table1", "--data", str(path), "--folds", "10", "--methods", "ours", "--no-progress"]) == 2
+    assert (
+        evaluate.main(
+            ["table1", "--data", str(path), "--folds", "10", "--methods", "ours", "--no-progress"]
+        )
+        == 2
+    )
     assert "folds" in capsys.readouterr().err

@@ -1,4 +1,5 @@
-"""Exact GP and FITC/SPGP (agents/gp.py): FITC at inducing ratio 1.0 is the exact GP, batching is exact."""
+"""Exact GP and FITC/SPGP (agents/gp.py): FITC at inducing ratio 1.0 is the exact GP, batching is
+exact."""
 
 from __future__ import annotations
 
@@ -45,8 +46,11 @@ def test_fitc_at_ratio_one_equals_exact_gp(demos, lengthscale):
         mean_ref, var_ref = exact_gp_reference(x, y, xq, hyp)
         z = x[inducing_indices(len(x), 1.0)]
         np.testing.assert_array_equal(z, x)
-        for mean, var in (fitc_gp_reference(x, y, z, xq, hyp), fitc_gp(x, y, z, hyp).predict(xq, hyp),
-                          exact_gp(x, y, hyp).predict(xq, hyp)):
+        for mean, var in (
+            fitc_gp_reference(x, y, z, xq, hyp),
+            fitc_gp(x, y, z, hyp).predict(xq, hyp),
+            exact_gp(x, y, hyp).predict(xq, hyp),
+        ):
             np.testing.assert_allclose(mean, mean_ref, rtol=0, atol=1e-8)
             np.testing.assert_allclose(var, var_ref, rtol=0, atol=1e-8)
 
@@ -71,8 +75,12 @@ def test_sparse_is_an_approximation_that_improves_with_ratio(demos):
     x, y = demos[2]
     xq = _queries(x)
     mean_ex, _ = exact_gp_reference(x, y, xq, hyp)
-    errs = [np.abs(fitc_gp(x, y, x[inducing_indices(len(x), r)], hyp).predict(xq, hyp)[0] - mean_ex).max()
-            for r in (0.05, 0.4, 1.0)]
+    errs = [
+        np.abs(
+            fitc_gp(x, y, x[inducing_indices(len(x), r)], hyp).predict(xq, hyp)[0] - mean_ex
+        ).max()
+        for r in (0.05, 0.4, 1.0)
+    ]
     assert errs[0] > errs[1] > errs[2] and errs[2] < 1e-8
 
 
@@ -86,7 +94,11 @@ def test_bank_batches_every_demo_exactly(demos, ratio, n_buckets):
     mean, var = bank.predict(xq)
     assert mean.shape == (len(xq), len(demos), 2) and var.shape == (len(xq), len(demos))
     for k, (x, y) in enumerate(demos):
-        form = exact_gp(x, y, hyp) if ratio is None else fitc_gp(x, y, x[inducing_indices(len(x), ratio)], hyp)
+        form = (
+            exact_gp(x, y, hyp)
+            if ratio is None
+            else fitc_gp(x, y, x[inducing_indices(len(x), ratio)], hyp)
+        )
         m, v = form.predict(xq, hyp)
         np.testing.assert_allclose(mean[:, k], m, atol=1e-9)
         np.testing.assert_allclose(var[:, k], v, atol=1e-9)

@@ -42,7 +42,8 @@ def test_a_rest_to_rest_reach_is_the_flash_hogan_profile():
 def _two_bodies():
     xml = """<mujoco><option gravity="0 0 0"/><worldbody>
       <body name="hand" pos="0 0 1" mocap="true"><site name="grip"/></body>
-      <body name="obj" pos="0.02 0 1"><freejoint/><geom type="cylinder" size="0.033 0.1" mass="0.4"/></body>
+      <body name="obj" pos="0.02 0 1"><freejoint/>
+        <geom type="cylinder" size="0.033 0.1" mass="0.4"/></body>
     </worldbody></mujoco>"""
     m = mujoco.MjModel.from_xml_string(xml)
     return m, mujoco.MjData(m)

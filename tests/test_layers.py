@@ -4,7 +4,7 @@
 | --- | --- | --- |
 | 0, bottom | ``handover_env`` (simulator, data, feature encoders) | itself |
 | 1, middle | ``agents``, ``baselines`` | layers 0-1 |
-| 2, top | ``handover_eval`` (evaluation, training and evaluation CLIs, demo), ``train.py``, ``evaluate.py`` | layers 0-2 |
+| 2, top | ``handover_eval`` (evaluation, CLIs, demo), ``train.py``, ``evaluate.py`` | layers 0-2 |
 
 Every import counts, at module level or inside a function (a lazy import is still a dependency),
 read from the source with :mod:`ast`, so nothing is executed.
@@ -23,7 +23,9 @@ SCRIPTS = {"train.py": 2, "evaluate.py": 2}
 
 
 def _sources() -> list[tuple[Path, int]]:
-    files = [(p, layer) for pkg, layer in LAYERS.items() for p in sorted((ROOT / pkg).rglob("*.py"))]
+    files = [
+        (p, layer) for pkg, layer in LAYERS.items() for p in sorted((ROOT / pkg).rglob("*.py"))
+    ]
     return files + [(ROOT / name, layer) for name, layer in SCRIPTS.items()]
 
 
@@ -44,7 +46,9 @@ def test_every_package_is_in_a_layer():
     assert packages - {"tests"} == set(LAYERS)
 
 
-@pytest.mark.parametrize("path, layer", _sources(), ids=lambda v: str(v.relative_to(ROOT)) if isinstance(v, Path) else "")
+@pytest.mark.parametrize(
+    "path, layer", _sources(), ids=lambda v: str(v.relative_to(ROOT)) if isinstance(v, Path) else ""
+)
 def test_no_module_imports_a_layer_above_its_own(path, layer):
     above = sorted(f"{pkg} (line {line})" for pkg, line in imported_packages(path)
                    if LAYERS.get(pkg, -1) > layer)
@@ -53,5 +57,8 @@ def test_no_module_imports_a_layer_above_its_own(path, layer):
 
 def test_the_checker_sees_lazy_imports(tmp_path):
     f = tmp_path / "m.py"
-    f.write_text("import numpy\ndef g():\n    from handover_eval.methods import METHODS\n    import agents.base\n")
+    f.write_text(
+        "import numpy\ndef g():\n    from handover_eval.methods import METHODS\n    import "
+        "agents.base\n"
+    )
     assert {pkg for pkg, _ in imported_packages(f)} == {"numpy", "handover_eval", "agents"}

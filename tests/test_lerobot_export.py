@@ -1,4 +1,5 @@
-"""LeRobot export of the canonical dataset: features, reload offline, delta_timestamps chunks, errors."""
+"""LeRobot export of the canonical dataset: features, reload offline, delta_timestamps chunks,
+errors."""
 
 from __future__ import annotations
 
@@ -28,7 +29,9 @@ from handover_env.data.lerobot_export import (  # noqa: E402
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
     data = toy_dataset(n=6, length=40, seed=1)
-    root = export_lerobot(data, tmp_path_factory.mktemp("export") / "ds", repo_id="local/toy", history=5)
+    root = export_lerobot(
+        data, tmp_path_factory.mktemp("export") / "ds", repo_id="local/toy", history=5
+    )
     return data, root
 
 
@@ -45,7 +48,9 @@ def test_reloads_offline_with_same_length_and_features(exported):
     assert tuple(ds.features["action"]["shape"]) == (3,)
     item = ds[data[0].length + 3]  # episode 1, frame 3
     ep = data[1]
-    np.testing.assert_allclose(item["observation.state"].numpy(), ep.giver_xyz[3], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(
+        item["observation.state"].numpy(), ep.giver_xyz[3], rtol=0, atol=1e-6
+    )
     np.testing.assert_allclose(item["action"].numpy(), ep.giver_xyz[3], rtol=0, atol=1e-6)
     want = episode_frames(ep, FeatureSpec(history=5), np.array([3])).env_state[0]
     np.testing.assert_allclose(item["observation.environment_state"].numpy(), want, atol=1e-6)

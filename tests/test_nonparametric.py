@@ -1,4 +1,5 @@
-"""The SPGP planner and IAAL (agents/nonparametric.py, baselines/iaal.py) on toy data with known answers."""
+"""The SPGP planner and IAAL (agents/nonparametric.py, baselines/iaal.py) on toy data with known
+answers."""
 
 from __future__ import annotations
 
@@ -6,7 +7,12 @@ import numpy as np
 import pytest
 
 from agents.base import Agent
-from agents.nonparametric import NonparametricAgent, NonparametricConfig, backward_velocity, cosine_distance
+from agents.nonparametric import (
+    NonparametricAgent,
+    NonparametricConfig,
+    backward_velocity,
+    cosine_distance,
+)
 from baselines.iaal import IAALAgent
 from handover_env.data.dataset import Episode, HandoverDataset
 from handover_env.envs.observation import ObsLayout
@@ -27,7 +33,9 @@ def toy_dataset(n_demos: int = 6, length: int = 70) -> HandoverDataset:
         heading = np.pi + 0.25 * (j - n_demos / 2)  # walking toward -x, fanned out
         y0 = -1.5 + 0.5 * j
         rec = np.column_stack([2.5 + 0.8 * t * np.cos(heading), y0 + 0.8 * t * np.sin(heading)])
-        giv = np.column_stack([0.1 * j + 0.2 * t, -0.3 - 0.05 * j + 0.0 * t, 1.0 + 0.03 * j + 0.1 * np.sin(t + j)])
+        giv = np.column_stack(
+            [0.1 * j + 0.2 * t, -0.3 - 0.05 * j + 0.0 * t, 1.0 + 0.03 * j + 0.1 * np.sin(t + j)]
+        )
         eps.append(_episode(j, rec, giv, ood=(j == n_demos - 1)))
     return HandoverDataset(eps, name="toy")
 
@@ -66,8 +74,12 @@ def test_streaming_equals_batch_recomputation(agent, toy):
     for t in range(len(noisy)):
         agent.stream_update(noisy[t])
         if t in (0, 1, 7, 33, len(noisy) - 1):
-            np.testing.assert_allclose(agent.stream_distances(), agent.distances(noisy[: t + 1]), atol=1e-12)
-            np.testing.assert_allclose(agent.stream_predict(), agent.predict(noisy[: t + 1]), atol=1e-12)
+            np.testing.assert_allclose(
+                agent.stream_distances(), agent.distances(noisy[: t + 1]), atol=1e-12
+            )
+            np.testing.assert_allclose(
+                agent.stream_predict(), agent.predict(noisy[: t + 1]), atol=1e-12
+            )
 
 
 def test_float32_default_agrees_with_float64(toy):
@@ -96,7 +108,9 @@ def test_predict_sequence_equals_loop_over_predict(agent, toy):
 
 
 def test_blend_weights_are_normalised_similarities(toy):
-    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=3, precision="float64")).fit(toy)
+    agent = NonparametricAgent(
+        NonparametricConfig(lengthscale=0.15, top_k=3, precision="float64")
+    ).fit(toy)
     hist = toy[1].receiver_xy[:25] + np.array([0.0, 0.25])  # between lanes 1 and 2
     d = agent.distances(hist)
     sel = np.argsort(d)[:3]
@@ -119,19 +133,28 @@ def test_zero_velocity_is_neutral_and_finite(toy):
     np.testing.assert_allclose(cosine_distance(np.zeros((4, 2)), np.ones((4, 2)), 0.05), 1.0)
     np.testing.assert_allclose(cosine_distance(np.array([1.0, 0]), np.array([-2.0, 0]), 0.05), 2.0)
     np.testing.assert_allclose(cosine_distance(np.array([1.0, 0]), np.array([0.0, 0]), 0.05), 1.0)
-    np.testing.assert_allclose(backward_velocity(np.array([[0.0, 0], [1, 0], [3, 0]]), 30.0)[:, 0], [30, 30, 60])
+    np.testing.assert_allclose(
+        backward_velocity(np.array([[0.0, 0], [1, 0], [3, 0]]), 30.0)[:, 0], [30, 30, 60]
+    )
 
 
 def test_far_query_is_finite_and_sensible(toy):
-    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=3, precision="float64")).fit(toy)
+    agent = NonparametricAgent(
+        NonparametricConfig(lengthscale=0.15, top_k=3, precision="float64")
+    ).fit(toy)
     far = toy[0].receiver_xy[:20] + np.array([50.0, 50.0])
     d = agent.distances(far)
     # Every flow reverts to its prior: sigma2 = 1, d_cos = 1, so d = kappa + 1 for every demo.
     np.testing.assert_allclose(d, CONFIG.kappa + 1.0, atol=1e-9)
     pred = agent.predict(far)
     assert pred.shape == (30, 3) and np.all(np.isfinite(pred))
-    lo, hi = np.min([ep.giver_xyz.min(0) for ep in toy], 0), np.max([ep.giver_xyz.max(0) for ep in toy], 0)
-    assert np.all(pred >= lo - 1e-9) and np.all(pred <= hi + 1e-9)  # a convex blend of recorded givers
+    lo, hi = (
+        np.min([ep.giver_xyz.min(0) for ep in toy], 0),
+        np.max([ep.giver_xyz.max(0) for ep in toy], 0),
+    )
+    assert np.all(pred >= lo - 1e-9) and np.all(
+        pred <= hi + 1e-9
+    )  # a convex blend of recorded givers
 
 
 def test_bad_input_raises(agent):
@@ -157,10 +180,16 @@ def test_bad_input_raises(agent):
 
 def test_one_episode_and_short_episodes_work(toy):
     one = HandoverDataset([toy[0]])
-    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=10, precision="float64")).fit(one)
-    np.testing.assert_allclose(agent.predict(toy[0].receiver_xy[:10]), toy[0].giver_xyz[9:39], atol=1e-12)
+    agent = NonparametricAgent(
+        NonparametricConfig(lengthscale=0.15, top_k=10, precision="float64")
+    ).fit(one)
+    np.testing.assert_allclose(
+        agent.predict(toy[0].receiver_xy[:10]), toy[0].giver_xyz[9:39], atol=1e-12
+    )
     short = HandoverDataset([_episode(0, toy[0].receiver_xy[:8], toy[0].giver_xyz[:8]), toy[1]])
-    agent = NonparametricAgent(NonparametricConfig(lengthscale=0.15, top_k=1, precision="float64")).fit(short)
+    agent = NonparametricAgent(
+        NonparametricConfig(lengthscale=0.15, top_k=1, precision="float64")
+    ).fit(short)
     pred = agent.predict(toy[0].receiver_xy[:4])
     np.testing.assert_allclose(pred[:5], toy[0].giver_xyz[3:8], atol=1e-12)
     np.testing.assert_allclose(pred[5:], np.repeat(toy[0].giver_xyz[7:8], 25, axis=0), atol=1e-12)
@@ -193,7 +222,14 @@ def test_act_follows_the_forecast_with_ready_pose_first(toy):
         assert abs(targets[n - 1][3] - ready[3]) <= agent.closed_loop.max_yaw_turn + 1e-6
 
 
-REAL = __import__("pathlib").Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "dynamic_handover_dataset" / "whole_motions"
+REAL = (
+    __import__("pathlib").Path(__file__).resolve().parents[1]
+    / ".."
+    / "shared"
+    / "data"
+    / "dynamic_handover_dataset"
+    / "whole_motions"
+)
 
 
 @pytest.mark.skipif(not REAL.is_dir(), reason="development copy of the public dataset not present")

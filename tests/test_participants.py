@@ -1,4 +1,5 @@
-"""Simulated participants: independence from the paper's Θ̂, the documented satisfaction, answers."""
+"""Simulated participants: independence from the paper's Θ̂, the documented satisfaction,
+answers."""
 
 from __future__ import annotations
 
@@ -41,7 +42,8 @@ def test_participant_module_imports_nothing_from_the_env_or_theta() -> None:
                    "forecast_time", "release_force"):
         assert banned not in text, banned
     # and importing it loads no env module
-    code = "import sys, agents.participants; print(sorted(m for m in sys.modules if m.startswith('handover_env')))"
+    code = ("import sys, agents.participants; "
+            "print(sorted(m for m in sys.modules if m.startswith('handover_env')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=SOURCE.parents[1]).stdout.strip()
     assert out == "[]"
@@ -49,8 +51,13 @@ def test_participant_module_imports_nothing_from_the_env_or_theta() -> None:
 
 def test_no_theta_hat_or_range_centre_literal() -> None:
     tree = ast.parse(SOURCE.read_text())
-    numbers = {float(n.value) for n in ast.walk(tree)
-               if isinstance(n, ast.Constant) and isinstance(n.value, (int, float)) and not isinstance(n.value, bool)}
+    numbers = {
+        float(n.value)
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Constant)
+        and isinstance(n.value, (int, float))
+        and not isinstance(n.value, bool)
+    }
     assert not numbers & set(PAPER_THETA_HAT), numbers & set(PAPER_THETA_HAT)
     assert not numbers & set(RANGE_CENTRE), numbers & set(RANGE_CENTRE)
     text = SOURCE.read_text()
@@ -59,17 +66,41 @@ def test_no_theta_hat_or_range_centre_literal() -> None:
 
 
 def _person(**over) -> Participant:
-    traits = {"failure_cost": 2.5, "unsafe_cost": 1.0, "expected_time": 3.0, "time_cost": 0.4, "slowdown_cost": 0.5,
-                  "comfort_reach": 0.8, "reach_cost": 0.5, "arm_time": 1.3, "arm_cost": 0.2, "preferred_pull": 5.0,
-                  "pull_cost": 0.4, "touch_cost": 0.5, "contact_cost": 2.0, "jerk_ref": 26.0, "jerk_cost": 0.2,
-                  "answer_noise": 0.3, "rating_bias": 0.0, "rating_noise": 0.0}
+    traits = {
+        "failure_cost": 2.5,
+        "unsafe_cost": 1.0,
+        "expected_time": 3.0,
+        "time_cost": 0.4,
+        "slowdown_cost": 0.5,
+        "comfort_reach": 0.8,
+        "reach_cost": 0.5,
+        "arm_time": 1.3,
+        "arm_cost": 0.2,
+        "preferred_pull": 5.0,
+        "pull_cost": 0.4,
+        "touch_cost": 0.5,
+        "contact_cost": 2.0,
+        "jerk_ref": 26.0,
+        "jerk_cost": 0.2,
+        "answer_noise": 0.3,
+        "rating_bias": 0.0,
+        "rating_noise": 0.0,
+    }
     traits.update(over)
     return Participant(pid=1, body=Body("male", 1.75, 0.85, -0.9), traits=Traits(**traits), seed=0)
 
 
-PERFECT = {"outcome": "success", "handover_time": 2.0, "handover_time_with_delay": 2.0, "time_lost": 0.0,
-           "reach_distance": 0.5, "arm_extended_time": 1.0, "pull_force": 4.0, "body_contact_force": 0.0,
-           "robot_jerk_rms": 20.0}
+PERFECT = {
+    "outcome": "success",
+    "handover_time": 2.0,
+    "handover_time_with_delay": 2.0,
+    "time_lost": 0.0,
+    "reach_distance": 0.5,
+    "arm_extended_time": 1.0,
+    "pull_force": 4.0,
+    "body_contact_force": 0.0,
+    "robot_jerk_rms": 20.0,
+}
 
 
 def test_satisfaction_terms_follow_the_documented_formulas() -> None:
@@ -77,9 +108,18 @@ def test_satisfaction_terms_follow_the_documented_formulas() -> None:
     assert p.satisfaction(PERFECT) == 5.0
     arm = 0.386 * 1.75
     cases = {
-        "failure": ({"outcome": "missed", "handover_time": None, "handover_time_with_delay": None}, 2.5),
-        "unsafe": ({"outcome": "unsafe_force", "handover_time": None, "handover_time_with_delay": None}, 3.5),
-        "waiting": ({"handover_time_with_delay": 5.0, "handover_time": 3.0}, 0.4 * 2.0),  # lived time counts
+        "failure": (
+            {"outcome": "missed", "handover_time": None, "handover_time_with_delay": None},
+            2.5,
+        ),
+        "unsafe": (
+            {"outcome": "unsafe_force", "handover_time": None, "handover_time_with_delay": None},
+            3.5,
+        ),
+        "waiting": (
+            {"handover_time_with_delay": 5.0, "handover_time": 3.0},
+            0.4 * 2.0,
+        ),  # lived time counts
         "slowing": ({"time_lost": 0.6}, 0.5 * 0.6),
         "reach": ({"reach_distance": 0.9 * arm}, 0.5 * 1.0),
         "arm_out": ({"arm_extended_time": 3.3}, 0.2 * 2.0),
@@ -91,7 +131,9 @@ def test_satisfaction_terms_follow_the_documented_formulas() -> None:
     touched = {**PERFECT, "body_contact_force": 70.0, "contact_force_torso": 70.0}
     assert p.satisfaction(touched) == pytest.approx(5.0 - 0.5 - 2.0 * 70.0 / ISO_LIMITS["torso"])
     crushed = {**PERFECT, "body_contact_force": 5000.0, "contact_force_hand_r": 5000.0}
-    assert p.satisfaction(crushed) == pytest.approx(5.0 - 0.5 - 2.0 * 2.0)  # capped at twice the limit
+    assert p.satisfaction(crushed) == pytest.approx(
+        5.0 - 0.5 - 2.0 * 2.0
+    )  # capped at twice the limit
 
 
 def test_satisfaction_depends_on_the_episode_only() -> None:
@@ -130,7 +172,9 @@ def test_population_is_seeded_and_matches_its_stated_distributions() -> None:
     assert [x.body.sex for x in a].count("male") == 6
     men = [sample_participant(s, "male").body.height for s in range(1500)]
     women = [sample_participant(s, "female").body.height for s in range(1500)]
-    assert np.mean(men) == pytest.approx(1.757, abs=0.006) and np.std(men) == pytest.approx(0.065, abs=0.006)
+    assert np.mean(men) == pytest.approx(1.757, abs=0.006) and np.std(men) == pytest.approx(
+        0.065, abs=0.006
+    )
     assert np.mean(women) == pytest.approx(1.623, abs=0.006)
     people = [sample_participant(s) for s in range(600)]
     pulls = np.array([q.traits.preferred_pull for q in people])
@@ -158,5 +202,7 @@ def test_walks_drive_the_env_with_the_participants_body() -> None:
     env.reset(seed=p.walk_seeds(1)[0], options=opts)
     rec = env.unwrapped.receiver
     assert rec.height == pytest.approx(p.body.height)
-    assert rec.walker.pass_y == pytest.approx(p.body.pass_y) and rec.walker.speed == pytest.approx(p.body.speed)
+    assert rec.walker.pass_y == pytest.approx(p.body.pass_y) and rec.walker.speed == pytest.approx(
+        p.body.speed
+    )
     env.close()

@@ -19,7 +19,13 @@ from handover_env.person import RATE
 from handover_env.skeleton import BodyDims, joints_of
 
 ENV_ID = "handover_env/DynamicHandover-v0"
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "dynamic_handover_dataset" / "whole_motions"
+DATA = (
+    Path(__file__).resolve().parents[2]
+    / "shared"
+    / "data"
+    / "dynamic_handover_dataset"
+    / "whole_motions"
+)
 
 
 def _run(env, agent, seed=0, options=None):
@@ -82,17 +88,24 @@ def test_a_bump_that_opens_the_gripper_is_a_premature_release_not_a_success(env)
     the push opens it before any grasp."""
     y = -0.75
     episode = _straight_walk(y, skeleton=True)
-    info, term, _ = _run(env, _Hold([0.5, y - 0.08, 1.25, -math.pi / 2]),
-                         options={"receiver": "replay", "episode": episode, "hand_mode": "recorded"})
+    info, term, _ = _run(
+        env,
+        _Hold([0.5, y - 0.08, 1.25, -math.pi / 2]),
+        options={"receiver": "replay", "episode": episode, "hand_mode": "recorded"},
+    )
     assert term and info["outcome"] == "premature_release" and not info["is_success"]
     assert info["released"] and info["transfer_time"] is None
-    assert (info["body_contact_object"] or info["body_contact_robot"]) and info["contact_force_torso"] > 7.1
+    assert (info["body_contact_object"] or info["body_contact_robot"]) and info[
+        "contact_force_torso"
+    ] > 7.1
 
 
 def test_an_object_out_of_reach_slows_the_person_then_is_missed(env):
     """The robot keeps the object at its ready pose; the person passes 1.3 m away: too far to
     take it, so they slow down (as far as the recordings show) and walk past."""
-    info, term, _ = _run(env, NullAgent(), options={"receiver": "replay", "episode": _straight_walk(-1.3)})
+    info, term, _ = _run(
+        env, NullAgent(), options={"receiver": "replay", "episode": _straight_walk(-1.3)}
+    )
     assert term and info["outcome"] == "missed"
     assert info["min_speed_factor"] == pytest.approx(0.82)
     assert info["time_lost"] > 0.05
@@ -144,7 +157,14 @@ def test_person_settings_and_bad_options():
     with pytest.raises(RuntimeError, match="reset"):
         e.step(e.action_space.sample())  # the failed reset left it un-reset
     with pytest.raises(ValueError, match="skeleton"):
-        e.reset(seed=0, options={"receiver": "replay", "episode": _straight_walk(-0.9), "hand_mode": "recorded"})
+        e.reset(
+            seed=0,
+            options={
+                "receiver": "replay",
+                "episode": _straight_walk(-0.9),
+                "hand_mode": "recorded",
+            },
+        )
 
 
 def test_same_seed_same_person_and_outcome():
@@ -165,7 +185,9 @@ def test_giver_replay_takes_the_object_where_the_recorded_person_did(env):
     from handover_env.data.transfer import detect_transfer
 
     files = list_public_files(DATA)
-    folds = stratified_fold_ids(np.array([p.name.startswith("motion_variation") for p in files]), 10, 0)
+    folds = stratified_fold_ids(
+        np.array([p.name.startswith("motion_variation") for p in files]), 10, 0
+    )
     held_out = [p for p, f in zip(files, folds) if f >= 5][:8]
     agent = GiverReplayAgent()
     ok, dts = 0, []
@@ -174,7 +196,9 @@ def test_giver_replay_takes_the_object_where_the_recorded_person_did(env):
         agent.set_episode(rec.episode)
         info, *_ = _run(env, agent, options={"receiver": "replay", "episode": rec})
         ok += info["outcome"] == "success"
-        det = detect_transfer(smooth_track(rec.receiver_pose, 30.0), smooth_track(rec.episode.giver_xyz, 30.0))
+        det = detect_transfer(
+            smooth_track(rec.receiver_pose, 30.0), smooth_track(rec.episode.giver_xyz, 30.0)
+        )
         if det.frame is not None and info["transfer_time"] is not None:
             dts.append(abs(info["transfer_time"] - det.frame / 30.0))
         assert info["penetration"] < 0.01

@@ -59,7 +59,9 @@ def test_resample_at_half_speed_doubles_the_duration():
     slow = resample(m, np.arange(0, m.frames - 1, 0.5))
     assert slow.frames == 2 * (m.frames - 1)
     np.testing.assert_allclose(slow.origin[::2, 0], m.origin[:-1, 0], atol=1e-12)
-    np.testing.assert_allclose(slow.speed[10:-10], m.speed[5:-6].repeat(2)[: slow.frames - 20] * 0.5, rtol=0.2)
+    np.testing.assert_allclose(
+        slow.speed[10:-10], m.speed[5:-6].repeat(2)[: slow.frames - 20] * 0.5, rtol=0.2
+    )
 
 
 def test_giver_replay_predicts_the_recorded_path():

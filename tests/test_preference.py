@@ -31,7 +31,9 @@ def _judge_towards(target: np.ndarray):
 def test_pooled_participants_share_one_posterior_and_find_a_common_optimum() -> None:
     people = sample_population(3, seed=5)
     target = action_grid(SMALL)[40]
-    result = run_preference(people, PreferenceConfig(iterations=8, cospar=SMALL, seed=1), judge=_judge_towards(target))
+    result = run_preference(
+        people, PreferenceConfig(iterations=8, cospar=SMALL, seed=1), judge=_judge_towards(target)
+    )
     assert {r["participant"] for r in result.preferences} == {p.pid for p in people}
     assert len(result.history) >= 8 * 3 * SMALL.n_samples
     assert np.allclose(result.theta_hat.as_array(), target)
@@ -69,10 +71,19 @@ def test_runner_caches_episodes_and_runs_static_too() -> None:
     theta = HandoverParams(110.0, 15.0, 0.3, 8.0)
     seeds = p.walk_seeds(1)
     a = runner.run(p, theta, seeds)
-    assert runner.episodes_run == 1 and runner.run(p, theta, seeds) == a and runner.episodes_run == 1
+    assert (
+        runner.episodes_run == 1 and runner.run(p, theta, seeds) == a and runner.episodes_run == 1
+    )
     s = runner.run(p, theta, seeds, static=True)
     assert runner.episodes_run == 2
-    assert a[0]["outcome"] in ("success", "premature_release", "dropped", "unsafe_force", "missed", "timeout")
+    assert a[0]["outcome"] in (
+        "success",
+        "premature_release",
+        "dropped",
+        "unsafe_force",
+        "missed",
+        "timeout",
+    )
     if s[0]["outcome"] == "success":
         assert s[0]["handover_time_with_delay"] == pytest.approx(s[0]["handover_time"] + 2.0)
     runner.close()
@@ -91,13 +102,26 @@ def test_train_preference_cli_writes_theta_history_and_plot(tmp_path: Path, caps
     assert set(record["theta_hat"]) == {"stiffness", "damping", "forecast_time", "release_force"}
     assert "simulated" in record["source"] and record["episodes"] >= 2
     rows = list(csv.DictReader((out / "history.csv").open()))
-    assert rows and {"iteration", "stiffness", "success_rate", "hidden_utility", "comparisons_won"} <= set(rows[0])
+    assert rows and {
+        "iteration",
+        "stiffness",
+        "success_rate",
+        "hidden_utility",
+        "comparisons_won",
+    } <= set(rows[0])
     assert (out / "posterior_marginals.png").stat().st_size > 1000
     assert list(csv.DictReader((out / "preferences.csv").open()))
 
 
-@pytest.mark.parametrize("argv", [["--grid", "1,2,2,2"], ["--participant", "-1"], ["--iterations", "0"],
-                                  ["--participant", "1", "--participants", "2"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--grid", "1,2,2,2"],
+        ["--participant", "-1"],
+        ["--iterations", "0"],
+        ["--participant", "1", "--participants", "2"],
+    ],
+)
 def test_train_preference_rejects_bad_input(argv: list[str], capsys) -> None:
     from handover_eval import train_cli as train
 
@@ -117,13 +141,29 @@ def test_brute_force_check_scores_cospar_against_the_grid_optimum(tmp_path: Path
             k, b, tf, fr = theta.as_array()
             ok = tf < 0.9
             self.episodes_run += len(seeds)
-            return [{"outcome": "success" if ok else "missed", "handover_time": 2.0 + tf,
-                     "handover_time_with_delay": 2.0 + tf, "pull_force": 2.0 * fr, "reach_distance": 0.5,
-                     "arm_extended_time": 1.0, "robot_jerk_rms": k / 3.0 + b, "body_contact_force": 0.0,
-                     "time_lost": 0.0} for _ in seeds]
+            return [
+                {
+                    "outcome": "success" if ok else "missed",
+                    "handover_time": 2.0 + tf,
+                    "handover_time_with_delay": 2.0 + tf,
+                    "pull_force": 2.0 * fr,
+                    "reach_distance": 0.5,
+                    "arm_extended_time": 1.0,
+                    "robot_jerk_rms": k / 3.0 + b,
+                    "body_contact_force": 0.0,
+                    "time_lost": 0.0,
+                }
+                for _ in seeds
+            ]
 
-    rows = run_check(CheckConfig(participants=2, grid=(2, 2, 3, 3), walks=1, iterations=6), tmp_path,
-                     progress=False, runner=FakeRunner())
+    rows = run_check(
+        CheckConfig(participants=2, grid=(2, 2, 3, 3), walks=1, iterations=6),
+        tmp_path,
+        progress=False,
+        runner=FakeRunner(),
+    )
     assert len(rows) == 2 and all(0.0 <= r["gain"] <= 1.0 for r in rows)
     assert all(r["best_forecast_time"] < 0.9 and r["best_release_force"] == 5.0 for r in rows)
-    assert (tmp_path / "check.md").read_text().count("| yes |") + (tmp_path / "check.md").read_text().count("| no |") == 2
+    assert (tmp_path / "check.md").read_text().count("| yes |") + (
+        tmp_path / "check.md"
+    ).read_text().count("| no |") == 2

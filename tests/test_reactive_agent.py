@@ -1,4 +1,5 @@
-"""The reactive baseline agent: its handover point, its waiting and release behaviour, and closed loop."""
+"""The reactive baseline agent: its handover point, its waiting and release behaviour, and closed
+loop."""
 
 from __future__ import annotations
 
@@ -70,9 +71,13 @@ def test_holds_still_until_fingers_let_go_then_returns_to_ready():
     target = agent.act(_obs(track))
     later = _walk(0.9, -0.9, 0.8, 28)
     np.testing.assert_array_equal(agent.act(_obs(later, released=True, held=True)), target)
-    np.testing.assert_allclose(agent.act(_obs(later, released=True, held=False)), [*cfg.ready_pos, cfg.ready_yaw])
+    np.testing.assert_allclose(
+        agent.act(_obs(later, released=True, held=False)), [*cfg.ready_pos, cfg.ready_yaw]
+    )
     agent.reset()
-    np.testing.assert_allclose(agent.act(_obs(later, released=True, held=True)), [*cfg.ready_pos, cfg.ready_yaw])
+    np.testing.assert_allclose(
+        agent.act(_obs(later, released=True, held=True)), [*cfg.ready_pos, cfg.ready_yaw]
+    )
 
 
 def test_predict_rows_step_by_one_frame():
@@ -81,7 +86,9 @@ def test_predict_rows_step_by_one_frame():
     pred = agent.predict(track)
     assert pred.shape == (agent.horizon, 3)
     dx = np.diff(pred[:, 0])
-    inside = (pred[1:, 0] > agent.config.x_range[0] + 1e-9) & (pred[:-1, 0] < agent.config.x_range[1] - 1e-9)
+    inside = (pred[1:, 0] > agent.config.x_range[0] + 1e-9) & (
+        pred[:-1, 0] < agent.config.x_range[1] - 1e-9
+    )
     np.testing.assert_allclose(dx[inside], -0.9 / 30.0, atol=1e-6)
     with pytest.raises(ValueError, match="shape"):
         agent.predict(np.zeros((5, 3)))

@@ -1,4 +1,5 @@
-"""Issue 16 items 1, 10, 11: loading a checkpoint runs no code, and a tampered one is refused by name."""
+"""Issue 16 items 1, 10, 11: loading a checkpoint runs no code, and a tampered one is refused by
+name."""
 
 from __future__ import annotations
 
@@ -48,7 +49,9 @@ def act_dir(data, tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def bc_dir(data, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("bc") / "ckpt"
-    BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=2, use_giver_state=True)).fit(data, out_dir=out).save(out)
+    BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=2, use_giver_state=True)).fit(
+        data, out_dir=out
+    ).save(out)
     return out
 
 
@@ -70,22 +73,65 @@ POPEN = {"class": "subprocess.Popen", "config": {"args": ["sh", "-c", "id > MARK
 @pytest.mark.parametrize(
     "file, edit, message",
     [
-        (PRE, lambda d: d["steps"].insert(0, POPEN), r"policy_preprocessor\.json: step 0 names the class 'subprocess\.Popen'"),
-        (POST, lambda d: d["steps"].insert(1, POPEN), r"policy_postprocessor\.json: step 1 names the class 'subprocess\.Popen'"),
-        (PRE, lambda d: d["steps"][0].update({"class": "os.system"}), r"step 0 names the class 'os\.system'"),
-        (PRE, lambda d: d["steps"][1].update({"registry_name": "tokenizer_processor"}),
-         r"step 1 names the processor 'tokenizer_processor', which is not one of the steps"),
-        (PRE, lambda d: d["steps"][0]["config"].update({"rename_map": {"action": "observation.state"}}),
-         r"step 0 \(rename_observations_processor\) has the config"),
-        (PRE, lambda d: d["steps"][3].update({"state_file": "../../etc/passwd"}), r"step 3 \(normalizer_processor\) must have state_file"),
-        (POST, lambda d: d["steps"].reverse(), r"step 0 is 'device_processor'; the steps must be exactly"),
-        (PRE, lambda d: d["steps"].append(d["steps"][0]), r"step 4 is 'rename_observations_processor'; the steps must"),
+        (
+            PRE,
+            lambda d: d["steps"].insert(0, POPEN),
+            r"policy_preprocessor\.json: step 0 names the class 'subprocess\.Popen'",
+        ),
+        (
+            POST,
+            lambda d: d["steps"].insert(1, POPEN),
+            r"policy_postprocessor\.json: step 1 names the class 'subprocess\.Popen'",
+        ),
+        (
+            PRE,
+            lambda d: d["steps"][0].update({"class": "os.system"}),
+            r"step 0 names the class 'os\.system'",
+        ),
+        (
+            PRE,
+            lambda d: d["steps"][1].update({"registry_name": "tokenizer_processor"}),
+            r"step 1 names the processor 'tokenizer_processor', which is not one of the steps",
+        ),
+        (
+            PRE,
+            lambda d: d["steps"][0]["config"].update(
+                {"rename_map": {"action": "observation.state"}}
+            ),
+            r"step 0 \(rename_observations_processor\) has the config",
+        ),
+        (
+            PRE,
+            lambda d: d["steps"][3].update({"state_file": "../../etc/passwd"}),
+            r"step 3 \(normalizer_processor\) must have state_file",
+        ),
+        (
+            POST,
+            lambda d: d["steps"].reverse(),
+            r"step 0 is 'device_processor'; the steps must be exactly",
+        ),
+        (
+            PRE,
+            lambda d: d["steps"].append(d["steps"][0]),
+            r"step 4 is 'rename_observations_processor'; the steps must",
+        ),
         (PRE, lambda d: d["steps"].pop(), r"policy_preprocessor\.json: 3 steps, expected"),
     ],
-    ids=["popen-pre", "popen-post", "class-beside-registry", "other-registry-step", "changed-config",
-         "state-file-path", "reordered", "extra-step", "missing-step"],
+    ids=[
+        "popen-pre",
+        "popen-post",
+        "class-beside-registry",
+        "other-registry-step",
+        "changed-config",
+        "state-file-path",
+        "reordered",
+        "extra-step",
+        "missing-step",
+    ],
 )
-def test_processor_json_is_allow_listed_before_lerobot_sees_it(act_dir, tmp_path, monkeypatch, file, edit, message):
+def test_processor_json_is_allow_listed_before_lerobot_sees_it(
+    act_dir, tmp_path, monkeypatch, file, edit, message
+):
     folder = _copy(act_dir, tmp_path / "ckpt")
     _edit_json(folder / file, edit)
     monkeypatch.chdir(tmp_path)
@@ -95,7 +141,8 @@ def test_processor_json_is_allow_listed_before_lerobot_sees_it(act_dir, tmp_path
 
 
 def test_evaluate_does_not_run_a_tampered_cached_checkpoint(data, tmp_path, monkeypatch):
-    """evaluate.py reuses checkpoints from <out>/checkpoints: a tampered one is retrained, not run."""
+    """evaluate.py reuses checkpoints from <out>/checkpoints: a tampered one is retrained, not
+    run."""
     from handover_eval.methods import (
         MethodOptions,
         build_agent,
@@ -143,45 +190,96 @@ COMMON = {  # tamperings of files both kinds share: name -> (file, how)
     "weights-garbage": ("model.safetensors", lambda p: p.write_bytes(b"\x00" * 64)),
     "weights-missing": ("model.safetensors", lambda p: p.unlink()),
     "weights-nan": ("model.safetensors", lambda p: _tensors(p, _set(_first_float, _nan))),
-    "weights-int64": ("model.safetensors", lambda p: _tensors(p, _set(_first_float, lambda t: t.long()))),
-    "weights-shape": ("model.safetensors", lambda p: _tensors(p, _set(_first_float, lambda t: t[:1]))),
-    "weights-missing-key": ("model.safetensors", lambda p: _tensors(p, lambda t: t.pop(_first_float(t)))),
-    "weights-extra-key": ("model.safetensors", lambda p: _tensors(p, lambda t: t.update(extra=torch.zeros(2)))),
+    "weights-int64": (
+        "model.safetensors",
+        lambda p: _tensors(p, _set(_first_float, lambda t: t.long())),
+    ),
+    "weights-shape": (
+        "model.safetensors",
+        lambda p: _tensors(p, _set(_first_float, lambda t: t[:1])),
+    ),
+    "weights-missing-key": (
+        "model.safetensors",
+        lambda p: _tensors(p, lambda t: t.pop(_first_float(t))),
+    ),
+    "weights-extra-key": (
+        "model.safetensors",
+        lambda p: _tensors(p, lambda t: t.update(extra=torch.zeros(2))),
+    ),
 }
 
 BC_TAMPER = {
     **COMMON,
     "config-garbage": ("config.json", lambda p: p.write_text("{not json")),
     "config-list": ("config.json", lambda p: p.write_text("[]")),
-    "config-bool-string": ("config.json", lambda p: _edit_json(p, lambda d: d["config"].update(use_giver_state="no"))),
+    "config-bool-string": (
+        "config.json",
+        lambda p: _edit_json(p, lambda d: d["config"].update(use_giver_state="no")),
+    ),
     "config-missing-key": ("config.json", lambda p: _edit_json(p, lambda d: d["config"].pop("lr"))),
-    "config-float-int": ("config.json", lambda p: _edit_json(p, lambda d: d["config"].update(history=2.5))),
-    "config-features": ("config.json", lambda p: _edit_json(p, lambda d: d["features"].update(history=3))),
+    "config-float-int": (
+        "config.json",
+        lambda p: _edit_json(p, lambda d: d["config"].update(history=2.5)),
+    ),
+    "config-features": (
+        "config.json",
+        lambda p: _edit_json(p, lambda d: d["features"].update(history=3)),
+    ),
     "config-type": ("config.json", lambda p: _edit_json(p, lambda d: d.pop("type"))),
-    "zero-std": ("model.safetensors", lambda p: _tensors(p, _set(lambda t: "out_std", torch.zeros_like))),
+    "zero-std": (
+        "model.safetensors",
+        lambda p: _tensors(p, _set(lambda t: "out_std", torch.zeros_like)),
+    ),
 }
 
 ACT_TAMPER = {
     **COMMON,
     "handover-garbage": ("handover_act.json", lambda p: p.write_text("\x00\x01")),
-    "handover-bool-string": ("handover_act.json", lambda p: _edit_json(p, lambda d: d["config"].update(use_vae="no"))),
-    "handover-missing-key": ("handover_act.json", lambda p: _edit_json(p, lambda d: d["config"].pop("batch_size"))),
-    "handover-policy-owned": ("handover_act.json",
-                              lambda p: _edit_json(p, lambda d: d["config"]["policy"].update(chunk_size=5))),
-    "handover-policy-type": ("handover_act.json",
-                             lambda p: _edit_json(p, lambda d: d["config"]["policy"].update(dim_model="16"))),
-    "handover-policy-list": ("handover_act.json", lambda p: _edit_json(p, lambda d: d["config"].update(policy=[1]))),
-    "handover-giver-state": ("handover_act.json",
-                             lambda p: _edit_json(p, lambda d: d["config"].update(use_giver_state=False))),
+    "handover-bool-string": (
+        "handover_act.json",
+        lambda p: _edit_json(p, lambda d: d["config"].update(use_vae="no")),
+    ),
+    "handover-missing-key": (
+        "handover_act.json",
+        lambda p: _edit_json(p, lambda d: d["config"].pop("batch_size")),
+    ),
+    "handover-policy-owned": (
+        "handover_act.json",
+        lambda p: _edit_json(p, lambda d: d["config"]["policy"].update(chunk_size=5)),
+    ),
+    "handover-policy-type": (
+        "handover_act.json",
+        lambda p: _edit_json(p, lambda d: d["config"]["policy"].update(dim_model="16")),
+    ),
+    "handover-policy-list": (
+        "handover_act.json",
+        lambda p: _edit_json(p, lambda d: d["config"].update(policy=[1])),
+    ),
+    "handover-giver-state": (
+        "handover_act.json",
+        lambda p: _edit_json(p, lambda d: d["config"].update(use_giver_state=False)),
+    ),
     "config-json-garbage": ("config.json", lambda p: p.write_text("{")),
-    "config-json-chunk": ("config.json", lambda p: _edit_json(p, lambda d: d.update(chunk_size=10))),
-    "config-json-state": ("config.json", lambda p: _edit_json(p, lambda d: d["input_features"].pop("observation.state"))),
+    "config-json-chunk": (
+        "config.json",
+        lambda p: _edit_json(p, lambda d: d.update(chunk_size=10)),
+    ),
+    "config-json-state": (
+        "config.json",
+        lambda p: _edit_json(p, lambda d: d["input_features"].pop("observation.state")),
+    ),
     "processor-garbage": (PRE, lambda p: p.write_text("[1, 2")),
-    "stats-zero-std": (PRE_STATS, lambda p: _tensors(p, _set(lambda t: "action.std", torch.zeros_like))),
+    "stats-zero-std": (
+        PRE_STATS,
+        lambda p: _tensors(p, _set(lambda t: "action.std", torch.zeros_like)),
+    ),
     "stats-nan": (POST_STATS, lambda p: _tensors(p, _set(lambda t: "action.mean", _nan))),
     "stats-truncated": (PRE_STATS, lambda p: p.write_bytes(p.read_bytes()[:40])),
     "stats-missing": (POST_STATS, lambda p: p.unlink()),
-    "stats-unknown-key": (PRE_STATS, lambda p: _tensors(p, lambda t: t.update({"action.evil": torch.ones(3)}))),
+    "stats-unknown-key": (
+        PRE_STATS,
+        lambda p: _tensors(p, lambda t: t.update({"action.evil": torch.ones(3)})),
+    ),
 }
 
 
@@ -208,7 +306,10 @@ def test_tampered_act_checkpoint_is_a_checkpoint_error_naming_it(act_dir, tmp_pa
 def test_use_giver_state_is_cross_checked_with_lerobots_config(act_dir, tmp_path):
     folder = _copy(act_dir, tmp_path / "ckpt")
     _edit_json(folder / "handover_act.json", lambda d: d["config"].update(use_giver_state=False))
-    with pytest.raises(CheckpointError, match=r"config\.json disagrees with handover_act\.json in \['input_features'\]"):
+    with pytest.raises(
+        CheckpointError,
+        match=r"config\.json disagrees with handover_act\.json in \['input_features'\]",
+    ):
         ACTAgent.load(folder)
 
 

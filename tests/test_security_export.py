@@ -46,12 +46,21 @@ def test_overwrite_refuses_a_folder_that_is_not_an_export(tmp_path: Path, data, 
     (user / "paper.tex").write_text("\\documentclass{article}")
     before = _tree(user)
     assert main(["export-lerobot", str(src), str(user), "--overwrite"]) == 2
-    assert f"refusing to overwrite {user}: it is not a handover LeRobot export" in capsys.readouterr().err
+    assert (
+        f"refusing to overwrite {user}: it is not a handover LeRobot export"
+        in capsys.readouterr().err
+    )
     assert _tree(user) == before
 
 
-@pytest.mark.parametrize("root", ["", " ", ".", "./", "/", "~"], ids=["empty", "blank", "dot", "dot-slash", "root", "home"])
-def test_dangerous_roots_are_refused_before_anything_is_read(tmp_path: Path, data, root: str, monkeypatch, capsys) -> None:
+@pytest.mark.parametrize(
+    "root",
+    ["", " ", ".", "./", "/", "~"],
+    ids=["empty", "blank", "dot", "dot-slash", "root", "home"],
+)
+def test_dangerous_roots_are_refused_before_anything_is_read(
+    tmp_path: Path, data, root: str, monkeypatch, capsys
+) -> None:
     work = tmp_path / "work"
     work.mkdir()
     (work / "d.npz").write_bytes(b"the user's input")
@@ -64,7 +73,9 @@ def test_dangerous_roots_are_refused_before_anything_is_read(tmp_path: Path, dat
         export_lerobot(data, root, overwrite=True)
 
 
-def test_parents_of_the_current_folder_and_home_are_refused(tmp_path: Path, data, monkeypatch) -> None:
+def test_parents_of_the_current_folder_and_home_are_refused(
+    tmp_path: Path, data, monkeypatch
+) -> None:
     inner = tmp_path / "a" / "b"
     inner.mkdir(parents=True)
     monkeypatch.chdir(inner)
@@ -89,7 +100,9 @@ def test_overwrite_replaces_an_earlier_export(tmp_path: Path, data) -> None:
 
 
 # ---------------------------------------------------------------------- item 9
-def test_an_interrupted_export_leaves_nothing_that_blocks_a_rerun(tmp_path: Path, data, monkeypatch) -> None:
+def test_an_interrupted_export_leaves_nothing_that_blocks_a_rerun(
+    tmp_path: Path, data, monkeypatch
+) -> None:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     real = LeRobotDataset.save_episode
@@ -107,7 +120,9 @@ def test_an_interrupted_export_leaves_nothing_that_blocks_a_rerun(tmp_path: Path
         export_lerobot(data, root, history=4)
     assert list(tmp_path.iterdir()) == []
     monkeypatch.setattr(LeRobotDataset, "save_episode", real)
-    stale = tmp_path / ".ds.partial-999999999-dead"  # what a SIGKILL leaves: removed by the next run
+    stale = (
+        tmp_path / ".ds.partial-999999999-dead"
+    )  # what a SIGKILL leaves: removed by the next run
     (stale / "meta").mkdir(parents=True)
     export_lerobot(data, root, history=4)  # no --overwrite needed
     assert read_sidecar(root)["n_frames"] == data.n_frames

@@ -36,7 +36,8 @@ for argv in json.loads(sys.argv[1]):
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
         rc = main(argv)
     results.append({{"argv": argv, "rc": rc, "err": err.getvalue(), "out": out.getvalue()}})
-# VmHWM: this process's own peak resident memory (ru_maxrss would include the parent's, kept across exec)
+# VmHWM: this process's own peak resident memory (ru_maxrss would include the parent's, kept
+# across exec)
 hwm = [line for line in open("/proc/self/status") if line.startswith("VmHWM:")][0].split()[1]
 results.append({{"peak_rss_mb": int(hwm) / 1024}})
 print(json.dumps(results))
@@ -52,16 +53,26 @@ def test_crafted_files_end_with_named_errors_under_2gb(tmp_path: Path) -> None:
         expected += [bad, bad]
     members = crafted.npz_members(toy_dataset(n=3, length=40, seed=0))
     npz_files = {
-        "header_lie": crafted.write_npz(tmp_path / "header_lie.npz",
-                                        {**members, "receiver_xy": crafted.lying_header_npy((10**9, 2))}),
+        "header_lie": crafted.write_npz(
+            tmp_path / "header_lie.npz",
+            {**members, "receiver_xy": crafted.lying_header_npy((10**9, 2))},
+        ),
         "directory": crafted.many_members_npz(tmp_path / "directory.npz"),
-        "far": crafted.write_npz(tmp_path / "far.npz", {**members, "giver_xyz": np.full_like(members["giver_xyz"], 1e308)}),
+        "far": crafted.write_npz(
+            tmp_path / "far.npz",
+            {**members, "giver_xyz": np.full_like(members["giver_xyz"], 1e308)},
+        ),
     }
     for path in npz_files.values():
         commands.append(["info", str(path)])
         expected.append(path)
-    good = crafted.make_folder(tmp_path / "good", crafted.write_good_pickle)  # the limit itself is fine
-    commands += [["convert", str(good), str(tmp_path / "good.npz")], ["info", str(tmp_path / "good.npz")]]
+    good = crafted.make_folder(
+        tmp_path / "good", crafted.write_good_pickle
+    )  # the limit itself is fine
+    commands += [
+        ["convert", str(good), str(tmp_path / "good.npz")],
+        ["info", str(tmp_path / "good.npz")],
+    ]
 
     child = subprocess.run(
         [sys.executable, "-c", CHILD.format(limit=LIMIT), json.dumps(commands)],

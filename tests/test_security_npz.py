@@ -27,10 +27,15 @@ def test_unused_members_are_never_read(tmp_path: Path, members) -> None:
     assert len(ds) == 4 and ds.n_frames == int(members["lengths"].sum())
 
 
-def test_a_used_member_whose_header_lies_is_refused_before_allocation(tmp_path: Path, members) -> None:
+def test_a_used_member_whose_header_lies_is_refused_before_allocation(
+    tmp_path: Path, members
+) -> None:
     path = write_npz(tmp_path / "d.npz", {**members, "giver_xyz": lying_header_npy((10**9, 3))})
-    with pytest.raises(DatasetError, match=r"d\.npz: member giver_xyz: its header declares shape "
-                                           r"\(1000000000, 3\) of float64 \(24,000,000,000 bytes\)"):
+    with pytest.raises(
+        DatasetError,
+        match=r"d\.npz: member giver_xyz: its header declares shape "
+        r"\(1000000000, 3\) of float64 \(24,000,000,000 bytes\)",
+    ):
         HandoverDataset.load(path)
 
 
@@ -38,7 +43,10 @@ def test_declared_member_sizes_are_bounded(tmp_path: Path, members, monkeypatch)
     path = write_npz(tmp_path / "d.npz", members)
     declared = 128 + members["giver_xyz"].nbytes  # the zip entry: .npy header + data
     monkeypatch.setattr(npz_io, "MAX_NPZ_MEMBER_BYTES", 1000)
-    with pytest.raises(DatasetError, match=rf"d\.npz: member giver_xyz declares {declared:,} bytes \(at most 1,000\)"):
+    with pytest.raises(
+        DatasetError,
+        match=rf"d\.npz: member giver_xyz declares {declared:,} bytes \(at most 1,000\)",
+    ):
         HandoverDataset.load(path)
     monkeypatch.setattr(npz_io, "MAX_NPZ_MEMBER_BYTES", 10**9)
     monkeypatch.setattr(npz_io, "MAX_NPZ_TOTAL_BYTES", 3000)
@@ -48,7 +56,9 @@ def test_declared_member_sizes_are_bounded(tmp_path: Path, members, monkeypatch)
 
 def test_archive_directory_size_is_bounded(tmp_path: Path) -> None:
     path = many_members_npz(tmp_path / "d.npz", declared=60_000)
-    with pytest.raises(DatasetError, match=r"d\.npz: the archive lists 60,000 members \(at most 64\)"):
+    with pytest.raises(
+        DatasetError, match=r"d\.npz: the archive lists 60,000 members \(at most 64\)"
+    ):
         HandoverDataset.load(path)
 
 
@@ -63,21 +73,49 @@ def test_object_members_are_refused(tmp_path: Path, members) -> None:
 @pytest.mark.parametrize(
     "change, message",
     [
-        ({"format_version": np.array([1, 1])}, r"format_version must be a single integer, got dtype int64 shape \(2,\)"),
-        ({"rate_hz": np.array([30.0, 30.0])}, r"rate_hz must be a single number, got dtype float64 shape \(2,\)"),
-        ({"format_version": np.array(1.9)}, r"format_version must be a single integer, got dtype float64"),
+        (
+            {"format_version": np.array([1, 1])},
+            r"format_version must be a single integer, got dtype int64 shape \(2,\)",
+        ),
+        (
+            {"rate_hz": np.array([30.0, 30.0])},
+            r"rate_hz must be a single number, got dtype float64 shape \(2,\)",
+        ),
+        (
+            {"format_version": np.array(1.9)},
+            r"format_version must be a single integer, got dtype float64",
+        ),
         ({"format_version": np.array(2)}, "format version 2, this code reads 1"),
         ("strings_ood", r"is_ood must be 4 booleans, got dtype <U5"),
         ("zero_quat", r"episode 'toy_001': object_quat has a zero-norm .*quaternion at frame 3"),
-        ("huge_coordinate", rf"episode 'toy_000': giver_xyz reaches 1e\+308 m, outside the \+-{MAX_ABS_COORD_M:g} m"),
+        (
+            "huge_coordinate",
+            rf"episode 'toy_000': giver_xyz reaches 1e\+308 m, outside the "
+            rf"\+-{MAX_ABS_COORD_M:g} m",
+        ),
         ("no_episodes", "holds no episodes"),
         ({"source_id": np.array([1, 2, 3, 4])}, "source_id must be 4 strings"),
-        ({"receiver_xy": np.zeros((3, 2))}, r"receiver_xy has dtype float64 shape \(3, 2\), expected floats"),
+        (
+            {"receiver_xy": np.zeros((3, 2))},
+            r"receiver_xy has dtype float64 shape \(3, 2\), expected floats",
+        ),
     ],
-    ids=["2-element-version", "2-element-rate", "version-1.9", "version-2", "is_ood-strings", "zero-quaternion",
-         "1e308-metres", "0-episodes", "int-ids", "short-array"],
+    ids=[
+        "2-element-version",
+        "2-element-rate",
+        "version-1.9",
+        "version-2",
+        "is_ood-strings",
+        "zero-quaternion",
+        "1e308-metres",
+        "0-episodes",
+        "int-ids",
+        "short-array",
+    ],
 )
-def test_malformed_content_is_refused_with_its_reason(tmp_path: Path, members, change, message: str) -> None:
+def test_malformed_content_is_refused_with_its_reason(
+    tmp_path: Path, members, change, message: str
+) -> None:
     m = dict(members)
     if change == "strings_ood":
         m["is_ood"] = np.array(["False", "False", "False", "True"])
@@ -90,8 +128,15 @@ def test_malformed_content_is_refused_with_its_reason(tmp_path: Path, members, c
         g[5, 0] = 1e308
         m["giver_xyz"] = g
     elif change == "no_episodes":
-        m.update(lengths=np.zeros(0, dtype=np.int64), is_ood=np.zeros(0, bool), source_id=np.array([], dtype="<U1"),
-                 **{k: m[k][:0] for k in ("receiver_xy", "receiver_hand_xyz", "giver_xyz", "object_quat")})
+        m.update(
+            lengths=np.zeros(0, dtype=np.int64),
+            is_ood=np.zeros(0, bool),
+            source_id=np.array([], dtype="<U1"),
+            **{
+                k: m[k][:0]
+                for k in ("receiver_xy", "receiver_hand_xyz", "giver_xyz", "object_quat")
+            },
+        )
     else:
         m.update(change)
     path = write_npz(tmp_path / "bad.npz", m)
@@ -109,7 +154,9 @@ def test_a_file_of_1e308_metres_does_not_reach_training(tmp_path: Path, members,
     g = members["giver_xyz"].copy()
     g[:, 0] = 1e308
     path = write_npz(tmp_path / "far.npz", {**members, "giver_xyz": g})
-    assert train.main(["bc-mlp", "--smoke", "--data", str(path), "--out", str(tmp_path / "run")]) == 2
+    assert (
+        train.main(["bc-mlp", "--smoke", "--data", str(path), "--out", str(tmp_path / "run")]) == 2
+    )
     assert "far.npz: episode 'toy_000': giver_xyz reaches 1e+308 m" in capsys.readouterr().err
     assert not (tmp_path / "run" / "model.safetensors").exists()
 

@@ -1,4 +1,5 @@
-"""The person's kinematics: rotations, retargeting recorded joints onto the rigid body, gait, arm IK."""
+"""The person's kinematics: rotations, retargeting recorded joints onto the rigid body, gait, arm
+IK."""
 
 from __future__ import annotations
 
@@ -44,12 +45,19 @@ def test_swing_is_the_smallest_rotation_taking_a_onto_b():
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
     r = swing(a, b)
-    np.testing.assert_allclose(np.einsum("nij,nj->ni", r, a / np.linalg.norm(a, axis=1, keepdims=True)),
-                               b / np.linalg.norm(b, axis=1, keepdims=True), atol=1e-9)
-    np.testing.assert_allclose(r @ np.swapaxes(r, 1, 2), np.broadcast_to(np.eye(3), r.shape), atol=1e-9)
+    np.testing.assert_allclose(
+        np.einsum("nij,nj->ni", r, a / np.linalg.norm(a, axis=1, keepdims=True)),
+        b / np.linalg.norm(b, axis=1, keepdims=True),
+        atol=1e-9,
+    )
+    np.testing.assert_allclose(
+        r @ np.swapaxes(r, 1, 2), np.broadcast_to(np.eye(3), r.shape), atol=1e-9
+    )
     # Smallest: the rotation angle equals the angle between a and b, about an axis normal to both.
     angle = np.arccos(np.clip((np.trace(r, axis1=1, axis2=2) - 1) / 2, -1, 1))
-    between = np.arccos(np.clip(np.sum(a * b, 1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1), -1, 1))
+    between = np.arccos(
+        np.clip(np.sum(a * b, 1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1), -1, 1)
+    )
     np.testing.assert_allclose(angle, between, atol=1e-7)
 
 
@@ -67,7 +75,9 @@ def test_triad_and_yaw():
     r = triad(np.array([0.0, 0.0, 2.0]), np.array([0.3, 1.0, 0.0]))
     np.testing.assert_allclose(r[:, 2], [0, 0, 1], atol=1e-12)
     assert r[:, 1] @ np.array([0.3, 1.0, 0.0]) > 0 and abs(np.linalg.det(r) - 1) < 1e-12
-    np.testing.assert_allclose(yaw_matrix(math.pi / 2) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(
+        yaw_matrix(math.pi / 2) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12
+    )
 
 
 def test_retarget_recovers_a_rigid_pose():
@@ -100,7 +110,9 @@ def test_measure_dims_keeps_lengths_and_rejects_bad_input():
     dims = BodyDims.from_height(1.7)
     joints = np.stack([TEMPLATE * (1.7 / 1.725) + [1.0, -0.9, dims.pelvis_z]] * 5)
     measured = measure_dims(joints)
-    np.testing.assert_allclose(np.linalg.norm(measured.bones, axis=1), np.linalg.norm(dims.bones, axis=1), atol=1e-9)
+    np.testing.assert_allclose(
+        np.linalg.norm(measured.bones, axis=1), np.linalg.norm(dims.bones, axis=1), atol=1e-9
+    )
     assert measured.height == pytest.approx(1.7, abs=0.01)
     with pytest.raises(ValueError, match="shape"):
         measure_dims(np.zeros((5, 33, 3)))
@@ -116,10 +128,12 @@ def test_walking_pose_swings_legs_in_antiphase_and_follows_the_track():
     dims = BodyDims.from_height(walker.height)
     pose = walking_pose(traj, dims)
     np.testing.assert_allclose(pose.origin[:, 0, :2], traj.xy, atol=1e-12)
-    ankles_r = pose.origin[:, SEG["shank_r"]] + np.einsum("tij,j->ti", pose.rot[:, SEG["shank_r"]],
-                                                          dims.local(J["RIGHT_ANKLE"], SEG["shank_r"]))
-    ankles_l = pose.origin[:, SEG["shank_l"]] + np.einsum("tij,j->ti", pose.rot[:, SEG["shank_l"]],
-                                                          dims.local(J["LEFT_ANKLE"], SEG["shank_l"]))
+    ankles_r = pose.origin[:, SEG["shank_r"]] + np.einsum(
+        "tij,j->ti", pose.rot[:, SEG["shank_r"]], dims.local(J["RIGHT_ANKLE"], SEG["shank_r"])
+    )
+    ankles_l = pose.origin[:, SEG["shank_l"]] + np.einsum(
+        "tij,j->ti", pose.rot[:, SEG["shank_l"]], dims.local(J["LEFT_ANKLE"], SEG["shank_l"])
+    )
     fwd = np.stack([np.cos(traj.heading), np.sin(traj.heading)], axis=1)
     gap = np.sum((ankles_r - ankles_l)[:, :2] * fwd, axis=1)
     # The feet alternate: the right ankle is ahead half the time, behind the other half.

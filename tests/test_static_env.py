@@ -1,4 +1,5 @@
-"""StaticHandover-v0: the robot waits for the detected hand (+ stabilisation delay), then delivers."""
+"""StaticHandover-v0: the robot waits for the detected hand (+ stabilisation delay), then
+delivers."""
 
 from __future__ import annotations
 
@@ -26,7 +27,9 @@ def test_robot_does_not_move_before_hand_detection_and_delay():
         t = u.data.time
         if obs[sl][0] < 0.5:
             assert t < u.t_enabled + 1e-9
-            max_dev = max(max_dev, float(np.linalg.norm(u.data.site_xpos[u.ids.tcp_site] - READY_POS)))
+            max_dev = max(
+                max_dev, float(np.linalg.norm(u.data.site_xpos[u.ids.tcp_site] - READY_POS))
+            )
         elif enabled_at is None:
             enabled_at = t
         if enabled_at is not None and t > enabled_at + 0.5:
@@ -62,5 +65,8 @@ def test_static_handover_succeeds_and_reports_both_times(delay):
     assert info["handover_time_with_delay"] == pytest.approx(u.t_release - u.receiver.t_depart)
     assert info["handover_time_with_delay"] - info["handover_time"] == pytest.approx(delay)
     # The object went to the detected (raised) hand.
-    assert np.linalg.norm(u.data.xpos[u.ids.object_body] - u.data.site_xpos[u.ids.body.grip_site]) < 0.12
+    assert (
+        np.linalg.norm(u.data.xpos[u.ids.object_body] - u.data.site_xpos[u.ids.body.grip_site])
+        < 0.12
+    )
     assert 1.0 < info["handover_time"] < 10.0

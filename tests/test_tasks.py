@@ -1,4 +1,5 @@
-"""The handover variants are Task objects: receiver set-up, episode end and a weighted reward in info."""
+"""The handover variants are Task objects: receiver set-up, episode end and a weighted reward in
+info."""
 
 from __future__ import annotations
 
@@ -33,7 +34,11 @@ def test_each_env_has_its_task_with_the_default_weights():
     dyn, sta = gym.make(DYNAMIC).unwrapped, gym.make("handover_env/StaticHandover-v0").unwrapped
     assert type(dyn.task) is DynamicHandover and type(sta.task) is StaticHandover
     assert dyn.task.reward == sta.task.reward == HandoverReward(1.0, 2.0, 10.0, 10.0, 10.0)
-    assert sta.task.stabilisation_delay == 2.0 and sta.task.handover_delay == 2.0 and dyn.task.handover_delay == 0.0
+    assert (
+        sta.task.stabilisation_delay == 2.0
+        and sta.task.handover_delay == 2.0
+        and dyn.task.handover_delay == 0.0
+    )
     assert dyn.task.enabled_time(dyn) == 0.0 and math.isinf(sta.task.enabled_time(sta))
 
 
@@ -52,18 +57,26 @@ def test_reward_terms_are_in_info_and_sum_to_the_reward():
 def test_reward_weights_are_constructor_arguments_and_leave_the_episode_alone():
     base = _episode(gym.make(DYNAMIC))
     weighted = _episode(gym.make(DYNAMIC, reward={"success": 3.0, "time_cost": 2.0}))
-    assert len(base) == len(weighted) and base[-1][1]["outcome"] == weighted[-1][1]["outcome"] == "success"
+    assert (
+        len(base) == len(weighted)
+        and base[-1][1]["outcome"] == weighted[-1][1]["outcome"] == "success"
+    )
     assert weighted[-1][1]["reward_outcome"] == 3.0
     assert weighted[0][0] == pytest.approx(2.0 * base[0][0])
     # a force threshold of 0 f_r makes every wrist force count
-    forced = _episode(gym.make(DYNAMIC, task=DynamicHandover(reward=HandoverReward(force_threshold=0.0))))
+    forced = _episode(
+        gym.make(DYNAMIC, task=DynamicHandover(reward=HandoverReward(force_threshold=0.0)))
+    )
     assert min(info["reward_force"] for _, info in forced) < 0.0
-    assert sum(info["reward_force"] for _, info in base) >= sum(info["reward_force"] for _, info in forced)
+    assert sum(info["reward_force"] for _, info in base) >= sum(
+        info["reward_force"] for _, info in forced
+    )
 
 
 @dataclass
 class StandStill(HandoverTask):
-    """A variant in a few lines: a person who never walks past (no 'missed'), nothing else changed."""
+    """A variant in a few lines: a person who never walks past (no 'missed'), nothing else
+    changed."""
 
     def walked_past(self, env, t):
         return False

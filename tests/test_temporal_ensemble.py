@@ -50,7 +50,9 @@ def test_uniform_weights_average_overlapping_chunks():
     chunks = [rng.normal(size=(30, 3)) for _ in range(5)]
     for s, c in enumerate(chunks):
         ens.add(c, s)
-    np.testing.assert_allclose(ens.at_frame(6), np.mean([c[6 - s] for s, c in enumerate(chunks)], axis=0))
+    np.testing.assert_allclose(
+        ens.at_frame(6), np.mean([c[6 - s] for s, c in enumerate(chunks)], axis=0)
+    )
 
 
 class _ConstantVelocity(PredictiveAgent):
@@ -78,7 +80,9 @@ def _obs(layout: ObsLayout, track: np.ndarray, released: bool = False) -> np.nda
 
 def test_predictive_agent_streams_forecasts_and_resets():
     layout = ObsLayout()
-    agent = _ConstantVelocity(closed_loop=ClosedLoopConfig(ensemble_m=0.0, min_frames=2), layout=layout)
+    agent = _ConstantVelocity(
+        closed_loop=ClosedLoopConfig(ensemble_m=0.0, min_frames=2), layout=layout
+    )
     walk = np.column_stack([2.0 - 0.9 * np.arange(60) / 30.0, np.full(60, -0.9)])
     out = [agent.act(_obs(layout, walk[: n + 1])) for n in range(40)]
     ready = np.array([*agent.closed_loop.ready_pos, agent.closed_loop.ready_yaw], dtype=np.float32)

@@ -1,4 +1,5 @@
-"""train.py: --help documents every flag; smoke trainings of both baselines round-trip checkpoints."""
+"""train.py: --help documents every flag; smoke trainings of both baselines round-trip
+checkpoints."""
 
 from __future__ import annotations
 
@@ -26,10 +27,25 @@ def test_help_documents_every_flag(method):
     for action in sub._actions:
         if action.option_strings and action.dest != "help":
             assert action.help, f"{method} {action.option_strings} has no help text"
-    out = subprocess.run([sys.executable, str(ROOT / "train.py"), method, "--help"], cwd=ROOT, env=ENV,
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "train.py"), method, "--help"],
+        cwd=ROOT,
+        env=ENV,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0
-    for flag in ("--data", "--out", "--smoke", "--resume", "--seed", "--batch-size", "--lr", "--device"):
+    for flag in (
+        "--data",
+        "--out",
+        "--smoke",
+        "--resume",
+        "--seed",
+        "--batch-size",
+        "--lr",
+        "--device",
+    ):
         assert flag in out.stdout
 
 
@@ -44,7 +60,10 @@ def test_smoke_trains_both_baselines_and_round_trips(tmp_path):
         train.main([method, "--smoke", "--data", str(data_path), "--out", str(tmp_path / method),
                     "--test-fold", "0", "--folds", "2", "--no-progress"])
         summary = json.loads((tmp_path / method / "train_summary.json").read_text())
-        assert np.isfinite(summary["final_val_loss"]) and summary["test_rms_mm"]["id"]["n_episodes"] > 0
+        assert (
+            np.isfinite(summary["final_val_loss"])
+            and summary["test_rms_mm"]["id"]["n_episodes"] > 0
+        )
     ep = data[0]
     for agent in (BCMLPAgent.load(tmp_path / "bc-mlp"), ACTAgent.load(tmp_path / "act")):
         pred = agent.predict(ep.receiver_xy[:12], ep.giver_xyz[11])
@@ -63,9 +82,13 @@ def test_bad_inputs_fail_clearly(tmp_path, capsys):
         assert err.startswith("train.py: error: ") and "\n" not in err, err
         return err
 
-    assert "no dataset" in run(["bc-mlp", "--smoke", "--data", str(tmp_path / "nope.npz"), "--out", str(tmp_path / "o")])
+    assert "no dataset" in run(
+        ["bc-mlp", "--smoke", "--data", str(tmp_path / "nope.npz"), "--out", str(tmp_path / "o")]
+    )
     short = toy_dataset(n=6, length=20, seed=0).save(tmp_path / "short.npz")
     assert "horizon H=60 frames is longer than" in run(
         ["act", "--smoke", "--data", str(short), "--out", str(tmp_path / "o"), "--horizon", "60"])
     good = toy_dataset(n=6, length=45, seed=0).save(tmp_path / "good.npz")
-    assert "cannot resume" in run(["bc-mlp", "--smoke", "--data", str(good), "--out", str(tmp_path / "o2"), "--resume"])
+    assert "cannot resume" in run(
+        ["bc-mlp", "--smoke", "--data", str(good), "--out", str(tmp_path / "o2"), "--resume"]
+    )

@@ -1,4 +1,5 @@
-"""Issue 16 items 7, 8, 10, 12: train.py never overwrites a run by accident, checkpoints are written as
+"""Issue 16 items 7, 8, 10, 12: train.py never overwrites a run by accident, checkpoints are written
+as
 one unit, and options and saved state are validated."""
 
 from __future__ import annotations
@@ -32,12 +33,34 @@ def data_path(tmp_path_factory) -> Path:
 
 
 def bc(data_path: Path, out: Path, *extra: str) -> list[str]:
-    return ["bc-mlp", "--smoke", "--data", str(data_path), "--out", str(out), "--no-progress", *extra]
+    return [
+        "bc-mlp",
+        "--smoke",
+        "--data",
+        str(data_path),
+        "--out",
+        str(out),
+        "--no-progress",
+        *extra,
+    ]
 
 
 def act(data_path: Path, out: Path, *extra: str) -> list[str]:
-    return ["act", "--smoke", "--data", str(data_path), "--out", str(out), "--no-progress", "--steps", "4",
-            "--eval-every", "2", *ACT_TINY, *extra]
+    return [
+        "act",
+        "--smoke",
+        "--data",
+        str(data_path),
+        "--out",
+        str(out),
+        "--no-progress",
+        "--steps",
+        "4",
+        "--eval-every",
+        "2",
+        *ACT_TINY,
+        *extra,
+    ]
 
 
 def _files(folder: Path) -> dict[str, bytes]:
@@ -64,11 +87,16 @@ def test_a_finished_run_is_never_overwritten_without_asking(data_path, tmp_path,
     assert train.main(act(data_path, out)) == 2
     assert "holds a BC-MLP checkpoint, not ACT; pass --overwrite" in capsys.readouterr().err
     assert train.main(bc(data_path, out)) == 2
-    assert "already holds a BC-MLP run; pass --resume to continue it or --overwrite" in capsys.readouterr().err
+    assert (
+        "already holds a BC-MLP run; pass --resume to continue it or --overwrite"
+        in capsys.readouterr().err
+    )
     assert _files(out) == before and BCMLPAgent.load(out).fitted
     assert train.main(act(data_path, out, "--overwrite")) == 0
     assert ACTAgent.load(out).fitted
-    assert json.loads((out / "config.json").read_text())["type"] == "act"  # no BC-MLP file left behind
+    assert (
+        json.loads((out / "config.json").read_text())["type"] == "act"
+    )  # no BC-MLP file left behind
     assert train.main(bc(data_path, out, "--resume")) == 2
     assert "holds a ACT checkpoint, not BC-MLP" in capsys.readouterr().err
 
@@ -79,7 +107,10 @@ def test_a_folder_of_other_files_is_refused_even_with_overwrite(data_path, tmp_p
     (out / "notes.txt").write_text("keep")
     for extra in ((), ("--overwrite",)):
         assert train.main(bc(data_path, out, *extra)) == 2
-        assert "is not empty and holds no checkpoint of this project (notes.txt)" in capsys.readouterr().err
+        assert (
+            "is not empty and holds no checkpoint of this project (notes.txt)"
+            in capsys.readouterr().err
+        )
     assert [p.name for p in out.iterdir()] == ["notes.txt"]
 
 
@@ -112,11 +143,15 @@ def test_a_kill_between_checkpoint_files_resumes_exactly(data_path, tmp_path, mo
         assert train.main(argv(data_path, tmp_path / "killed")) == 130
         assert interrupt.calls == 2
     state = json.loads((tmp_path / "killed" / "training_state" / "state.json").read_text())
-    assert state.get("epoch", state.get("step")) == (1 if method == "bc-mlp" else 2)  # the first checkpoint
+    assert state.get("epoch", state.get("step")) == (
+        1 if method == "bc-mlp" else 2
+    )  # the first checkpoint
     assert not (tmp_path / "killed" / ".staging").exists()
     assert train.main(argv(data_path, tmp_path / "killed", "--resume")) == 0
     for name in ("model.safetensors", "training_state/last.safetensors"):
-        assert _same(_weights(tmp_path / "straight" / name), _weights(tmp_path / "killed" / name)), name
+        assert _same(
+            _weights(tmp_path / "straight" / name), _weights(tmp_path / "killed" / name)
+        ), name
 
 
 def test_an_interrupted_commit_is_finished_by_the_next_reader(tmp_path):
@@ -158,7 +193,9 @@ def test_a_half_written_file_is_a_one_line_error(data_path, tmp_path, capsys, da
 # ---------------------------------------------------------------------- item 12
 @pytest.mark.parametrize("option, value", [("--lr", "0"), ("--batch-size", "0"), ("--lr", "-1e-3"),
                                            ("--epochs", "0"), ("--val-fraction", "1")])
-def test_zero_or_negative_options_are_errors_not_defaults(data_path, tmp_path, capsys, option, value):
+def test_zero_or_negative_options_are_errors_not_defaults(
+    data_path, tmp_path, capsys, option, value
+):
     with pytest.raises(SystemExit) as exc:
         train.main(bc(data_path, tmp_path / "run", f"{option}={value}"))
     assert exc.value.code == 2
@@ -166,7 +203,9 @@ def test_zero_or_negative_options_are_errors_not_defaults(data_path, tmp_path, c
     assert not (tmp_path / "run").exists()
 
 
-@pytest.mark.parametrize("device", ["bogus", "cuda:7"] if not torch.cuda.is_available() else ["bogus"])
+@pytest.mark.parametrize(
+    "device", ["bogus", "cuda:7"] if not torch.cuda.is_available() else ["bogus"]
+)
 def test_an_unusable_device_is_a_one_line_error(data_path, tmp_path, capsys, device):
     assert train.main(bc(data_path, tmp_path / "run", "--device", device)) == 2
     err = capsys.readouterr().err.strip()
@@ -186,7 +225,12 @@ def test_a_tampered_state_json_is_refused(data_path, tmp_path, capsys):
 def test_a_finished_bc_mlp_run_is_extended_by_resume_with_more_epochs(data_path, tmp_path):
     assert train.main(bc(data_path, tmp_path / "five", "--epochs", "5", "--patience", "50")) == 0
     assert train.main(bc(data_path, tmp_path / "three", "--epochs", "3", "--patience", "50")) == 0
-    assert train.main(bc(data_path, tmp_path / "three", "--epochs", "5", "--patience", "50", "--resume")) == 0
+    assert (
+        train.main(
+            bc(data_path, tmp_path / "three", "--epochs", "5", "--patience", "50", "--resume")
+        )
+        == 0
+    )
     state = json.loads((tmp_path / "three" / "training_state" / "state.json").read_text())
     assert state["epoch"] == 5 and len(state["val_loss"]) == 5
     for name in ("model.safetensors", "training_state/last.safetensors"):

@@ -1,4 +1,5 @@
-"""The shared trainer of the torch baselines: one progress/log path, no LeRobot in BC-MLP, missing extras."""
+"""The shared trainer of the torch baselines: one progress/log path, no LeRobot in BC-MLP, missing
+extras."""
 
 from __future__ import annotations
 
@@ -37,12 +38,22 @@ def test_a_baseline_without_its_extra_is_a_one_line_error_naming_it(module):
 def test_training_writes_one_json_line_per_validation_and_a_tqdm_bar(tmp_path, capsys):
     data = toy_dataset(n=6, length=40, seed=3)
     out = tmp_path / "bc"
-    agent = BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=3, patience=50)).fit(data, out_dir=out, progress=True)
+    agent = BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=3, patience=50)).fit(
+        data, out_dir=out, progress=True
+    )
     lines = [json.loads(line) for line in (out / LOG_FILE).read_text().splitlines()]
     assert [r["epoch"] for r in lines] == [1, 2, 3]
     assert [r["val_loss"] for r in lines] == agent.train_log["val_loss"]
     assert lines[-1]["best_val"] == min(agent.train_log["val_loss"])
     assert "bc-mlp" in capsys.readouterr().err  # the tqdm bar
     # a resumed run keeps the earlier lines and appends its own
-    BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=5, patience=50)).fit(data, out_dir=out, resume=True)
-    assert [json.loads(line)["epoch"] for line in (out / LOG_FILE).read_text().splitlines()] == [1, 2, 3, 4, 5]
+    BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=5, patience=50)).fit(
+        data, out_dir=out, resume=True
+    )
+    assert [json.loads(line)["epoch"] for line in (out / LOG_FILE).read_text().splitlines()] == [
+        1,
+        2,
+        3,
+        4,
+        5,
+    ]

@@ -104,7 +104,12 @@ def recording(
     receiver[:, 0] = pelvis
     receiver[:, 12] = _world(pelvis, np.array([0.0, -0.17, 0.48]))
     receiver[:, 13] = _world(pelvis, np.array([0.0, -0.20, 0.20]))
-    offsets = {14: (0.04, 0.0, 0.02), 15: (0.0, 0.0, 0.0), 16: (0.0, 0.0, -0.06), 17: (0.0, 0.04, 0.0)}
+    offsets = {
+        14: (0.04, 0.0, 0.02),
+        15: (0.0, 0.0, 0.0),
+        16: (0.0, 0.0, -0.06),
+        17: (0.0, 0.04, 0.0),
+    }
     for j, off in offsets.items():
         receiver[:, j] = hand + np.array(off)
     giver_pelvis = np.array([-0.1, 0.0, 0.8])
@@ -181,7 +186,9 @@ def test_detects_transfer_onset_release(smooth: bool) -> None:
     assert m["prereach_speed"] == pytest.approx(0.8, abs=0.02)
     assert m["min_rel_speed"] == pytest.approx(1.0, abs=0.03) and abs(m["time_lost"]) < 0.03
     assert abs(m["lateral_deviation"]) < 0.01
-    assert m["ttc_onset"] == pytest.approx(m["object_shoulder_fwd_onset"] / m["walking_speed_onset"])
+    assert m["ttc_onset"] == pytest.approx(
+        m["object_shoulder_fwd_onset"] / m["walking_speed_onset"]
+    )
 
 
 def test_slowdown_is_measured() -> None:
@@ -223,7 +230,9 @@ def test_walking_frame_and_body_frame() -> None:
     np.testing.assert_allclose(w.forward, np.tile([-1.0, 0.0], (n, 1)), atol=1e-6)
     np.testing.assert_allclose(w.left, np.tile([0.0, -1.0], (n, 1)), atol=1e-6)
     assert np.median(w.speed) == pytest.approx(2.0 / (n - 1) * RATE, rel=1e-3)
-    body = to_body_frame(np.array([0.5, -0.5, 1.3]), np.array([1.0, -0.9, 0.9]), np.array([-1.0, 0.0]))
+    body = to_body_frame(
+        np.array([0.5, -0.5, 1.3]), np.array([1.0, -0.9, 0.9]), np.array([-1.0, 0.0])
+    )
     np.testing.assert_allclose(body, [0.5, -0.4, 0.4])
     still = walking_frame(np.zeros((40, 2)), RATE)
     assert np.isnan(still.forward).all()
@@ -274,7 +283,16 @@ def test_transfer_stats_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert exc.value.code == 0 and "--calibration-folds" in capsys.readouterr().out
     folder = _write_folder(tmp_path / "whole_motions")
     out = tmp_path / "calib"
-    argv = ["transfer-stats", str(folder), "--out", str(out), "--folds", "2", "--calibration-folds", "1"]
+    argv = [
+        "transfer-stats",
+        str(folder),
+        "--out",
+        str(out),
+        "--folds",
+        "2",
+        "--calibration-folds",
+        "1",
+    ]
     assert main([*argv, "--no-figures"]) == 0
     summary = json.loads((out / "receiver_calibration.json").read_text())
     assert summary["detection"]["all/all"]["transfer"] == 5
@@ -298,7 +316,9 @@ def test_figures(tmp_path: Path) -> None:
 
 
 # ----------------------------------------------------------------------- the real dataset
-@pytest.mark.skipif(not REAL.is_dir(), reason="the development copy of the public dataset is absent")
+@pytest.mark.skipif(
+    not REAL.is_dir(), reason="the development copy of the public dataset is absent"
+)
 def test_real_recordings_mostly_get_a_transfer() -> None:
     from handover_env.data.public import list_public_files
 
@@ -308,8 +328,16 @@ def test_real_recordings_mostly_get_a_transfer() -> None:
     results = [analyse_file(p) for p in chosen]
     detected = [r for r in results if r.analysis.events["transfer"] is not None]
     assert len(detected) >= 0.9 * len(results)
-    med = {k: np.nanmedian([r.analysis.measures[k] for r in detected]) for k in
-           ("pelvis_x_transfer", "object_z_transfer", "hold_duration", "reach_duration", "d15_transfer")}
+    med = {
+        k: np.nanmedian([r.analysis.measures[k] for r in detected])
+        for k in (
+            "pelvis_x_transfer",
+            "object_z_transfer",
+            "hold_duration",
+            "reach_duration",
+            "d15_transfer",
+        )
+    }
     assert 0.5 < med["pelvis_x_transfer"] < 1.3 and 1.2 < med["object_z_transfer"] < 1.5
     assert 0.5 < med["hold_duration"] < 1.6 and 0.3 < med["reach_duration"] < 1.0
     assert med["d15_transfer"] < 0.3

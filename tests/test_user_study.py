@@ -65,9 +65,24 @@ def test_user_study_quick_end_to_end(tmp_path: Path) -> None:
     # each part has its own answer-noise stream: --theta with the pooled Θ̂ reproduces H1-H3
     theta = json.loads((out / "pooled" / "theta_hat.json").read_text())["theta_hat"]
     again = tmp_path / "again"
-    assert evaluate.main(["user-study", "--quick", "--out", str(again), "--no-progress", "--no-personalised",
-                          "--theta", *(str(theta[k]) for k in ("stiffness", "damping", "forecast_time",
-                                                               "release_force"))]) == 0
+    assert (
+        evaluate.main(
+            [
+                "user-study",
+                "--quick",
+                "--out",
+                str(again),
+                "--no-progress",
+                "--no-personalised",
+                "--theta",
+                *(
+                    str(theta[k])
+                    for k in ("stiffness", "damping", "forecast_time", "release_force")
+                ),
+            ]
+        )
+        == 0
+    )
     assert (again / "trials.csv").read_text() == (out / "trials.csv").read_text()
     assert (again / "h3_choices.csv").read_text() == (out / "h3_choices.csv").read_text()
 
@@ -78,5 +93,8 @@ def test_user_study_rejects_bad_input(capsys) -> None:
     with pytest.raises(SystemExit) as exc:
         evaluate.main(["user-study", "--participants", "1"])
     assert exc.value.code == 2
-    assert evaluate.main(["user-study", "--theta", "100", "15", "-1", "8", "--quick", "--no-progress"]) == 2
+    assert (
+        evaluate.main(["user-study", "--theta", "100", "15", "-1", "8", "--quick", "--no-progress"])
+        == 2
+    )
     assert "forecast_time" in capsys.readouterr().err

@@ -1,4 +1,5 @@
-"""Handover demonstrations: the canonical dataset, the safe public-dataset loader, the synthetic default.
+"""Handover demonstrations: the canonical dataset, the safe public-dataset loader, the synthetic
+default.
 
 >>> from handover_env.data import load_any
 >>> demos = load_any(None)                        # embedded synthetic default (900 ID + 100 OOD)

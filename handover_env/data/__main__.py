@@ -54,7 +54,8 @@ def _header(dataset: HandoverDataset) -> str:
         f"{dataset.name or 'dataset'}\n"
         f"episodes: {len(dataset)} ({len(dataset) - n_ood} ID, {n_ood} OOD)\n"
         f"frames: {dataset.n_frames:,} at {dataset.rate_hz:g} Hz "
-        f"(per episode {lengths.min()} .. {lengths.max()}, median {int(sorted(lengths)[len(lengths) // 2])})"
+        f"(per episode {lengths.min()} .. {lengths.max()}, median "
+        f"{int(sorted(lengths)[len(lengths) // 2])})"
     )
 
 
@@ -120,8 +121,10 @@ def cmd_compare(args: argparse.Namespace) -> int:
         print(f"[{subset} episodes]")
         empty = [label for label, s in (("A", sa), ("B", sb)) if not _count(s, subset)]
         if empty:
-            print(f"nothing to compare: {' and '.join(empty)} {'has' if len(empty) == 1 else 'have'} "
-                  f"no {subset.upper()} episodes\n")
+            print(
+                f"nothing to compare: {' and '.join(empty)} {'has' if len(empty) == 1 else 'have'} "
+                f"no {subset.upper()} episodes\n"
+            )
             continue
         print(format_comparison(compare_statistics(sa, sb, subset), "A", "B"))
         print()
@@ -145,7 +148,8 @@ def cmd_export_lerobot(args: argparse.Namespace) -> int:
         from handover_env.data.lerobot_export import export_lerobot
     except ImportError as exc:
         raise DatasetError(
-            f"the LeRobot export is not available ({exc}); it lives in handover_env/data/lerobot_export.py"
+            f"the LeRobot export is not available ({exc}); it lives in "
+            "handover_env/data/lerobot_export.py"
         ) from exc
     dataset = _load(args.dataset)
     start = time.perf_counter()
@@ -301,8 +305,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=30,
         help="frames of future giver positions (default 30)",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace an existing ROOT, only if it holds an "
-                   "earlier export (its meta/handover.json); any other folder is refused")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing ROOT, only if it holds an "
+        "earlier export (its meta/handover.json); any other folder is refused",
+    )
     p.set_defaults(func=cmd_export_lerobot)
 
     p = sub.add_parser(
@@ -338,7 +346,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--folds", type=_positive_int, default=10, help="number of Table I folds (default 10)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the fold split (default 0, as Table I)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed of the fold split (default 0, as Table I)"
+    )
     p.add_argument(
         "--calibration-folds",
         type=_positive_int,
@@ -369,7 +379,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except MemoryError as exc:  # the loaders bound every allocation; this is a last resort
-        print(f"error: out of memory ({exc or 'MemoryError'}) running {args.command}", file=sys.stderr)
+        print(
+            f"error: out of memory ({exc or 'MemoryError'}) running {args.command}", file=sys.stderr
+        )
         return 2
 
 

@@ -71,19 +71,23 @@ class Episode:
             arr = np.asarray(getattr(self, name), dtype=np.float64)
             if arr.ndim != 2 or arr.shape[1] != width:
                 raise DatasetError(
-                    f"episode {self.source_id!r}: {name} must have shape (T, {width}), got {arr.shape}"
+                    f"episode {self.source_id!r}: {name} must have shape (T, {width}), got "
+                    f"{arr.shape}"
                 )
             if not np.all(np.isfinite(arr)):
                 raise DatasetError(f"episode {self.source_id!r}: {name} contains NaN or inf")
             if name in _POSITION_FIELDS and arr.size and np.abs(arr).max() > MAX_ABS_COORD_M:
                 raise DatasetError(
-                    f"episode {self.source_id!r}: {name} reaches {np.abs(arr).max():.3g} m, outside "
+                    f"episode {self.source_id!r}: {name} reaches {np.abs(arr).max():.3g} m, "
+                    "outside "
                     f"the +-{MAX_ABS_COORD_M:g} m a recorded position may have"
                 )
             if name == "object_quat" and arr.size:
                 norms = np.linalg.norm(arr, axis=1)
                 if norms.min() < MIN_QUAT_NORM or norms.max() > 1.0 / MIN_QUAT_NORM:
-                    frame = int(np.argmin(norms) if norms.min() < MIN_QUAT_NORM else np.argmax(norms))
+                    frame = int(
+                        np.argmin(norms) if norms.min() < MIN_QUAT_NORM else np.argmax(norms)
+                    )
                     raise DatasetError(
                         f"episode {self.source_id!r}: object_quat has a zero-norm (or huge) "
                         f"quaternion at frame {frame}"
@@ -92,14 +96,17 @@ class Episode:
             object.__setattr__(self, name, arr)
             lengths.add(arr.shape[0])
         if len(lengths) != 1:
-            raise DatasetError(f"episode {self.source_id!r}: arrays disagree in length: {sorted(lengths)}")
+            raise DatasetError(
+                f"episode {self.source_id!r}: arrays disagree in length: {sorted(lengths)}"
+            )
         if next(iter(lengths)) < 2:
             raise DatasetError(f"episode {self.source_id!r}: needs at least 2 frames")
         if next(iter(lengths)) > MAX_FRAMES:
             raise DatasetError(f"episode {self.source_id!r}: more than {MAX_FRAMES:,} frames")
         if not isinstance(self.is_ood, (bool, np.bool_)):
             raise DatasetError(
-                f"episode {self.source_id!r}: is_ood must be a bool, got {type(self.is_ood).__name__}"
+                f"episode {self.source_id!r}: is_ood must be a bool, got "
+                f"{type(self.is_ood).__name__}"
             )
         object.__setattr__(self, "is_ood", bool(self.is_ood))
         object.__setattr__(self, "source_id", str(self.source_id))
@@ -117,7 +124,8 @@ class HandoverDataset:
     Args:
         episodes: the demonstrations.
         rate_hz: sampling rate shared by every episode (30 Hz in the public dataset).
-        name: free-text provenance, e.g. ``"public:/path/to/whole_motions"`` or ``"synthetic(seed=0)"``.
+        name: free-text provenance, e.g. ``"public:/path/to/whole_motions"`` or
+            ``"synthetic(seed=0)"``.
     """
 
     episodes: list[Episode]
@@ -185,7 +193,9 @@ class HandoverDataset:
         idx = np.asarray(indices, dtype=np.int64).reshape(-1)
         if idx.size and (idx.min() < -len(self) or idx.max() >= len(self)):
             raise IndexError(f"index out of range for a dataset of {len(self)} episodes")
-        return HandoverDataset([self.episodes[i] for i in idx], rate_hz=self.rate_hz, name=self.name)
+        return HandoverDataset(
+            [self.episodes[i] for i in idx], rate_hz=self.rate_hz, name=self.name
+        )
 
     # ----------------------------------------------------------------- splits
     def stratified_kfold(self, k: int, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -237,7 +247,10 @@ class HandoverDataset:
         if path.is_dir() or (path.exists() and not path.is_file()):
             raise DatasetError(f"{path}: exists and is not a file (a folder?); choose a file name")
         lengths = self.lengths
-        arrays = {name: np.concatenate([getattr(ep, name) for ep in self.episodes]) for name in _ARRAY_FIELDS}
+        arrays = {
+            name: np.concatenate([getattr(ep, name) for ep in self.episodes])
+            for name in _ARRAY_FIELDS
+        }
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         tmp = Path(tmp_name)
@@ -275,7 +288,8 @@ class HandoverDataset:
 
         Raises:
             FileNotFoundError: the path does not exist.
-            DatasetError: the file is not a valid dataset; the message names the file and the problem.
+            DatasetError: the file is not a valid dataset; the message names the file and the
+                problem.
         """
         from handover_env.data.npz_io import read_npz_members
 
@@ -296,11 +310,15 @@ class HandoverDataset:
 
         version = scalar("format_version", "iu")
         if int(version) != FORMAT_VERSION:
-            raise DatasetError(f"{path}: format version {int(version)}, this code reads {FORMAT_VERSION}")
+            raise DatasetError(
+                f"{path}: format version {int(version)}, this code reads {FORMAT_VERSION}"
+            )
         rate = float(scalar("rate_hz", "iuf"))
         lengths = content["lengths"]
         if lengths.ndim != 1 or lengths.dtype.kind not in "iu":
-            raise DatasetError(f"{path}: lengths must be a 1-D integer array, got {lengths.dtype} {lengths.shape}")
+            raise DatasetError(
+                f"{path}: lengths must be a 1-D integer array, got {lengths.dtype} {lengths.shape}"
+            )
         n = lengths.size
         if n == 0:
             raise DatasetError(f"{path}: holds no episodes")
@@ -308,14 +326,23 @@ class HandoverDataset:
             raise DatasetError(f"{path}: {n:,} episodes (at most {MAX_EPISODES:,})")
         lengths = lengths.astype(np.int64)
         if lengths.min() < 2 or lengths.max() > MAX_FRAMES:
-            raise DatasetError(f"{path}: invalid episode lengths (each must be 2 .. {MAX_FRAMES:,} frames)")
+            raise DatasetError(
+                f"{path}: invalid episode lengths (each must be 2 .. {MAX_FRAMES:,} frames)"
+            )
         total = int(lengths.sum())
         if total > MAX_TOTAL_FRAMES:
             raise DatasetError(f"{path}: {total:,} frames (at most {MAX_TOTAL_FRAMES:,})")
         is_ood, source_id = content["is_ood"], content["source_id"]
         if is_ood.shape != (n,) or is_ood.dtype != np.bool_:
-            raise DatasetError(f"{path}: is_ood must be {n} booleans, got dtype {is_ood.dtype} shape {is_ood.shape}")
-        if source_id.shape != (n,) or source_id.dtype.kind != "U" or source_id.dtype.itemsize > 4 * MAX_ID_CHARS:
+            raise DatasetError(
+                f"{path}: is_ood must be {n} booleans, got dtype {is_ood.dtype} shape "
+                f"{is_ood.shape}"
+            )
+        if (
+            source_id.shape != (n,)
+            or source_id.dtype.kind != "U"
+            or source_id.dtype.itemsize > 4 * MAX_ID_CHARS
+        ):
             raise DatasetError(
                 f"{path}: source_id must be {n} strings of at most {MAX_ID_CHARS} characters, "
                 f"got dtype {source_id.dtype} shape {source_id.shape}"
@@ -324,13 +351,16 @@ class HandoverDataset:
             arr = content[name]
             if arr.shape != (total, width) or arr.dtype.kind != "f":
                 raise DatasetError(
-                    f"{path}: {name} has dtype {arr.dtype} shape {arr.shape}, expected floats {(total, width)}"
+                    f"{path}: {name} has dtype {arr.dtype} shape {arr.shape}, expected floats "
+                    f"{(total, width)}"
                 )
         name = ""
         if "name" in content:
             value = content["name"]
             if value.shape != () or value.dtype.kind != "U":
-                raise DatasetError(f"{path}: name must be one string, got dtype {value.dtype} shape {value.shape}")
+                raise DatasetError(
+                    f"{path}: name must be one string, got dtype {value.dtype} shape {value.shape}"
+                )
             name = str(value)
         bounds = np.concatenate([[0], np.cumsum(lengths)])
         episodes = []

@@ -4,11 +4,11 @@
 30 Hz up to the current frame, and the robot knows where its own gripper is. Both baselines get
 exactly that, packed the same way, at every frame ``t`` of an episode:
 
-| name              | LeRobot key                      | shape    | content                                        |
-|-------------------|----------------------------------|----------|------------------------------------------------|
-| environment state | ``observation.environment_state`` | (2 W,)   | receiver base xy history over the last W frames |
-| giver state       | ``observation.state``            | (3,)     | giver wrist xyz at frame t (m)                  |
-| action chunk      | ``action`` (+ ``delta_timestamps``)| (H, 3)  | giver wrist xyz at frames t, t+1, ..., t+H-1    |
+| name | LeRobot key | shape | content |
+|---|---|---|---|
+| environment state | ``observation.environment_state`` | (2 W,) | receiver base xy, last W frames |
+| giver state | ``observation.state`` | (3,) | giver wrist xyz at frame t (m) |
+| action chunk | ``action`` (+ ``delta_timestamps``)| (H, 3) | giver wrist xyz, frames t..t+H-1 |
 
 **Receiver history encoding** (``encode_receiver``), W frames ``p_{t-W+1} .. p_t`` of base xy (m):
 
@@ -79,7 +79,11 @@ class FeatureSpec:
         return 2 * self.history
 
     def to_dict(self) -> dict:
-        return {"history": int(self.history), "horizon": int(self.horizon), "rate_hz": float(self.rate_hz)}
+        return {
+            "history": int(self.history),
+            "horizon": int(self.horizon),
+            "rate_hz": float(self.rate_hz),
+        }
 
 
 def receiver_windows(receiver_xy: np.ndarray, times: np.ndarray, history: int) -> np.ndarray:
@@ -103,7 +107,9 @@ def encode_receiver(window: np.ndarray) -> np.ndarray:
 def encode_history(receiver_history: np.ndarray, history: int) -> np.ndarray:
     """Environment state (2 W,) from an observed (T, 2) history (the last W frames are used)."""
     receiver_history = np.asarray(receiver_history, dtype=np.float64)
-    window = receiver_windows(receiver_history, np.array([receiver_history.shape[0] - 1]), history)[0]
+    window = receiver_windows(receiver_history, np.array([receiver_history.shape[0] - 1]), history)[
+        0
+    ]
     return encode_receiver(window)
 
 
@@ -112,7 +118,9 @@ def check_dataset(dataset: HandoverDataset, spec: FeatureSpec) -> None:
     if len(dataset) == 0:
         raise ValueError("the dataset has no episodes")
     if abs(dataset.rate_hz - spec.rate_hz) > 1e-6:
-        raise ValueError(f"dataset rate is {dataset.rate_hz} Hz, the baseline features need {spec.rate_hz} Hz")
+        raise ValueError(
+            f"dataset rate is {dataset.rate_hz} Hz, the baseline features need {spec.rate_hz} Hz"
+        )
     short = [(ep.source_id, ep.length) for ep in dataset if ep.length < spec.horizon]
     if short:
         sid, n = short[0]
@@ -191,8 +199,11 @@ def validate_giver(giver_xyz: np.ndarray | None) -> np.ndarray:
     return arr
 
 
-def split_train_val(dataset: HandoverDataset, val_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Episode indices (train, val), stratified by ID/OOD; val is one of round(1/val_fraction) folds.
+def split_train_val(
+    dataset: HandoverDataset, val_fraction: float, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Episode indices (train, val), stratified by ID/OOD; val is one of round(1/val_fraction)
+    folds.
 
     With too few episodes for a stratified split (tests, tiny sets) it falls back to a seeded
     random split that still keeps at least one episode on each side.

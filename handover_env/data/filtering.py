@@ -72,7 +72,8 @@ def hampel(
     n_sigmas: float = HAMPEL_SIGMAS,
     min_deviation: float = HAMPEL_MIN_DEVIATION,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Replace isolated outliers along axis 0 by the running median (stage 1 of :func:`smooth_track`).
+    """Replace isolated outliers along axis 0 by the running median (stage 1 of
+    :func:`smooth_track`).
 
     Args:
         x: (T, ...) track.
@@ -88,7 +89,9 @@ def hampel(
     if int(half_window) != half_window or half_window < 1:
         raise ValueError(f"half_window must be an integer >= 1, got {half_window!r}")
     if not n_sigmas > 0 or not min_deviation >= 0:
-        raise ValueError(f"need n_sigmas > 0 and min_deviation >= 0, got {n_sigmas}, {min_deviation}")
+        raise ValueError(
+            f"need n_sigmas > 0 and min_deviation >= 0, got {n_sigmas}, {min_deviation}"
+        )
     size = (2 * int(half_window) + 1,) + (1,) * (arr.ndim - 1)
     median = median_filter(arr, size=size, mode="nearest")
     residual = np.abs(arr - median)
@@ -112,7 +115,9 @@ def lowpass(
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
     if not 0 < cutoff_hz < rate_hz / 2:
-        raise ValueError(f"cutoff_hz must be in (0, rate_hz / 2 = {rate_hz / 2:g}), got {cutoff_hz!r}")
+        raise ValueError(
+            f"cutoff_hz must be in (0, rate_hz / 2 = {rate_hz / 2:g}), got {cutoff_hz!r}"
+        )
     if int(order) != order or order < 1:
         raise ValueError(f"order must be an integer >= 1, got {order!r}")
     sos = butter(int(order), cutoff_hz, btype="low", fs=rate_hz, output="sos")

@@ -3,15 +3,16 @@
 One LeRobot frame per dataset frame, with the baselines' shared features
 (:mod:`handover_env.data.features`):
 
-| key                              | dtype   | shape   | content                                         |
-|----------------------------------|---------|---------|-------------------------------------------------|
-| ``observation.environment_state`` | float32 | (2 W,)  | receiver base xy history (current xy + offsets)  |
-| ``observation.state``            | float32 | (3,)    | giver wrist xyz at this frame (m)               |
-| ``action``                       | float32 | (3,)    | giver wrist xyz at this frame (m)               |
+| key | dtype | shape | content |
+|---|---|---|---|
+| ``observation.environment_state`` | float32 | (2 W,) | receiver base xy history (xy + offsets) |
+| ``observation.state`` | float32 | (3,) | giver wrist xyz at this frame (m) |
+| ``action`` | float32 | (3,) | giver wrist xyz at this frame (m) |
 
 ``action`` at frame t is the giver position at t. A policy reads the future chunk through
 LeRobot's ``delta_timestamps``: ``{"action": [k / 30 for k in range(H)]}`` gives the giver positions
-for frames t .. t+H-1 with ``action_is_pad`` past the episode end (see :func:`action_delta_timestamps`).
+for frames t .. t+H-1 with ``action_is_pad`` past the episode end (see
+:func:`action_delta_timestamps`).
 Every frame carries the task string :data:`TASK`. ``meta/handover.json`` beside LeRobot's metadata
 records W, H, the source dataset name and each episode's source id and ID/OOD flag.
 
@@ -35,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from handover_env.data.dataset import HandoverDataset
 from handover_env.data.features import (
     ACTION,
     ACTION_DIM,
@@ -45,7 +47,6 @@ from handover_env.data.features import (
     check_dataset,
     episode_frames,
 )
-from handover_env.data.dataset import HandoverDataset
 from handover_env.paths import (
     check_replaceable_root,
     remove_stale_siblings,
@@ -62,7 +63,9 @@ _MAX_SIDECAR_BYTES = 64 << 20
 
 def lerobot_features(history: int) -> dict[str, dict]:
     """The LeRobot ``features`` dict of an export with a W-frame receiver history."""
-    env_names = ["x", "y"] + [f"d{axis}_{k}" for k in range(history - 1, 0, -1) for axis in ("x", "y")]
+    env_names = ["x", "y"] + [
+        f"d{axis}_{k}" for k in range(history - 1, 0, -1) for axis in ("x", "y")
+    ]
     return {
         OBS_ENV_STATE: {"dtype": "float32", "shape": (2 * history,), "names": env_names},
         OBS_STATE: {"dtype": "float32", "shape": (STATE_DIM,), "names": ["x", "y", "z"]},
@@ -84,7 +87,8 @@ def export_lerobot(
     overwrite: bool = False,
     progress: bool = False,
 ) -> Path:
-    """Write ``dataset`` as a LeRobotDataset under ``root`` (``use_videos=False``); returns ``root``.
+    """Write ``dataset`` as a LeRobotDataset under ``root`` (``use_videos=False``); returns
+    ``root``.
 
     Args:
         dataset: the canonical dataset (its rate must be an integer number of Hz).
@@ -110,10 +114,13 @@ def export_lerobot(
     root = check_replaceable_root(root)
     if root.exists() or root.is_symlink():
         if not overwrite:
-            raise FileExistsError(f"{root} already exists; pass overwrite=True (--overwrite) to replace it")
+            raise FileExistsError(
+                f"{root} already exists; pass overwrite=True (--overwrite) to replace it"
+            )
         if not is_export(root):
             raise ValueError(
-                f"refusing to overwrite {root}: it is not a handover LeRobot export (no {SIDECAR} or "
+                f"refusing to overwrite {root}: it is not a handover LeRobot export (no {SIDECAR} "
+                "or "
                 f"LeRobot metadata of ours); delete it yourself or choose another folder"
             )
     root.parent.mkdir(parents=True, exist_ok=True)
@@ -200,10 +207,13 @@ def is_export(root: str | os.PathLike) -> bool:
 
 
 def read_sidecar(root: str | os.PathLike) -> dict:
-    """The ``meta/handover.json`` of an export, validated, or a clear error if ``root`` is not one."""
+    """The ``meta/handover.json`` of an export, validated, or a clear error if ``root`` is not
+    one."""
     path = Path(root) / SIDECAR
     if not path.is_file():
-        raise FileNotFoundError(f"{root} is not a handover LeRobot export (no {SIDECAR}); run export-lerobot")
+        raise FileNotFoundError(
+            f"{root} is not a handover LeRobot export (no {SIDECAR}); run export-lerobot"
+        )
     if path.stat().st_size > _MAX_SIDECAR_BYTES:
         raise ValueError(f"{path}: larger than {_MAX_SIDECAR_BYTES:,} bytes")
     try:
@@ -213,7 +223,9 @@ def read_sidecar(root: str | os.PathLike) -> dict:
     if not isinstance(meta, dict):
         raise ValueError(f"{path}: expected a JSON object")
     if meta.get("export_format") != EXPORT_FORMAT:
-        raise ValueError(f"{path}: export format {meta.get('export_format')}, this code reads {EXPORT_FORMAT}")
+        raise ValueError(
+            f"{path}: export format {meta.get('export_format')}, this code reads {EXPORT_FORMAT}"
+        )
     types = {"history": int, "horizon": int, "rate_hz": float, "name": str, "source_id": list,
              "is_ood": list, "n_frames": int, "fingerprint": str}
     for key, kind in types.items():
@@ -228,14 +240,22 @@ def read_sidecar(root: str | os.PathLike) -> dict:
     return meta
 
 
-def export_matches(root: str | os.PathLike, dataset: HandoverDataset, history: int, horizon: int) -> str | None:
-    """None when the export at ``root`` holds exactly ``dataset`` with windows W, H; else why not."""
+def export_matches(
+    root: str | os.PathLike, dataset: HandoverDataset, history: int, horizon: int
+) -> str | None:
+    """None when the export at ``root`` holds exactly ``dataset`` with windows W, H; else why
+    not."""
     try:
         meta = read_sidecar(root)
     except (OSError, ValueError) as exc:
         return str(exc)
-    wanted = {"fingerprint": dataset.fingerprint(), "history": int(history), "horizon": int(horizon),
-              "n_frames": int(dataset.n_frames), "episodes": len(dataset)}
+    wanted = {
+        "fingerprint": dataset.fingerprint(),
+        "history": int(history),
+        "horizon": int(horizon),
+        "n_frames": int(dataset.n_frames),
+        "episodes": len(dataset),
+    }
     got = {**meta, "episodes": len(meta["source_id"])}
     diff = [key for key, value in wanted.items() if got.get(key) != value]
     if diff:

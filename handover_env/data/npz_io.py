@@ -1,4 +1,5 @@
-"""Bounded reading of ``.npz`` members: only the members asked for, each size checked before it is read.
+"""Bounded reading of ``.npz`` members: only the members asked for, each size checked before it is
+read.
 
 ``np.load(path)[key]`` trusts the archive: every member a caller touches is decompressed to the
 size its zip entry declares, and the ``.npy`` header inside may declare a shape far larger than
@@ -65,10 +66,14 @@ def read_npz_members(
     if not stat.S_ISREG(st.st_mode):
         raise DatasetError(f"{path}: not a regular file")
     if st.st_size > MAX_NPZ_BYTES:
-        raise DatasetError(f"{path}: {st.st_size:,} bytes, more than the {MAX_NPZ_BYTES:,} a dataset may have")
+        raise DatasetError(
+            f"{path}: {st.st_size:,} bytes, more than the {MAX_NPZ_BYTES:,} a dataset may have"
+        )
     entries = _directory_entries(path)
     if entries is not None and entries > MAX_NPZ_MEMBERS:
-        raise DatasetError(f"{path}: the archive lists {entries:,} members (at most {MAX_NPZ_MEMBERS})")
+        raise DatasetError(
+            f"{path}: the archive lists {entries:,} members (at most {MAX_NPZ_MEMBERS})"
+        )
     try:
         archive = zipfile.ZipFile(path)
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
@@ -78,7 +83,9 @@ def read_npz_members(
     with archive:
         names = set(archive.namelist())
         if len(names) > MAX_NPZ_MEMBERS:
-            raise DatasetError(f"{path}: the archive lists {len(names):,} members (at most {MAX_NPZ_MEMBERS})")
+            raise DatasetError(
+                f"{path}: the archive lists {len(names):,} members (at most {MAX_NPZ_MEMBERS})"
+            )
         missing = sorted(key for key in required if f"{key}.npy" not in names)
         if missing:
             raise DatasetError(f"{path}: missing keys {missing}")
@@ -91,15 +98,21 @@ def read_npz_members(
                 )
             total += info.file_size
             if total > MAX_NPZ_TOTAL_BYTES:
-                raise DatasetError(f"{path}: the members declare more than {MAX_NPZ_TOTAL_BYTES:,} bytes in all")
+                raise DatasetError(
+                    f"{path}: the members declare more than {MAX_NPZ_TOTAL_BYTES:,} bytes in all"
+                )
             if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
-                raise DatasetError(f"{path}: member {key} uses compression method {info.compress_type}")
+                raise DatasetError(
+                    f"{path}: member {key} uses compression method {info.compress_type}"
+                )
             try:
                 out[key] = _read_member(archive, info)
             except DatasetError as exc:
                 raise DatasetError(f"{path}: member {key}: {exc}") from None
             except (zipfile.BadZipFile, OSError, ValueError, EOFError, MemoryError) as exc:
-                raise DatasetError(f"{path}: member {key} is not readable ({type(exc).__name__}: {exc})") from exc
+                raise DatasetError(
+                    f"{path}: member {key} is not readable ({type(exc).__name__}: {exc})"
+                ) from exc
     return out
 
 
@@ -107,9 +120,13 @@ def _read_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> np.ndarray:
     with archive.open(info) as f:
         version = np.lib.format.read_magic(f)
         if version == (1, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_1_0(f, max_header_size=_HEADER_LIMIT)
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(
+                f, max_header_size=_HEADER_LIMIT
+            )
         elif version in ((2, 0), (3, 0)):
-            shape, fortran, dtype = np.lib.format.read_array_header_2_0(f, max_header_size=_HEADER_LIMIT)
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(
+                f, max_header_size=_HEADER_LIMIT
+            )
         else:  # pragma: no cover - read_magic only returns these
             raise DatasetError(f"unsupported .npy version {version}")
         if dtype.hasobject:

@@ -1,4 +1,5 @@
-"""Static check of a public-dataset pickle before it is unpickled: nothing in it runs, nothing is allocated.
+"""Static check of a public-dataset pickle before it is unpickled: nothing in it runs, nothing is
+allocated.
 
 A recording is a ``dict`` of numpy arrays. Rebuilding one needs a handful of opcodes and three
 calls (``numpy._core.multiarray._reconstruct``, ``numpy.dtype``, ``numpy.ndarray.__setstate__``),
@@ -50,7 +51,10 @@ class UnsafePickleError(DatasetError):
 
 
 #: The globals a recording may name, by role.
-RECONSTRUCT = {("numpy.core.multiarray", "_reconstruct"), ("numpy._core.multiarray", "_reconstruct")}
+RECONSTRUCT = {
+    ("numpy.core.multiarray", "_reconstruct"),
+    ("numpy._core.multiarray", "_reconstruct"),
+}
 SCALAR = {("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar")}
 NDARRAY = {("numpy", "ndarray")}
 DTYPE = {("numpy", "dtype")}
@@ -112,11 +116,15 @@ def scan_pickle(data: bytes, source: str) -> None:
     except UnsafePickleError:
         raise
     except _Refused as exc:
-        raise DatasetError(f"{source}: refused to load: {exc}; nothing in the file was run") from None
+        raise DatasetError(
+            f"{source}: refused to load: {exc}; nothing in the file was run"
+        ) from None
     except (ValueError, EOFError) as exc:  # pickletools: truncated argument, unknown opcode
         text = str(exc)
         if "but only" in text or "no newline" in text or "EOF" in text or not data:
-            raise DatasetError(f"{source}: truncated pickle ({len(data)} bytes; ended early)") from None
+            raise DatasetError(
+                f"{source}: truncated pickle ({len(data)} bytes; ended early)"
+            ) from None
         raise DatasetError(f"{source}: not a readable pickle ({text})") from None
 
 
@@ -171,7 +179,9 @@ class _Scanner:
                 raise _Refused(f"more than {MAX_PICKLE_OPCODES:,} opcodes")
             name = opcode.name
             if count == 1 and name != "PROTO":
-                raise ValueError(f"it does not start with a pickle protocol header (first opcode {name})")
+                raise ValueError(
+                    f"it does not start with a pickle protocol header (first opcode {name})"
+                )
             try:
                 self.step(name, arg)
             except _Refused as exc:
@@ -236,7 +246,12 @@ class _Scanner:
             self.push(self._global(module, attr))
         elif name == "STACK_GLOBAL":
             attr, module = self.pop(name), self.pop(name)
-            if module.kind != "str" or attr.kind != "str" or module.value is None or attr.value is None:
+            if (
+                module.kind != "str"
+                or attr.kind != "str"
+                or module.value is None
+                or attr.value is None
+            ):
                 raise _Refused("STACK_GLOBAL on something other than two short strings")
             self.push(self._global(module.value, attr.value))
         elif name == "REDUCE":
@@ -318,7 +333,9 @@ class _Scanner:
                     and a[1].kind == "tuple" and [i.value for i in a[1].value] == [0]
                     and a[1].value[0].kind == "int" and a[2].kind in ("bytes", "str")
                     and a[2].size <= 8):
-                raise _Refused("_reconstruct called other than as _reconstruct(ndarray, (0,), b'b')")
+                raise _Refused(
+                    "_reconstruct called other than as _reconstruct(ndarray, (0,), b'b')"
+                )
             return _Item("array")
         if key in DTYPE:
             if not (len(a) == 3 and a[0].kind == "str" and a[0].value is not None

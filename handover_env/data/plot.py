@@ -24,7 +24,9 @@ def check_figure_path(out: str | os.PathLike) -> Path:
     text = os.fspath(out)
     path = Path(text)
     if not text or path.is_dir() or text.endswith(os.sep):
-        raise ValueError(f"{text!r}: is a folder; give the output image's file name, e.g. paths.png")
+        raise ValueError(
+            f"{text!r}: is a folder; give the output image's file name, e.g. paths.png"
+        )
     if path.suffix.lower() not in FORMATS:
         raise ValueError(f"{path}: the output must end in one of {', '.join(FORMATS)}")
     if path.exists() and not path.is_file():

@@ -1,4 +1,5 @@
-"""Safe loader of the public Dynamic Handover Dataset (a folder of pickles) into the canonical format.
+"""Safe loader of the public Dynamic Handover Dataset (a folder of pickles) into the canonical
+format.
 
 The public dataset of the paper (Sec. IV-A, "Data Collection": 1,000 human-to-human handovers,
 900 in-distribution + 100 out-of-distribution) is published as one Python pickle per recording:
@@ -162,7 +163,9 @@ def read_regular_file(path: str | os.PathLike, limit: int, root: Path | None = N
             raise DatasetError(
                 f"{_show(path)}: {st.st_size:,} bytes, more than the {limit:,} a recording may have"
             )
-        fd = os.open(target, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0))
+        fd = os.open(
+            target, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0)
+        )
         with os.fdopen(fd, "rb") as f:
             if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
                 raise DatasetError(f"{_show(path)}: not a regular file")
@@ -192,8 +195,12 @@ def safe_load_pickle(path: str | os.PathLike, root: Path | None = None) -> Any:
     except UnsafePickleError:
         raise
     except EOFError as exc:
-        raise DatasetError(f"{_show(path)}: truncated pickle ({len(data)} bytes; ended early)") from exc
-    except Exception as exc:  # UnpicklingError, ValueError, TypeError, MemoryError from a corrupt stream
+        raise DatasetError(
+            f"{_show(path)}: truncated pickle ({len(data)} bytes; ended early)"
+        ) from exc
+    except (
+        Exception
+    ) as exc:  # UnpicklingError, ValueError, TypeError, MemoryError from a corrupt stream
         raise DatasetError(
             f"{_show(path)}: not a readable pickle ({type(exc).__name__}: {exc})"
         ) from exc
@@ -232,7 +239,8 @@ def _validate_record(record: Any, source: str) -> dict[str, np.ndarray]:
         raise DatasetError(f"{source}: arrays disagree in length (frames): {lengths}")
     if next(iter(lengths.values())) > MAX_FRAMES:
         raise DatasetError(
-            f"{source}: {lengths['pose_object']:,} frames, more than the {MAX_FRAMES:,} a recording may have"
+            f"{source}: {lengths['pose_object']:,} frames, more than the {MAX_FRAMES:,} a "
+            "recording may have"
         )
     if next(iter(lengths.values())) < 2:
         raise DatasetError(f"{source}: needs at least 2 frames, got {lengths['pose_object']}")

@@ -38,10 +38,14 @@ class Recording:
     def __post_init__(self) -> None:
         pose = np.asarray(self.receiver_pose, dtype=np.float64)
         if pose.ndim != 3 or pose.shape[1:] != (34, 3):
-            raise DatasetError(f"{self.episode.source_id}: receiver_pose must be (T, 34, 3), got {pose.shape}")
+            raise DatasetError(
+                f"{self.episode.source_id}: receiver_pose must be (T, 34, 3), got {pose.shape}"
+            )
         if pose.shape[0] != self.episode.length:
-            raise DatasetError(f"{self.episode.source_id}: receiver_pose has {pose.shape[0]} frames, "
-                               f"the episode {self.episode.length}")
+            raise DatasetError(
+                f"{self.episode.source_id}: receiver_pose has {pose.shape[0]} frames, "
+                f"the episode {self.episode.length}"
+            )
         if not np.all(np.isfinite(pose)):
             raise DatasetError(f"{self.episode.source_id}: receiver_pose contains NaN or inf")
         pose.setflags(write=False)
@@ -61,7 +65,10 @@ def load_recording(path: str | os.PathLike) -> Recording:
     path = Path(path)
     match = _NAME_RE.match(path.name)
     if match is None:
-        raise DatasetError(f"{path}: not a public-dataset file name (motion_normal_<i>.pkl or motion_variation_<i>.pkl)")
+        raise DatasetError(
+            f"{path}: not a public-dataset file name (motion_normal_<i>.pkl or "
+            "motion_variation_<i>.pkl)"
+        )
     record = _validate_record(safe_load_pickle(path), str(path))
     episode = episode_from_record(record, path.stem, is_ood=match.group(1) == "motion_variation")
     return Recording(episode=episode, receiver_pose=record["pose_receiver"].copy())

@@ -1,4 +1,5 @@
-"""Per-episode statistics of a handover dataset, used by ``info`` and ``compare`` and for calibration.
+"""Per-episode statistics of a handover dataset, used by ``info`` and ``compare`` and for
+calibration.
 
 The same definitions apply to recorded and synthetic data, so the two can be compared directly:
 
@@ -130,7 +131,8 @@ def compare_statistics(
 def format_distribution(stats: dict[str, np.ndarray]) -> str:
     """A table of median and 5/25/75/95 % quantiles per statistic, for ID, OOD and all."""
     lines = [
-        f"{'statistic':40s} {'subset':6s} {'median':>8s} {'p5':>8s} {'p25':>8s} {'p75':>8s} {'p95':>8s}"
+        f"{'statistic':40s} {'subset':6s} {'median':>8s} {'p5':>8s} {'p25':>8s} {'p75':>8s} "
+        f"{'p95':>8s}"
     ]
     mask = stats["is_ood"]
     for name, (label, unit) in STATISTICS.items():
@@ -159,7 +161,8 @@ def format_comparison(rows: list[Comparison], name_a: str = "A", name_b: str = "
         title = f"{label} [{unit}]" if unit else label
         flag = " *" if row.name in ACCEPTANCE_STATISTICS else ""
         lines.append(
-            f"{title:40s} {row.median_a:14.3f} {row.median_b:14.3f} {100 * row.relative_difference:+9.1f}% "
+            f"{title:40s} {row.median_a:14.3f} {row.median_b:14.3f} "
+            f"{100 * row.relative_difference:+9.1f}% "
             f"{row.ks:6.3f} {row.ks_pvalue:9.2e}{flag}"
         )
     lines.append("* acceptance: medians within 10% (issue 3)")

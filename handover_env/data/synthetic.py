@@ -48,7 +48,8 @@ TAKE_X_Q = {
     "id": (_P, (-0.80, -0.798, -0.79, -0.598, -0.284, 0.059, 0.93, 1.154, 1.355)),
     "ood": (_P, (-0.80, -0.798, -0.793, -0.652, -0.205, 0.144, 0.84, 1.205, 1.23)),
 }
-#: Object relative to the receiver pelvis at the transfer: ahead along the walk and to the right (m).
+#: Object relative to the receiver pelvis at the transfer: ahead along the walk and to the right
+#: (m).
 MEET_FORWARD_Q = (_P, (0.0, 0.034, 0.116, 0.182, 0.221, 0.254, 0.33, 0.396, 0.45))
 MEET_RIGHT_Q = (_P, (0.06, 0.111, 0.155, 0.223, 0.268, 0.313, 0.404, 0.531, 0.60))
 #: Object height at the transfer (m) and its peak height before the transfer (m).
@@ -363,7 +364,8 @@ def _default_episodes() -> tuple[Episode, ...]:
 
 
 def default_dataset() -> HandoverDataset:
-    """The embedded default: ``generate_synthetic()`` (900 ID + 100 OOD, seed 0), cached per process."""
+    """The embedded default: ``generate_synthetic()`` (900 ID + 100 OOD, seed 0), cached per
+    process."""
     return HandoverDataset(
         list(_default_episodes()), rate_hz=DEFAULT_RATE_HZ, name="synthetic(default)"
     )

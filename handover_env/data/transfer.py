@@ -122,7 +122,8 @@ class TransferDetection:
 FAILURES: dict[str, str] = {
     "never_near": f"the tracked hand never comes within {NEAR_RADIUS:.2f} m of the object",
     "near_at_end": f"the hand comes within {NEAR_RADIUS:.2f} m only in the last {HOLD_TIME:g} s",
-    "not_held": f"the hand comes near but does not stay within {HOLD_RADIUS:.2f} m for {HOLD_TIME:g} s",
+    "not_held": f"the hand comes near but does not stay within {HOLD_RADIUS:.2f} m for "
+                f"{HOLD_TIME:g} s",
     "not_comoving": "the object does not move with the receiver after the hand arrives",
     "carried_before": f"the object travels with the receiver over {MAX_LEAD_TIME:g} s before the "
     "tracked hand arrives (hand tracked too far from it)",
@@ -131,7 +132,8 @@ FAILURES: dict[str, str] = {
 
 @dataclass(frozen=True)
 class WalkingFrame:
-    """The receiver's walking frame per frame: unit ``forward`` and ``left`` (T, 2), ``speed`` (T,)."""
+    """The receiver's walking frame per frame: unit ``forward`` and ``left`` (T, 2), ``speed``
+    (T,)."""
 
     forward: np.ndarray
     left: np.ndarray
@@ -167,7 +169,9 @@ def check_recording(
         raise ValueError(f"arrays disagree in length (frames): {lengths}")
     need = int(np.ceil(2 * HOLD_TIME * rate_hz)) + 2
     if lengths["receiver"] < need:
-        raise ValueError(f"need at least {need} frames at {rate_hz:g} Hz, got {lengths['receiver']}")
+        raise ValueError(
+            f"need at least {need} frames at {rate_hz:g} Hz, got {lengths['receiver']}"
+        )
     return out["receiver"], out["object"], out.get("giver")
 
 
@@ -279,7 +283,8 @@ def detect_transfer(
 
 
 def baseline_slice(transfer: int, rate_hz: float) -> slice:
-    """Frames of walking before the reach: from the start to 1 s before the transfer (>= 8 frames)."""
+    """Frames of walking before the reach: from the start to 1 s before the transfer (>= 8
+    frames)."""
     return slice(0, max(MIN_BASELINE_FRAMES, transfer - int(round(BASELINE_GAP * rate_hz))))
 
 
@@ -305,7 +310,8 @@ class ReachOnset:
 
 
 def detect_reach_onset(receiver: np.ndarray, transfer: int, rate_hz: float = RATE_HZ) -> ReachOnset:
-    """The reach onset: where the hand's final rise from its walking height toward the object begins.
+    """The reach onset: where the hand's final rise from its walking height toward the object
+    begins.
 
     The walking height is the median hand height above the pelvis over :func:`baseline_slice`.
     Take the last frame before ``transfer`` at which the hand is at most :data:`ONSET_RISE` above
@@ -314,7 +320,9 @@ def detect_reach_onset(receiver: np.ndarray, transfer: int, rate_hz: float = RAT
     transfer comes too early for a walking baseline or the hand does not rise.
     """
     if transfer <= MIN_BASELINE_FRAMES:
-        return ReachOnset(None, None, f"transfer at frame {transfer}: no walking baseline before it")
+        return ReachOnset(
+            None, None, f"transfer at frame {transfer}: no walking baseline before it"
+        )
     height = hand_height(receiver)
     base = float(np.median(height[baseline_slice(transfer, rate_hz)]))
     if height[transfer] - base < ONSET_RISE:
@@ -355,7 +363,8 @@ def detect_release(
 def detect_arm_back(
     receiver: np.ndarray, transfer: int, start: int, rate_hz: float = RATE_HZ
 ) -> int | None:
-    """First frame from ``start`` at which the hand is drawn back to the body (the arm-extended end).
+    """First frame from ``start`` at which the hand is drawn back to the body (the arm-extended
+    end).
 
     Back means: the horizontal distance of joint 15 from the pelvis is within
     :data:`ARM_BACK_MARGIN` of its walking median (over the onset baseline). The receiver may still
@@ -370,6 +379,7 @@ def detect_arm_back(
 
 
 def arm_length(receiver: np.ndarray) -> float:
-    """Median over frames of the shoulder-elbow-wrist-hand bone lengths (12 -> 13 -> 14 -> 15), m."""
+    """Median over frames of the shoulder-elbow-wrist-hand bone lengths (12 -> 13 -> 14 -> 15),
+    m."""
     bones = np.diff(receiver[:, list(ARM_CHAIN)], axis=1)
     return float(np.median(np.linalg.norm(bones, axis=2).sum(axis=1)))

@@ -77,7 +77,11 @@ def write_figures(results: list, out_dir: str | Path) -> list[Path]:
     plt.close(fig)
 
     panels = (
-        ("object_shoulder_onset", "object to right shoulder at onset, m", np.arange(0.3, 1.81, 0.05)),
+        (
+            "object_shoulder_onset",
+            "object to right shoulder at onset, m",
+            np.arange(0.3, 1.81, 0.05),
+        ),
         ("ttc_onset", "time to contact at onset, s", np.arange(0.0, 3.01, 0.1)),
         ("reach_duration", "reach duration (onset to transfer), s", np.arange(0.0, 2.01, 1 / 15)),
     )

@@ -1,4 +1,5 @@
-"""Markdown rendering of the receiver calibration summary (:mod:`handover_env.data.transfer_report`)."""
+"""Markdown rendering of the receiver calibration summary
+(:mod:`handover_env.data.transfer_report`)."""
 
 from __future__ import annotations
 
@@ -85,13 +86,18 @@ def _noise(summary: dict) -> list[str]:
             lines.append(
                 f"| {_label(group)} | {label} | {_num(sp['p50'], 's')} [{_num(sp['p95'], 's')}] "
                 f"({_num(s['pelvis_max_speed_max'], 's')}) | {s['recordings_pelvis_over_2mps']} | "
-                f"{_num(st['p50'], 'm')} [{_num(st['p95'], 'm')}] | {s['recordings_with_hand_jump']} | "
+                f"{_num(st['p50'], 'm')} [{_num(st['p95'], 'm')}] | "
+                f"{s['recordings_with_hand_jump']} | "
                 f"{s['hand_jump_frames']} |"
             )
     within = {g: n["smooth"]["hand_jump_frames_within_reach"] for g, n in summary["noise"].items()}
-    lines += ["", "After the filter, the hand steps over 0.1 m that fall within the reach (onset - 3 "
-              "frames .. transfer + 3 frames: a fast reach while walking, not noise): "
-              + ", ".join(f"{_label(g)} {v}" for g, v in within.items()) + "."]
+    lines += [
+        "",
+        "After the filter, the hand steps over 0.1 m that fall within the reach (onset - 3 "
+        "frames .. transfer + 3 frames: a fast reach while walking, not noise): "
+        + ", ".join(f"{_label(g)} {v}" for g, v in within.items())
+        + ".",
+    ]
     hampel = {g: n["hampel_replaced_samples"] for g, n in summary["noise"].items()}
     lines += ["", "Samples (joint coordinates) changed by the outlier pass: "
               + ", ".join(f"{_label(g)} {v}" for g, v in hampel.items()) + "."]
@@ -111,8 +117,13 @@ def _grasp(summary: dict) -> list[str]:
     lines += ["", *_header(["group", "joint 15 to object"] + [f"{q} %" for q in first["quantile"]])]
     for g in groups:
         gr = summary["grasp_radius"][g]
-        for key, what in (("d15_transfer", "at the transfer"), ("d15_min_window", "min, -0.2 .. +0.5 s")):
-            lines.append(f"| {_label(g)} | {what} | " + " | ".join(_num(v, "m") for v in gr[key]) + " |")
+        for key, what in (
+            ("d15_transfer", "at the transfer"),
+            ("d15_min_window", "min, -0.2 .. +0.5 s"),
+        ):
+            lines.append(
+                f"| {_label(g)} | {what} | " + " | ".join(_num(v, "m") for v in gr[key]) + " |"
+            )
     return lines
 
 
@@ -139,43 +150,57 @@ def write_markdown(
         "",
         f"Table I's stratified {split['folds']}-fold split (seed {split['seed']}, "
         "`stratified_fold_ids` over the files in `list_public_files` order, the order Table I "
-        f"loads them): folds {split['calibration_folds'][0]}-{split['calibration_folds'][-1]} are the "
-        f"**calibration half**, folds {split['held_out_folds'][0]}-{split['held_out_folds'][-1]} the "
+        f"loads them): folds {split['calibration_folds'][0]}-{split['calibration_folds'][-1]} are "
+        "the "
+        f"**calibration half**, folds {split['held_out_folds'][0]}-{split['held_out_folds'][-1]} "
+        "the "
         "**held-out half**. Calibrate on the first; check on the second. Sizes: "
-        + ", ".join(f"{_label(g)} {n}" for g, n in summary["groups"].items()) + ".",
+        + ", ".join(f"{_label(g)} {n}" for g, n in summary["groups"].items())
+        + ".",
         "",
         "## Rules (all tracks first smoothed by `smooth_track`)",
         "",
-        f"- **Transfer** (the receiver's hand takes the object): the first frame at which the nearest "
-        f"of the right wrist/hand/tip/thumb (joints 14-17) is within {rules['transfer.NEAR_RADIUS']} m "
+        "- **Transfer** (the receiver's hand takes the object): the first frame at which the "
+        "nearest "
+        "of the right wrist/hand/tip/thumb (joints 14-17) is within "
+        f"{rules['transfer.NEAR_RADIUS']} m "
         f"of the object and stays within {rules['transfer.HOLD_RADIUS']} m for "
         f"{rules['transfer.HOLD_TIME']} s; from there the first frame at which the hand closes in "
-        f"slower than {rules['transfer.ARRIVAL_SPEED']} m/s (the end of the reach). The object must "
+        f"slower than {rules['transfer.ARRIVAL_SPEED']} m/s (the end of the reach). The object "
+        "must "
         "then move with the receiver (mean velocity along the walk over "
         f"{rules['transfer.COMOVE_TIME']} s "
-        f">= {rules['transfer.COMOVE_FRACTION']} x walking speed) and must not already have travelled "
+        f">= {rules['transfer.COMOVE_FRACTION']} x walking speed) and must not already have "
+        "travelled "
         f"with the receiver (>= {rules['transfer.LEAD_FRACTION']} x walking speed) for over "
         f"{rules['transfer.MAX_LEAD_TIME']} s.",
         f"- **Giver release** (end of the shared hold): the giver's nearest hand joint gets "
         f"{rules['transfer.RELEASE_MARGIN']} m beyond its holding distance (median over the "
         f"{rules['transfer.RELEASE_BASELINE_TIME']} s before the transfer) for "
-        f"{rules['transfer.RELEASE_HOLD_TIME']} s; the release is the last frame before that at which "
+        f"{rules['transfer.RELEASE_HOLD_TIME']} s; the release is the last frame before that at "
+        "which "
         f"it moved away slower than {rules['transfer.RELEASE_SPEED']} m/s.",
-        f"- **Reach onset**: the last frame before the transfer with the right hand (joint 15) at most "
-        f"{rules['transfer.ONSET_RISE']} m above its walking height (median height above the pelvis "
+        "- **Reach onset**: the last frame before the transfer with the right hand (joint 15) at "
+        "most "
+        f"{rules['transfer.ONSET_RISE']} m above its walking height (median height above the "
+        "pelvis "
         f"from the start to {rules['transfer.BASELINE_GAP']} s before the transfer), stepped back "
         f"(at most {rules['transfer.ONSET_BACKTRACK']} s) to the bottom from which the hand rises.",
-        f"- **Arm drawn back** (end of arm-extended time): from the transfer, the first frame at which "
+        "- **Arm drawn back** (end of arm-extended time): from the transfer, the first frame at "
+        "which "
         "the hand's horizontal distance from the pelvis is within "
         f"{rules['transfer.ARM_BACK_MARGIN']} m "
         "of its walking median.",
         f"- **Body frame**: origin pelvis, x forward along the pelvis velocity low-passed at "
         f"{rules['transfer.HEADING_CUTOFF_HZ']} Hz, y left, z up (heights 'above pelvis'; add "
-        "`pelvis_z_transfer` for height above the floor). Walking speed: pelvis velocity low-passed "
+        "`pelvis_z_transfer` for height above the floor). Walking speed: pelvis velocity "
+        "low-passed "
         f"at {rules['transfer.SPEED_CUTOFF_HZ']} Hz. Time to contact: object forward of the right "
         "shoulder / walking speed, treating the object as still.",
         "",
-        "No-transfer causes: " + "; ".join(f"`{k}`: {v}" for k, v in summary["failures"].items()) + ".",
+        "No-transfer causes: "
+        + "; ".join(f"`{k}`: {v}" for k, v in summary["failures"].items())
+        + ".",
         "",
         "## Detection counts",
         "",
@@ -186,7 +211,8 @@ def write_markdown(
         "",
         "## Grasp radius for a replayed recorded hand",
         "",
-        "Share of all recordings (no transfer = a miss) whose smoothed joint 15 comes within r of the "
+        "Share of all recordings (no transfer = a miss) whose smoothed joint 15 comes within r of "
+        "the "
         "object, and quantiles of that distance over recordings with a transfer. The recorded hand "
         "is offset from the OptiTrack object by the ZED-OptiTrack calibration and the tracker: "
         "it is never on the object.",
@@ -198,8 +224,10 @@ def write_markdown(
         "`smooth_track`: outlier pass (running median over "
         f"{2 * rules['filtering.HAMPEL_HALF_WINDOW'] + 1} "
         f"frames; a sample more than max({rules['filtering.HAMPEL_SIGMAS']} robust sigmas, "
-        f"{rules['filtering.HAMPEL_MIN_DEVIATION']} m) from it is replaced by it), then a zero-phase "
-        f"order-{rules['filtering.ORDER']} Butterworth low-pass at {rules['filtering.CUTOFF_HZ']} Hz "
+        f"{rules['filtering.HAMPEL_MIN_DEVIATION']} m) from it is replaced by it), then a "
+        "zero-phase "
+        f"order-{rules['filtering.ORDER']} Butterworth low-pass at {rules['filtering.CUTOFF_HZ']} "
+        "Hz "
         "(`sosfiltfilt`). Pelvis speed: frame-to-frame xy; hand step: joint 15, 3D, per frame.",
         "",
         *_noise(summary),

@@ -1,7 +1,8 @@
 """Per-recording quantities for the receiver calibration (issue 12, section 2), from the events of
 :mod:`handover_env.data.transfer`.
 
-:func:`analyse_recording` smooths one recording with :func:`~handover_env.data.filtering.smooth_track`,
+:func:`analyse_recording` smooths one recording with
+:func:`~handover_env.data.filtering.smooth_track`,
 detects transfer, reach onset, giver release and arm-back, and returns every quantity of
 :data:`MEASURES` (NaN where its events are missing). :func:`track_noise` measures the recorded
 tracks' speed spikes and jumps before and after the filter. Body-frame coordinates are (forward,
@@ -43,7 +44,8 @@ SLOWDOWN_WINDOW = (1.0, 0.5)
 GRASP_WINDOW = (0.2, 0.5)
 #: Window of the figures' aligned traces around the transfer, s (before, after).
 TRACE_WINDOW = (2.0, 1.5)
-#: Track noise: a pelvis faster than this (m/s) or a hand step longer than this (m/frame) is a spike.
+#: Track noise: a pelvis faster than this (m/s) or a hand step longer than this (m/frame) is a
+#: spike.
 PELVIS_SPIKE_SPEED = 2.0
 HAND_JUMP = 0.10
 
@@ -58,7 +60,9 @@ MEASURES: dict[str, tuple[str, str, str]] = {
     "release_fraction": ("timing", "giver release: time / recording length", ""),
     "after_release": ("timing", "recording left after the release", "s"),
     "nearest_after_transfer": (
-        "timing", "hand nearest the object (the old argmin 'transfer'), after the transfer", "s"
+        "timing",
+        "hand nearest the object (the old argmin 'transfer'), after the transfer",
+        "s",
     ),
     "pelvis_x_transfer": ("where", "pelvis x at transfer", "m"),
     "pelvis_y_transfer": ("where", "pelvis y at transfer", "m"),
@@ -88,23 +92,45 @@ MEASURES: dict[str, tuple[str, str, str]] = {
     "hand_up_onset": ("reach onset", "hand above pelvis", "m"),
     "object_shoulder_onset": ("reach onset", "object to right shoulder distance", "m"),
     "object_shoulder_fwd_onset": ("reach onset", "object forward of right shoulder", "m"),
-    "ttc_onset": ("reach onset", "time to contact (object forward of shoulder / walking speed)", "s"),
+    "ttc_onset": (
+        "reach onset",
+        "time to contact (object forward of shoulder / walking speed)",
+        "s",
+    ),
     "walking_speed_onset": ("reach onset", "walking speed", "m/s"),
     "hand_shoulder_transfer": ("reach extent", "hand-shoulder distance at transfer", "m"),
     "arm_length": ("reach extent", "arm length (12-13-14-15 bones)", "m"),
     "reach_fraction": ("reach extent", "hand-shoulder distance / arm length at transfer", ""),
-    "object_reach_fraction": ("reach extent", "object-shoulder distance / arm length at transfer", ""),
-    "prereach_speed": ("slow-down", "walking speed before the reach (median, start to onset)", "m/s"),
+    "object_reach_fraction": (
+        "reach extent",
+        "object-shoulder distance / arm length at transfer",
+        "",
+    ),
+    "prereach_speed": (
+        "slow-down",
+        "walking speed before the reach (median, start to onset)",
+        "m/s",
+    ),
     "min_rel_speed": ("slow-down", "min walking speed / pre-reach, transfer -1 s .. +0.5 s", ""),
     "mean_rel_speed": ("slow-down", "mean walking speed / pre-reach, same window", ""),
     "time_lost": ("slow-down", "time lost vs walking at the pre-reach speed, same window", "s"),
     "lateral_deviation": ("slow-down", "pelvis path bulge toward the object, same window", "m"),
-    "min_rel_speed_control": ("slow-down", "control: min speed / pre-reach, 1.5 s before onset", ""),
+    "min_rel_speed_control": (
+        "slow-down",
+        "control: min speed / pre-reach, 1.5 s before onset",
+        "",
+    ),
     "lateral_deviation_control": (
-        "slow-down", "control: bulge toward the object, 1.5 s before onset", "m"
+        "slow-down",
+        "control: bulge toward the object, 1.5 s before onset",
+        "m",
     ),
     "arm_extended": ("arm", "arm extended (onset to hand drawn back to the body)", "s"),
-    "arm_back_after_release": ("arm", "hand drawn back, time after the giver's release (- before)", "s"),
+    "arm_back_after_release": (
+        "arm",
+        "hand drawn back, time after the giver's release (- before)",
+        "s",
+    ),
     "d15_transfer": ("hand-object distance", "joint 15 to object at transfer", "m"),
     "dnear_transfer": ("hand-object distance", "nearest of 14-17 to object at transfer", "m"),
     "d15_min_hold": ("hand-object distance", "joint 15: min over transfer .. release", "m"),
@@ -113,15 +139,21 @@ MEASURES: dict[str, tuple[str, str, str]] = {
     "d15_transfer_raw": ("hand-object distance", "joint 15 at transfer, unsmoothed tracks", "m"),
     "d15_min_raw": ("hand-object distance", "joint 15: min over the recording, unsmoothed", "m"),
     "giver_along_hold": (
-        "giver and object", "giver pelvis moved along the walk, transfer .. release", "m"
+        "giver and object",
+        "giver pelvis moved along the walk, transfer .. release",
+        "m",
     ),
     "giver_pelvis_range": ("giver and object", "giver pelvis: max distance from its start", "m"),
     "object_moved_before": ("giver and object", "object moved from its start by the transfer", "m"),
     "object_toward_receiver": (
-        "giver and object", "... of which toward the receiver (against the walk)", "m"
+        "giver and object",
+        "... of which toward the receiver (against the walk)",
+        "m",
     ),
     "object_along_before": (
-        "giver and object", "object speed along the walk / walking, 0.5 s before transfer", ""
+        "giver and object",
+        "object speed along the walk / walking, 0.5 s before transfer",
+        "",
     ),
 }
 EVENTS = ("near", "transfer", "onset", "release", "arm_back", "nearest")
@@ -151,7 +183,9 @@ class RecordingAnalysis:
 
 def trace_lags(rate_hz: float = RATE_HZ) -> np.ndarray:
     """Frame offsets of the aligned traces, from -TRACE_WINDOW[0] to +TRACE_WINDOW[1]."""
-    return np.arange(-int(round(TRACE_WINDOW[0] * rate_hz)), int(round(TRACE_WINDOW[1] * rate_hz)) + 1)
+    return np.arange(
+        -int(round(TRACE_WINDOW[0] * rate_hz)), int(round(TRACE_WINDOW[1] * rate_hz)) + 1
+    )
 
 
 def _aligned(signal: np.ndarray, at: int, lags: np.ndarray) -> np.ndarray:
@@ -205,7 +239,8 @@ def analyse_recording(
         giver: (T, 34, 3) giver skeleton (``pose_giver``); without it there is no release and
             nothing that depends on it.
         rate_hz: frame rate.
-        smooth: apply :func:`smooth_track` to every track first (the detectors' thresholds assume it).
+        smooth: apply :func:`smooth_track` to every track first (the detectors' thresholds assume
+            it).
     """
     raw_r, raw_o, raw_g = check_recording(receiver, obj, giver, rate_hz)
     r = smooth_track(raw_r, rate_hz) if smooth else raw_r
@@ -231,17 +266,27 @@ def analyse_recording(
     shoulder = r[:, R_SHOULDER]
     lags = trace_lags(rate_hz)
     m.update(
-        transfer_time=k / rate_hz, transfer_fraction=k / (n - 1),
+        transfer_time=k / rate_hz,
+        transfer_fraction=k / (n - 1),
         nearest_after_transfer=(events["nearest"] - k) / rate_hz,
-        pelvis_x_transfer=pelvis[k, 0], pelvis_y_transfer=pelvis[k, 1], pelvis_z_transfer=pelvis[k, 2],
-        object_x_transfer=o[k, 0], object_y_transfer=o[k, 1], object_z_transfer=o[k, 2],
-        object_fwd_transfer=body_obj[k, 0], object_lat_transfer=body_obj[k, 1],
-        object_up_transfer=body_obj[k, 2], hand_fwd_transfer=body_hand[k, 0],
-        hand_lat_transfer=body_hand[k, 1], hand_up_transfer=body_hand[k, 2],
+        pelvis_x_transfer=pelvis[k, 0],
+        pelvis_y_transfer=pelvis[k, 1],
+        pelvis_z_transfer=pelvis[k, 2],
+        object_x_transfer=o[k, 0],
+        object_y_transfer=o[k, 1],
+        object_z_transfer=o[k, 2],
+        object_fwd_transfer=body_obj[k, 0],
+        object_lat_transfer=body_obj[k, 1],
+        object_up_transfer=body_obj[k, 2],
+        hand_fwd_transfer=body_hand[k, 0],
+        hand_lat_transfer=body_hand[k, 1],
+        hand_up_transfer=body_hand[k, 2],
         object_shoulder_transfer=np.linalg.norm(o[k] - shoulder[k]),
         walking_speed_transfer=walking.speed[k],
         hand_shoulder_transfer=np.linalg.norm(r[k, R_HAND] - shoulder[k]),
-        arm_length=arm_length(r), d15_transfer=d15[k], dnear_transfer=detection.distance[k],
+        arm_length=arm_length(r),
+        d15_transfer=d15[k],
+        dnear_transfer=detection.distance[k],
         d15_transfer_raw=np.linalg.norm(raw_r[k, R_HAND] - raw_o[k]),
     )
     before_k, after_k = (int(round(w * rate_hz)) for w in GRASP_WINDOW)
@@ -268,7 +313,9 @@ def analyse_recording(
     if g is not None:
         release, reason = detect_release(g, o, k, rate_hz)
         giver_d = nearest_distance(g[:, list(GIVER_HAND_JOINTS)], o)
-        out.traces["giver"] = _aligned(giver_d - np.median(giver_d[max(0, k - 15) : k + 1]), k, lags)
+        out.traces["giver"] = _aligned(
+            giver_d - np.median(giver_d[max(0, k - 15) : k + 1]), k, lags
+        )
         giver_moved = np.linalg.norm(g[:, PELVIS, :2] - g[0, PELVIS, :2], axis=1)
         m["giver_pelvis_range"] = float(giver_moved.max())
         if release is None:
@@ -309,15 +356,21 @@ def _onset_measures(
     out.events["onset"] = onset
     n = r.shape[0]
     fwd, speed = walking.forward, walking.speed
-    shoulder_obj = body_obj[onset] - to_body_frame(r[onset, R_SHOULDER], r[onset, PELVIS], fwd[onset])
+    shoulder_obj = body_obj[onset] - to_body_frame(
+        r[onset, R_SHOULDER], r[onset, PELVIS], fwd[onset]
+    )
     height = hand_height(r)
     walking_height = float(np.median(height[baseline_slice(k, rate_hz)]))
     m.update(
         reach_duration=(k - onset) / rate_hz,
-        object_fwd_onset=body_obj[onset, 0], object_lat_onset=body_obj[onset, 1],
-        object_up_onset=body_obj[onset, 2], hand_fwd_onset=body_hand[onset, 0],
-        hand_lat_onset=body_hand[onset, 1], hand_up_onset=body_hand[onset, 2],
-        object_shoulder_onset=np.linalg.norm(shoulder_obj), object_shoulder_fwd_onset=shoulder_obj[0],
+        object_fwd_onset=body_obj[onset, 0],
+        object_lat_onset=body_obj[onset, 1],
+        object_up_onset=body_obj[onset, 2],
+        hand_fwd_onset=body_hand[onset, 0],
+        hand_lat_onset=body_hand[onset, 1],
+        hand_up_onset=body_hand[onset, 2],
+        object_shoulder_onset=np.linalg.norm(shoulder_obj),
+        object_shoulder_fwd_onset=shoulder_obj[0],
         walking_speed_onset=speed[onset],
         hand_rise_transfer=height[k] - walking_height,
     )
@@ -331,7 +384,10 @@ def _onset_measures(
     out.traces["rise"] = _aligned(height - walking_height, k, trace_lags(rate_hz))
     side = float(np.sign(body_obj[k, 1])) or -1.0
     path = lowpass(r[:, PELVIS, :2], rate_hz, HEADING_CUTOFF_HZ)
-    a, b = k - int(round(SLOWDOWN_WINDOW[0] * rate_hz)), k + int(round(SLOWDOWN_WINDOW[1] * rate_hz))
+    a, b = (
+        k - int(round(SLOWDOWN_WINDOW[0] * rate_hz)),
+        k + int(round(SLOWDOWN_WINDOW[1] * rate_hz)),
+    )
     if a >= 0 and b < n:
         window = slice(a, b + 1)
         m["min_rel_speed"] = float(rel[window].min())
@@ -344,4 +400,11 @@ def _onset_measures(
         m["lateral_deviation_control"] = _bulge(path[c : onset + 1], side)
 
 
-__all__ = ["EVENTS", "MEASURES", "RecordingAnalysis", "analyse_recording", "track_noise", "trace_lags"]
+__all__ = [
+    "EVENTS",
+    "MEASURES",
+    "RecordingAnalysis",
+    "analyse_recording",
+    "track_noise",
+    "trace_lags",
+]

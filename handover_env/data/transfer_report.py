@@ -1,4 +1,5 @@
-"""The receiver calibration report: every recording analysed, split into halves, summarised as quantiles.
+"""The receiver calibration report: every recording analysed, split into halves, summarised as
+quantiles.
 
 ``python -m handover_env.data transfer-stats PATH/whole_motions --out docs/calibration`` runs
 :func:`run_transfer_stats`, which
@@ -31,7 +32,12 @@ from tqdm.auto import tqdm
 
 from handover_env.data import filtering, transfer
 from handover_env.data.dataset import DatasetError, stratified_fold_ids
-from handover_env.data.public import OOD_PREFIX, _validate_record, list_public_files, safe_load_pickle
+from handover_env.data.public import (
+    OOD_PREFIX,
+    _validate_record,
+    list_public_files,
+    safe_load_pickle,
+)
 from handover_env.data.transfer_measures import (
     HAND_JUMP,
     MEASURES,
@@ -232,7 +238,9 @@ def grasp_radius(group: list[RecordingResult]) -> dict[str, list[float]]:
     for name in ("d15_transfer", "d15_min_window"):
         v = np.array([r.analysis.measures[name] for r in group], dtype=np.float64)
         v = v[np.isfinite(v)]
-        out[name] = [round(float(np.percentile(v, q)), 4) if v.size else None for q in GRASP_QUANTILES]
+        out[name] = [
+            round(float(np.percentile(v, q)), 4) if v.size else None for q in GRASP_QUANTILES
+        ]
     return out
 
 

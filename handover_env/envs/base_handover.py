@@ -81,10 +81,24 @@ READY_YAW = -math.pi / 2
 HOME_Q = np.array([-2.3, -1.8, 2.1, -0.3, -3.9, 0.0])
 ACTION_LOW = np.array([-0.3, -1.1, 0.8, -math.pi], dtype=np.float32)
 ACTION_HIGH = np.array([0.9, 0.1, 1.6, math.pi], dtype=np.float32)
-OUTCOMES = ("running", "success", "premature_release", "dropped", "unsafe_force", "missed", "unstable")
+OUTCOMES = (
+    "running",
+    "success",
+    "premature_release",
+    "dropped",
+    "unsafe_force",
+    "missed",
+    "unstable",
+)
 #: MuJoCo's warnings for a diverging state (it then resets the simulation).
-_DIVERGED = tuple(int(w) for w in (mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
-                                   mujoco.mjtWarning.mjWARN_BADQACC))
+_DIVERGED = tuple(
+    int(w)
+    for w in (
+        mujoco.mjtWarning.mjWARN_BADQPOS,
+        mujoco.mjtWarning.mjWARN_BADQVEL,
+        mujoco.mjtWarning.mjWARN_BADQACC,
+    )
+)
 #: reset() options the envs understand; anything else is warned about by name.
 RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode", "walker")
 
@@ -123,24 +137,57 @@ class HandoverEnvBase(gym.Env, EzPickle):
         reward: HandoverReward | dict[str, float] | None = None,
     ) -> None:
         EzPickle.__init__(
-            self, render_mode, stiffness, damping, forecast_time, release_force, safety_force, history,
-            obs_noise, obs_latency, default_receiver, stabilisation_delay, object_mass, miss_distance,
-            force_filter_tau, width, height, camera, person, task, reward,
+            self,
+            render_mode,
+            stiffness,
+            damping,
+            forecast_time,
+            release_force,
+            safety_force,
+            history,
+            obs_noise,
+            obs_latency,
+            default_receiver,
+            stabilisation_delay,
+            object_mass,
+            miss_distance,
+            force_filter_tau,
+            width,
+            height,
+            camera,
+            person,
+            task,
+            reward,
         )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
-        if render_mode == "human" and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
-            raise RuntimeError("render_mode='human' needs a display (DISPLAY is not set); use "
-                               "render_mode='rgb_array' (with MUJOCO_GL=egl or osmesa) on a headless machine")
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']} or None, got "
+                f"{render_mode!r}"
+            )
+        if (
+            render_mode == "human"
+            and not os.environ.get("DISPLAY")
+            and not os.environ.get("WAYLAND_DISPLAY")
+        ):
+            raise RuntimeError(
+                "render_mode='human' needs a display (DISPLAY is not set); use "
+                "render_mode='rgb_array' (with MUJOCO_GL=egl or osmesa) on a headless machine"
+            )
         if default_receiver not in ("id", "ood"):
             raise ValueError(f"default_receiver must be 'id' or 'ood', got {default_receiver!r}")
-        for name, v in (("safety_force", safety_force), ("obs_noise", obs_noise),
-                        ("stabilisation_delay", stabilisation_delay), ("miss_distance", miss_distance),
-                        ("force_filter_tau", force_filter_tau)):
+        for name, v in (
+            ("safety_force", safety_force),
+            ("obs_noise", obs_noise),
+            ("stabilisation_delay", stabilisation_delay),
+            ("miss_distance", miss_distance),
+            ("force_filter_tau", force_filter_tau),
+        ):
             if not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
         if int(obs_latency) != obs_latency or obs_latency < 0:
-            raise ValueError(f"obs_latency must be a whole number of frames >= 0, got {obs_latency!r}")
+            raise ValueError(
+                f"obs_latency must be a whole number of frames >= 0, got {obs_latency!r}"
+            )
         if isinstance(history, bool) or int(history) != history:
             raise ValueError(f"history must be a whole number of frames, got {history!r}")
         for name, v in (("width", width), ("height", height)):
@@ -149,11 +196,16 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.params = HandoverParams(stiffness, damping, forecast_time, release_force)
         self.stabilisation_delay = float(stabilisation_delay)
         if task is not None and reward is not None:
-            raise ValueError("pass the reward weights to the task (task=...(reward=...)) or reward=, not both")
+            raise ValueError(
+                "pass the reward weights to the task (task=...(reward=...)) or reward=, not both"
+            )
         if isinstance(reward, dict):
             reward = HandoverReward(**reward)
         if reward is not None and not isinstance(reward, HandoverReward):
-            raise ValueError(f"reward must be a HandoverReward or a dict of its fields, got {type(reward).__name__}")
+            raise ValueError(
+                "reward must be a HandoverReward or a dict of its fields, got "
+                f"{type(reward).__name__}"
+            )
         if task is not None and not isinstance(task, HandoverTask):
             raise ValueError(f"task must be a HandoverTask, got {type(task).__name__}")
         self.task = task if task is not None else self.default_task(reward or HandoverReward())
@@ -174,7 +226,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
         overrides = dict(person or {})
         unknown = sorted(set(overrides) - set(ReceiverConfig.__dataclass_fields__))
         if unknown:
-            raise ValueError(f"unknown person setting(s) {unknown}; see handover_env.receiver.ReceiverConfig")
+            raise ValueError(
+                f"unknown person setting(s) {unknown}; see handover_env.receiver.ReceiverConfig"
+            )
         overrides.setdefault("give_up_behind", self.miss_distance)
         self.receiver = Receiver(self.model, self.ids, ReceiverConfig(**overrides))
         self.dt = self.model.opt.timestep * FRAME_SKIP
@@ -189,8 +243,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         for phase in range(self._ticks):
             starts = [k for k in range(FRAME_SKIP) if (phase + k) % self._ticks == 0]
             bounds = sorted(set([0, *starts, FRAME_SKIP]))
-            self._segments.append([(lo in starts, hi - lo) for lo, hi in zip(bounds[:-1], bounds[1:])])
-        self._filter_alpha = (self._ticks * self.model.opt.timestep) / (force_filter_tau + self._ticks * self.model.opt.timestep)
+            self._segments.append(
+                [(lo in starts, hi - lo) for lo, hi in zip(bounds[:-1], bounds[1:])]
+            )
+        self._filter_alpha = (self._ticks * self.model.opt.timestep) / (
+            force_filter_tau + self._ticks * self.model.opt.timestep
+        )
 
         low, high = self.layout.bounds()
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -199,13 +257,18 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._slices = {k: v[0] for k, v in self.layout.slices().items()}
         self._obs = np.zeros(self.layout.size, dtype=np.float64)
 
-        self.contacts = ContactMonitor(self.model, self.ids, tick=self.model.opt.timestep * ControllerConfig().ticks)
+        self.contacts = ContactMonitor(
+            self.model, self.ids, tick=self.model.opt.timestep * ControllerConfig().ticks
+        )
         self._gripper_qpos = self.ids.gripper_driver_qpos
         self._object_body = self.ids.object_body
         arm_act = np.asarray(self.ids.arm_act)
         contiguous = arm_act.size and np.all(np.diff(arm_act) == 1)
         self._arm_act = slice(int(arm_act[0]), int(arm_act[-1]) + 1) if contiguous else arm_act
-        self._act_low, self._act_high = ACTION_LOW.astype(np.float64).tolist(), ACTION_HIGH.astype(np.float64).tolist()
+        self._act_low, self._act_high = (
+            ACTION_LOW.astype(np.float64).tolist(),
+            ACTION_HIGH.astype(np.float64).tolist(),
+        )
         self._obs_low64, self._obs_high64 = low.astype(np.float64), high.astype(np.float64)
         self._obs_out = np.zeros(self.layout.size, dtype=np.float64)
         self._obs_views = {k: self._obs[v] for k, v in self._slices.items()}
@@ -304,7 +367,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
         options = dict(options or {})
         unknown = sorted(set(options) - set(RESET_OPTIONS))
         if unknown:
-            gym.logger.warn(f"reset() ignores unknown option(s) {unknown}; known: {list(RESET_OPTIONS)}")
+            gym.logger.warn(
+                f"reset() ignores unknown option(s) {unknown}; known: {list(RESET_OPTIONS)}"
+            )
         kind = options.get("receiver", self.default_receiver)
         m, d, ids = self.model, self.data, self.ids
         # The person is chosen (and every option validated) before any state changes.
@@ -325,7 +390,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._update_payload()
         # Camera noise is drawn once per frame from np_random (frames are made as the person
         # walks: a person who slows down is seen slowing down).
-        n_noise = int(self.spec.max_episode_steps if self.spec and self.spec.max_episode_steps else 900) + 2
+        n_noise = (
+            int(self.spec.max_episode_steps if self.spec and self.spec.max_episode_steps else 900)
+            + 2
+        )
         self._camera_noise = (self.np_random.normal(0.0, self.obs_noise, size=(n_noise, 2))
                               if self.obs_noise > 0 else None)
         self._hand_noise = (self.np_random.normal(0.0, self.obs_noise, size=(n_noise, 3))
@@ -349,12 +417,16 @@ class HandoverEnvBase(gym.Env, EzPickle):
 
     def step(self, action: np.ndarray):
         if not getattr(self, "_ready", False):
-            raise RuntimeError("step() called before reset() (a copied or unpickled env is a fresh, "
-                               "un-reset env); call reset() first")
+            raise RuntimeError(
+                "step() called before reset() (a copied or unpickled env is a fresh, "
+                "un-reset env); call reset() first"
+            )
         if self.outcome != "running":
             raise RuntimeError("step() called after the episode ended; call reset()")
         a = np.asarray(action)
-        if a.shape != (4,) or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        if a.shape != (4,) or not (
+            np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
+        ):
             raise ValueError(f"action must be 4 finite real numbers (x, y, z, yaw), got {action!r}")
         vals = a.astype(np.float64).tolist()
         if not all(math.isfinite(v) for v in vals):
@@ -386,7 +458,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 apply_tick(d)
                 tick()
                 if contacts.unsafe_segment >= 0:
-                    break  # the episode ends at the unsafe contact, not pressed on to the step's end
+                    # the episode ends at the unsafe contact, not pressed on to the step's end
+                    break
             mj_step(m, d, n)  # positional: pybind keyword parsing costs ~0.5 us a call
         self._global_step += FRAME_SKIP
         self.receiver.apply(d, 1.0)
@@ -497,14 +570,20 @@ class HandoverEnvBase(gym.Env, EzPickle):
         if holds and self._gripper_holds:
             pull = rec.grip.force
             p = math.sqrt(float(pull[0] * pull[0] + pull[1] * pull[1] + pull[2] * pull[2]))
-            self.pull_force = max(self.pull_force, p)  # what the person pulls with while both hold the object
+            self.pull_force = max(
+                self.pull_force, p
+            )  # what the person pulls with while both hold the object
         if not self.released and f_mag > self.params.release_force:
             self.released = True
             self.released_while_held = bool(holds)
             self.t_release = float(d.time)
             self.release_force = f_mag
             d.ctrl[self.ids.gripper_act] = GRIPPER_OPEN_CTRL
-        if self.released and self._gripper_holds and self._qpos_v[self._gripper_qpos] < GRIPPER_OPEN_ANGLE:
+        if (
+            self.released
+            and self._gripper_holds
+            and self._qpos_v[self._gripper_qpos] < GRIPPER_OPEN_ANGLE
+        ):
             d.eq_active[self.ids.eq_gripper] = 0
             self._gripper_holds = False
             self.controller.payload_mass = 0.0
@@ -600,7 +679,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         """Episode facts; values not yet defined (no release, no grasp) are ``None``.
 
         Besides the outcome and the paper's handover time: when and where the object changed
-        hands (``transfer_time``: the person's grasp; ``transfer_pelvis_xy``, ``transfer_object_pos``),
+        hands (``transfer_time``: the person's grasp; ``transfer_pelvis_xy``,
+        ``transfer_object_pos``),
         the person's effort (``reach_distance``, ``arm_extended_time``, ``time_lost``,
         ``min_speed_factor``, ``path_deviation``, ``pull_force``) and contact with the body
         (``contact_force_<segment>``, ``body_contact_force``, ``penetration``,
@@ -627,9 +707,14 @@ class HandoverEnvBase(gym.Env, EzPickle):
             "receiver_grasp_time": None if math.isnan(rec.t_grasp) else rec.t_grasp,
             "transfer_time": None if math.isnan(rec.t_grasp) else rec.t_grasp,
             "reach_onset_time": None if math.isnan(rec.t_reach) else rec.t_reach,
-            "transfer_pelvis_xy": None if rec.grasp_pelvis_xy is None else tuple(rec.grasp_pelvis_xy.tolist()),
-            "transfer_object_pos": (None if self.transfer_object_pos is None
-                                    else tuple(self.transfer_object_pos.tolist())),
+            "transfer_pelvis_xy": None
+            if rec.grasp_pelvis_xy is None
+            else tuple(rec.grasp_pelvis_xy.tolist()),
+            "transfer_object_pos": (
+                None
+                if self.transfer_object_pos is None
+                else tuple(self.transfer_object_pos.tolist())
+            ),
             "departure_time": rec.t_depart,
             "pull_force": self.pull_force,
             "robot_jerk_rms": math.sqrt(self._jerk_sq / self._jerk_n) if self._jerk_n else 0.0,
@@ -645,7 +730,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
     # ------------------------------------------------------------------ rendering
     def render(self):
         if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human'"
+            )
             return None
         if self.render_mode == "rgb_array":
             if self._renderer is None:

@@ -112,7 +112,9 @@ class ContactMonitor:
     def info(self) -> dict[str, float | bool]:
         """Flat info entries: ``contact_force_<segment>`` for every segment, the body's peak,
         penetration and the touched flags."""
-        out: dict[str, float | bool] = {f"contact_force_{s.name}": float(self.peak[i]) for i, s in enumerate(SEGMENTS)}
+        out: dict[str, float | bool] = {
+            f"contact_force_{s.name}": float(self.peak[i]) for i, s in enumerate(SEGMENTS)
+        }
         out["body_contact_force"] = float(self.peak.max())
         out["body_contact_force_raw"] = self.raw_peak
         out["penetration"] = self.penetration

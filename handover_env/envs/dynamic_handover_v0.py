@@ -6,7 +6,8 @@ from handover_env.envs.base_handover import HandoverEnvBase
 
 
 class DynamicHandoverEnv(HandoverEnvBase):
-    """A UR5e with a Robotiq 2F-85 hands a 0.4 kg bottle to a receiver walking past (Kim et al. 2025).
+    """A UR5e with a Robotiq 2F-85 hands a 0.4 kg bottle to a receiver walking past (Kim et al.
+    2025).
 
     The robot (MuJoCo Menagerie models) stands on a pedestal at (0, -0.2, 0.79) in the frame of the
     public Dynamic Handover Dataset, holding the bottle. A simulated person (an articulated,
@@ -33,7 +34,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
     (see :class:`handover_env.envs.observation.ObsLayout`):
 
     | Part | Size | Meaning |
-    |------|------|---------|
+    |---|---|---|
     | receiver_xy_history | 2 W | receiver pelvis xy seen by a 30 Hz camera, oldest first (noise, latency) |
     | receiver_frames_seen | 1 | frames seen so far |
     | ee_pos, ee_quat | 3 + 4 | gripper TCP pose |
@@ -76,7 +77,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
     only by the TimeLimit (450 steps, 15 s).
 
     | info key | Meaning |
-    |----------|---------|
+    |---|---|
     | is_success, outcome | True on success; "running", "success", "premature_release", "dropped", "unsafe_force", "missed" |
     | handover_time | s from when the receiver leaves the start point to the release (paper Sec. V-C) |
     | transfer_time, transfer_pelvis_xy, transfer_object_pos | the person's grasp: when, where they were, where the bottle was |
@@ -93,7 +94,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
 
     ## Arguments
     | Argument | Default | Meaning |
-    |----------|---------|---------|
+    |---|---|---|
     | stiffness, damping, forecast_time, release_force | 114.3, 17.1, 0.14, 7.1 | Θ (paper's Θ-hat) |
     | safety_force | 140.0 | N, ISO/TS 15066 quasi-static hand limit |
     | history | 30 | camera frames of receiver history |

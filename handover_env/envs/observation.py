@@ -3,25 +3,25 @@
 The env returns one float32 vector (SB3 works out of the box); :class:`ObsLayout` names its
 parts. Agents call ``layout.unflatten(obs)`` instead of hard-coding offsets.
 
-| key                    | shape   | unit / meaning                                                    |
-|------------------------|---------|-------------------------------------------------------------------|
-| receiver_xy_history    | (W, 2)  | m, camera track of the receiver base xy at 30 Hz, oldest first    |
-| receiver_frames_seen   | (1,)    | number of camera frames observed so far (history is valid from    |
-|                        |         | index W - min(W, n) on; earlier rows repeat the first frame)      |
-| ee_pos                 | (3,)    | m, gripper TCP position                                           |
-| ee_quat                | (4,)    | TCP orientation (w, x, y, z)                                      |
-| ee_linvel              | (3,)    | m/s                                                               |
-| ee_angvel              | (3,)    | rad/s                                                             |
-| object_pos             | (3,)    | m                                                                 |
-| object_held            | (1,)    | 1 while the gripper holds the object, else 0                      |
-| wrist_force            | (3,)    | N, external force at the wrist F/T sensor (gravity-compensated)   |
-| wrist_torque           | (3,)    | N*m, external torque at the wrist sensor                          |
-| gripper_open           | (1,)    | 1 once the gripper has released                                    |
-| time                   | (1,)    | s since reset                                                     |
-| receiver_hand_xyz      | (3,)    | m, camera estimate of the receiver's right hand (same latency and |
-|                        |         | noise as the base track)                                          |
-| robot_enabled          | (1,)    | 1 once the robot may move (static env: after the hand was         |
-|                        |         | detected and the stabilisation delay passed; dynamic env: always) |
+| key | shape | unit / meaning |
+|---|---|---|
+| receiver_xy_history | (W, 2) | m, camera track of the receiver base xy at 30 Hz, oldest first |
+| receiver_frames_seen | (1,) | number of camera frames observed so far (history is valid from |
+| | | index W - min(W, n) on; earlier rows repeat the first frame) |
+| ee_pos | (3,) | m, gripper TCP position |
+| ee_quat | (4,) | TCP orientation (w, x, y, z) |
+| ee_linvel | (3,) | m/s |
+| ee_angvel | (3,) | rad/s |
+| object_pos | (3,) | m |
+| object_held | (1,) | 1 while the gripper holds the object, else 0 |
+| wrist_force | (3,) | N, external force at the wrist F/T sensor (gravity-compensated) |
+| wrist_torque | (3,) | N*m, external torque at the wrist sensor |
+| gripper_open | (1,) | 1 once the gripper has released |
+| time | (1,) | s since reset |
+| receiver_hand_xyz | (3,) | m, camera estimate of the receiver's right hand (same latency and |
+| | | noise as the base track) |
+| robot_enabled | (1,) | 1 once the robot may move (static env: after the hand was |
+| | | detected and the stabilisation delay passed; dynamic env: always) |
 """
 
 from __future__ import annotations
@@ -90,9 +90,17 @@ class ObsLayout:
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Finite float32 (low, high) for the observation Box."""
-        high = np.concatenate([np.full(int(np.prod(s)), lim, dtype=np.float32) for _, s, lim in self.fields])
+        high = np.concatenate(
+            [np.full(int(np.prod(s)), lim, dtype=np.float32) for _, s, lim in self.fields]
+        )
         low = -high
-        for name in ("receiver_frames_seen", "object_held", "gripper_open", "time", "robot_enabled"):
+        for name in (
+            "receiver_frames_seen",
+            "object_held",
+            "gripper_open",
+            "time",
+            "robot_enabled",
+        ):
             low[self.slices()[name][0]] = 0.0
         return low, high
 
@@ -117,7 +125,8 @@ class ObsLayout:
         return np.clip(out, low, high)
 
     def receiver_track(self, obs: np.ndarray) -> np.ndarray:
-        """The valid part of the receiver history in ``obs``: (n, 2) with n = min(W, frames seen)."""
+        """The valid part of the receiver history in ``obs``: (n, 2) with n = min(W, frames
+        seen)."""
         parts = self.unflatten(obs)
         n = int(min(self.history, max(1, round(float(parts["receiver_frames_seen"][0])))))
         return parts["receiver_xy_history"][-n:]

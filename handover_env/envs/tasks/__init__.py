@@ -2,7 +2,8 @@
 
 A task owns what makes a variant: how the receiver is set up at ``reset``, when the robot may
 move, when an episode ends and with which outcome, and the reward (:class:`HandoverReward`,
-whose weights are constructor arguments). The env (:class:`handover_env.envs.base_handover.HandoverEnvBase`)
+whose weights are constructor arguments). The env
+(:class:`handover_env.envs.base_handover.HandoverEnvBase`)
 owns the physics, the controller, the wrist sensor, the release and the observation.
 
 A new variant is one file here: a :class:`HandoverTask` subclass. Use it with any handover env,

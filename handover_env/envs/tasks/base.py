@@ -29,7 +29,8 @@ class HandoverReward:
         force_threshold: multiple of f_r above which the wrist force is penalised.
         force_scale: N of excess force that cost as much as the time (per second).
         success: reward of a successful handover.
-        failure: penalty of any other end (premature release, dropped, unsafe force, missed, unstable).
+        failure: penalty of any other end (premature release, dropped, unsafe force, missed,
+            unstable).
     """
 
     time_cost: float = 1.0
@@ -41,13 +42,20 @@ class HandoverReward:
     def __post_init__(self) -> None:
         for name in ("time_cost", "force_threshold", "force_scale", "success", "failure"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not math.isfinite(value)
+            ):
                 raise ValueError(f"HandoverReward.{name} must be a finite number, got {value!r}")
         if self.force_scale <= 0:
             raise ValueError(f"HandoverReward.force_scale must be > 0, got {self.force_scale!r}")
 
-    def terms(self, dt: float, wrist_force: float, release_force: float, outcome: str) -> dict[str, float]:
-        """The terms of one step: ``{"time", "force", "outcome"}``; the reward is their sum in that order."""
+    def terms(
+        self, dt: float, wrist_force: float, release_force: float, outcome: str
+    ) -> dict[str, float]:
+        """The terms of one step: ``{"time", "force", "outcome"}``; the reward is their sum in that
+        order."""
         force = 0.0
         excess = wrist_force - self.force_threshold * release_force
         if excess > 0:
@@ -80,7 +88,10 @@ class HandoverTask:
         """Set up the receiver for a new episode (``reset``); ``options`` are reset()'s options."""
         walker = options.get("walker")
         if walker is not None and not isinstance(walker, dict):
-            raise ValueError(f"options['walker'] must be a dict of WalkerParams fields, got {type(walker).__name__}")
+            raise ValueError(
+                "options['walker'] must be a dict of WalkerParams fields, got "
+                f"{type(walker).__name__}"
+            )
         env.receiver.reset(
             env.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
             episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
@@ -88,7 +99,8 @@ class HandoverTask:
         )
 
     def enabled_time(self, env: HandoverEnvBase) -> float:
-        """When the robot may first follow the agent's action (s after reset); math.inf: not yet known."""
+        """When the robot may first follow the agent's action (s after reset); math.inf: not yet
+        known."""
         return 0.0
 
     def before_outcome(self, env: HandoverEnvBase) -> None:
@@ -113,7 +125,11 @@ class HandoverTask:
             return "premature_release"
         if env.released and holds and not env.gripper_holds and env.clear_of_gripper(ox, oy, oz):
             return "success"
-        if not env.gripper_holds and not holds and (oz < env.last_held_z - DROP_DISTANCE or oz < FLOOR_HEIGHT):
+        if (
+            not env.gripper_holds
+            and not holds
+            and (oz < env.last_held_z - DROP_DISTANCE or oz < FLOOR_HEIGHT)
+        ):
             return "dropped"
         if not holds and not env.released and self.walked_past(env, float(env.data.time)):
             return "missed"
@@ -121,4 +137,6 @@ class HandoverTask:
 
     def reward_terms(self, env: HandoverEnvBase) -> dict[str, float]:
         """This step's reward terms (see :class:`HandoverReward`)."""
-        return self.reward.terms(env.dt, env.wrist_force_magnitude(), env.params.release_force, env.outcome)
+        return self.reward.terms(
+            env.dt, env.wrist_force_magnitude(), env.params.release_force, env.outcome
+        )

@@ -19,7 +19,8 @@ class DynamicHandover(HandoverTask):
     """The receiver walks past (scripted or replayed); the robot may move from the start.
 
     The episode ends as ``missed`` when the person left the object behind (a modelled hand gives up
-    on an unheld object behind them) or their walk ended over :data:`WALK_END_GRACE` s ago without it.
+    on an unheld object behind them) or their walk ended over :data:`WALK_END_GRACE` s ago without
+    it.
 
     Args:
         reward: the reward's weights (:class:`~handover_env.envs.tasks.base.HandoverReward`).
@@ -27,4 +28,6 @@ class DynamicHandover(HandoverTask):
 
     def walked_past(self, env: HandoverEnvBase, t: float) -> bool:
         rec = env.receiver
-        return rec.state == "passed" or (rec.finished and t > rec.duration + rec.time_lost + WALK_END_GRACE)
+        return rec.state == "passed" or (
+            rec.finished and t > rec.duration + rec.time_lost + WALK_END_GRACE
+        )

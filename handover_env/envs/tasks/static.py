@@ -31,14 +31,20 @@ class StaticHandover(HandoverTask):
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.stabilisation_delay) or self.stabilisation_delay < 0:
-            raise ValueError(f"stabilisation_delay must be a finite number >= 0, got {self.stabilisation_delay!r}")
+            raise ValueError(
+                "stabilisation_delay must be a finite number >= 0, got "
+                f"{self.stabilisation_delay!r}"
+            )
         self.handover_delay = float(self.stabilisation_delay)
 
     def configure_receiver(self, env: HandoverEnvBase, kind: str, options: dict[str, Any]) -> None:
         # Scripted walkers walk to the stop area; recorded people follow their recording until
         # their pelvis reaches the stop line (x = STOP_XY[0]), where both stop and stand.
-        overrides = ({**dict(options.get("walker") or {}), "end_x": STOP_XY[0] - 0.3, "pass_y": STOP_XY[1]}
-                     if kind in ("id", "ood") else None)
+        overrides = (
+            {**dict(options.get("walker") or {}), "end_x": STOP_XY[0] - 0.3, "pass_y": STOP_XY[1]}
+            if kind in ("id", "ood")
+            else None
+        )
         env.receiver.reset(
             env.np_random, kind=kind, height=options.get("height"), speed=options.get("speed"),
             episode=options.get("episode"), hand_mode=options.get("hand_mode", "reach"),
