@@ -86,6 +86,7 @@ from baselines.checkpoint_io import (
     CheckpointError,
     config_from_dict,
     expected_of,
+    json_type_ok,
     load_tensors,
     staged_write,
     write_json,
@@ -160,24 +161,6 @@ def _settable_fields() -> dict[str, Any]:
     return {
         f.name: hints[f.name] for f in fields(ACTConfig) if f.init and f.name not in OWNED_FIELDS
     }
-
-
-def _json_value_ok(value: Any, hint: Any) -> bool:
-    """Is ``value`` (from JSON) of the scalar type ``hint`` (int, float, bool, str, or X | None)?"""
-    args = typing.get_args(hint)
-    if type(None) in args:
-        return value is None or any(_json_value_ok(value, a) for a in args if a is not type(None))
-    if hint is bool:
-        return isinstance(value, bool)
-    if hint is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    if hint is float:
-        return (
-            isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-        )
-    if hint is str:
-        return isinstance(value, str)
-    return False
 
 
 @contextlib.contextmanager
@@ -256,7 +239,7 @@ class ACTAgentConfig:
             if key not in settable:
                 why = "set by the agent" if key in OWNED_FIELDS else "not an ACTConfig field"
                 raise ValueError(f"policy[{key!r}]: {why}")
-            if not _json_value_ok(value, settable[key]):
+            if not json_type_ok(value, settable[key]):
                 raise ValueError(f"policy[{key!r}] = {value!r} is not a {settable[key]}")
         model = self.model()
         for name in (

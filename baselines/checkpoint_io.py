@@ -196,8 +196,13 @@ def expected_of(
     return {k: (tuple(v.shape), v.dtype) for k, v in state_dict.items()}
 
 
-def _type_ok(value: Any, hint: Any) -> bool:
+def json_type_ok(value: Any, hint: Any) -> bool:
+    """Is ``value`` (read from JSON) of the type ``hint``: bool, int, float (finite), str, a JSON
+    object (``dict``), ``tuple[X, ...]`` (a JSON list) or ``X | None``? A bool is not an int."""
     origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if type(None) in args:
+        return value is None or any(json_type_ok(value, a) for a in args if a is not type(None))
     if hint is bool:
         return isinstance(value, bool)
     if hint is int:
@@ -211,8 +216,7 @@ def _type_ok(value: Any, hint: Any) -> bool:
     if origin is dict or hint is dict:  # a JSON object; its contents are the config's to check
         return isinstance(value, dict) and all(isinstance(k, str) for k in value)
     if origin is tuple:  # tuple[int, ...] stored as a JSON list
-        args = typing.get_args(hint)
-        return isinstance(value, (list, tuple)) and all(_type_ok(v, args[0]) for v in value)
+        return isinstance(value, (list, tuple)) and all(json_type_ok(v, args[0]) for v in value)
     return False
 
 
@@ -236,7 +240,7 @@ def config_from_dict(cls: type, d: Any, source: str, ignore: frozenset[str] = fr
             f"{source}: config fields do not match (unknown {unknown}, missing {missing})"
         )
     for name in names:
-        if name in d and not _type_ok(d[name], hints[name]):
+        if name in d and not json_type_ok(d[name], hints[name]):
             raise CheckpointError(
                 f"{source}: config field {name} = {d[name]!r} is not a "
                 f"{getattr(hints[name], '__name__', hints[name])}"
@@ -278,7 +282,7 @@ def check_training_state(
                 and not math.isnan(value)
             )
         else:
-            ok = isinstance(value, kind) if kind in (list, dict) else _type_ok(value, kind)
+            ok = isinstance(value, kind) if kind in (list, dict) else json_type_ok(value, kind)
         if not ok:
             raise CheckpointError(f"{source}: {key} = {value!r} is not a {kind.__name__}")
     n, losses, train = state[counter], state["val_loss"], state["train_loss"]
@@ -287,7 +291,7 @@ def check_training_state(
         problems.append(f"{counter} {n} is negative")
     if len(train) != len(losses) or (len(losses) != n if counter == "epoch" else len(losses) > n):
         problems.append(f"{len(train)}/{len(losses)} loss values at {counter} {n}")
-    if not all(_type_ok(v, float) for v in train + losses):
+    if not all(json_type_ok(v, float) for v in train + losses):
         problems.append("a loss value is not a finite number")
     elif losses and state["best_val"] != min(losses):
         problems.append("best_val disagrees with val_loss")

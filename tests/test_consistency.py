@@ -84,4 +84,4 @@ def test_the_cli_entry_points_set_offline_mode():
 def test_a_bench_that_loads_a_dataset_says_which(bench):
     text = (ROOT / "bench" / bench).read_text(encoding="utf-8")
     if "load_any(" in text:
-        assert 'print(f"data: ' in text, f"bench/{bench} loads a dataset without saying which"
+        assert 'f"data: ' in text, f"bench/{bench} loads a dataset without saying which"
