@@ -41,6 +41,10 @@ Model sizes:
   ``n_heads=8``, ``dim_feedforward=3200``, 4 encoder layers, 1 decoder layer, VAE with 4 encoder
   layers and ``latent_dim=32``.
 
+Checkpoint format 2 keeps the model's fields as LeRobot's ``ACTConfig`` overrides (``policy``);
+format-1 checkpoints (flat fields) still load (:meth:`ACTAgentConfig.from_legacy`), and the
+evaluation caches key ACT checkpoints by that layout, so earlier ones are reused.
+
 Checkpoint folder: ``config.json`` + ``model.safetensors`` (``ACTPolicy.save_pretrained``),
 ``policy_preprocessor*.json/.safetensors`` and ``policy_postprocessor*`` (the normalisation
 statistics), ``handover_act.json`` (our config, features and training summary) and
@@ -145,6 +149,26 @@ OWNED_FIELDS = frozenset(
         "use_peft",
     }
 )
+#: Checkpoint format 1 (flat config fields) -> ``ACTConfig`` field of this format's ``policy``.
+LEGACY_MODEL_FIELDS = {
+    "dim_model": "dim_model", "n_heads": "n_heads", "dim_feedforward": "dim_feedforward",
+    "n_encoder_layers": "n_encoder_layers", "n_decoder_layers": "n_decoder_layers",
+    "use_vae": "use_vae", "latent_dim": "latent_dim",
+    "n_vae_encoder_layers": "n_vae_encoder_layers",
+    "kl_weight": "kl_weight", "dropout": "dropout", "lr": "optimizer_lr",
+    "weight_decay": "optimizer_weight_decay", "temporal_ensemble_coeff": "temporal_ensemble_coeff",
+}
+#: Every field of a format-1 config and its type.
+LEGACY_TYPES: dict[str, type] = {
+    "history": int, "horizon": int, "dim_model": int, "n_heads": int, "dim_feedforward": int,
+    "n_encoder_layers": int, "n_decoder_layers": int, "use_vae": bool, "latent_dim": int,
+    "n_vae_encoder_layers": int, "kl_weight": float, "dropout": float, "paper_scale": bool,
+    "lr": float, "weight_decay": float, "grad_clip_norm": float, "batch_size": int, "steps": int,
+    "eval_every": int, "val_fraction": float, "seed": int, "device": str,
+    "temporal_ensemble_coeff": float, "use_giver_state": bool, "fast_dropout": bool,
+}
+#: The gradient clip of format 1, fixed since (LeRobot's ACT optimiser preset).
+LEGACY_GRAD_CLIP = 10.0
 #: torch intra-op threads while ACT trains. Summation order, hence the last bits of every step,
 #: depends on the thread count; one thread makes a seed reproducible in any process (and is also
 #: the fast setting on the project's shared 2-core machine; parallelism comes from processes).
@@ -322,6 +346,47 @@ class ACTAgentConfig:
             push_to_hub=False,
             **{**ACT_DEFAULTS, **({} if self.paper_scale else CPU_SCALE), **self.policy},
         )
+
+    def legacy_dict(self) -> dict[str, Any] | None:
+        """This config in the flat layout of checkpoint format 1 (before it wrapped ``ACTConfig``),
+        or None if it sets an ``ACTConfig`` field that layout did not have.
+
+        Evaluation caches key their ACT checkpoints by this layout (``handover_eval.methods``), so
+        checkpoints trained before the change are found and reused.
+        """
+        if not set(self.policy) <= set(LEGACY_MODEL_FIELDS.values()):
+            return None
+        model = self.model()
+        d: dict[str, Any] = {"history": self.history, "horizon": self.horizon}
+        for old, new in LEGACY_MODEL_FIELDS.items():
+            value = model[new]
+            d[old] = float(value) if LEGACY_TYPES[old] is float else value
+        d["grad_clip_norm"] = LEGACY_GRAD_CLIP
+        for name in ("paper_scale", "batch_size", "steps", "eval_every", "val_fraction", "seed",
+                     "device", "use_giver_state", "fast_dropout"):
+            d[name] = getattr(self, name)
+        return d
+
+    @classmethod
+    def from_legacy(cls, d: Any, source: str = "config") -> dict[str, Any]:
+        """A checkpoint-format-1 config (flat fields) as this format's config dict."""
+        if not isinstance(d, dict) or set(d) != set(LEGACY_TYPES):
+            raise CheckpointError(f"{source}: not a format-1 ACT config")
+        for name, kind in LEGACY_TYPES.items():
+            if not json_type_ok(d[name], kind):
+                raise CheckpointError(
+                    f"{source}: config field {name} = {d[name]!r} is not a {kind.__name__}"
+                )
+        if d["grad_clip_norm"] != LEGACY_GRAD_CLIP:
+            raise CheckpointError(
+                f"{source}: grad_clip_norm {d['grad_clip_norm']} (LeRobot's preset is 10)"
+            )
+        base = cls(paper_scale=d["paper_scale"]).model()
+        policy = {new: d[old] for old, new in LEGACY_MODEL_FIELDS.items() if d[old] != base[new]}
+        own = {k: d[k] for k in ("history", "horizon", "paper_scale", "batch_size", "steps",
+                                 "eval_every", "val_fraction", "seed", "device", "use_giver_state",
+                                 "fast_dropout")}
+        return {**own, "policy": policy}
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "config") -> ACTAgentConfig:
@@ -1003,5 +1068,6 @@ def _check_state(state: object, source: Path) -> dict:
 def _read_handover_json(path: Path) -> dict:
     """``handover_act.json``, validated: type, format, a complete config and matching features."""
     return trainer.read_checkpoint_json(
-        path, HANDOVER_JSON, CHECKPOINT_TYPE, CHECKPOINT_FORMAT, ACTAgentConfig, "ACT"
+        path, HANDOVER_JSON, CHECKPOINT_TYPE, CHECKPOINT_FORMAT, ACTAgentConfig, "ACT",
+        upgrades={1: ACTAgentConfig.from_legacy},
     )

@@ -279,7 +279,13 @@ def checkpoint_json(kind: str, fmt: int, config: Any, state: dict | None) -> dic
 
 
 def read_checkpoint_json(
-    path: Path, file: str, kind: str, fmt: int, config_cls: type, label: str
+    path: Path,
+    file: str,
+    kind: str,
+    fmt: int,
+    config_cls: type,
+    label: str,
+    upgrades: dict[int, Callable[[Any, str], dict]] | None = None,
 ) -> dict:
     """``path/file`` as written by :func:`checkpoint_json`, validated; raises CheckpointError naming
     the file.
@@ -290,6 +296,8 @@ def read_checkpoint_json(
         kind, fmt: the checkpoint type and format this code reads.
         config_cls: the config dataclass (every field present and of its JSON type).
         label: the baseline's name, for messages.
+        upgrades: {older format: function(config, source) -> the config in this format}; the
+            function validates the old config and raises CheckpointError if it cannot.
     """
     if not path.is_dir():
         raise CheckpointError(f"no {label} checkpoint folder at {path}")
@@ -301,10 +309,11 @@ def read_checkpoint_json(
         raise CheckpointError(f"{f}: expected a JSON object")
     if saved.get("type") != kind:
         raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {kind!r}")
-    if saved.get("format") != fmt:
-        raise CheckpointError(
-            f"{path}: checkpoint format {saved.get('format')}, this code reads {fmt}"
-        )
+    old = saved.get("format")
+    if old != fmt and not (isinstance(old, int) and old in (upgrades or {})):
+        raise CheckpointError(f"{path}: checkpoint format {old}, this code reads {fmt}")
+    if old != fmt:
+        saved = {**saved, "format": fmt, "config": upgrades[old](saved.get("config"), str(f))}
     cfg = config_from_dict(config_cls, saved.get("config"), str(f))
     if saved.get("features") != cfg.spec.to_dict():
         raise CheckpointError(f"{f}: features {saved.get('features')!r} disagree with its config")

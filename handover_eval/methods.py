@@ -148,7 +148,12 @@ def dataset_fingerprint(dataset: HandoverDataset) -> str:
 
 
 def _config_dict(agent: Agent) -> dict:
+    """The agent's config as it keys its checkpoints (ACT: the format-1 layout where it can, so
+    checkpoints trained before ACT's config wrapped LeRobot's ``ACTConfig`` are reused)."""
     config = getattr(agent, "config", None)
+    legacy = getattr(config, "legacy_dict", None)
+    if callable(legacy) and legacy() is not None:
+        return legacy()
     return asdict(config) if is_dataclass(config) else {}
 
 

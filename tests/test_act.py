@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -300,3 +302,33 @@ def test_fast_dropout_swaps_only_while_training():
         assert len(swapped) == n_dropout > 0
         assert not any(type(m) is torch.nn.Dropout for m in agent.policy.modules())
     assert [type(m) for m in agent.policy.modules()] == before
+
+
+@pytest.mark.parametrize("config", [
+    ACTAgentConfig(),
+    ACTAgentConfig(paper_scale=True, steps=3000, eval_every=375),
+    ACTAgentConfig(policy={"dim_model": 64, "optimizer_lr": 3e-4, "use_vae": False}),
+])
+def test_format_1_layout_round_trips(config):
+    legacy = config.legacy_dict()
+    assert legacy["grad_clip_norm"] == 10.0 and "policy" not in legacy
+    assert ACTAgentConfig.from_legacy(legacy) == asdict(config)
+    assert ACTAgentConfig(policy={"pre_norm": True}).legacy_dict() is None  # not in format 1
+    with pytest.raises(CheckpointError, match="not a format-1"):
+        ACTAgentConfig.from_legacy({**legacy, "extra": 1})
+    with pytest.raises(CheckpointError, match="is not a"):
+        ACTAgentConfig.from_legacy({**legacy, "lr": "big"})
+
+
+def test_a_format_1_checkpoint_still_loads(trained, tmp_path, data):
+    agent, out = trained
+    folder = tmp_path / "old"
+    shutil.copytree(out, folder)
+    f = folder / "handover_act.json"
+    saved = json.loads(f.read_text())
+    f.write_text(json.dumps({**saved, "format": 1, "config": agent.config.legacy_dict()}))
+    old = ACTAgent.load(folder)
+    assert old.config == agent.config
+    ep = data[0]
+    np.testing.assert_array_equal(old.predict(ep.receiver_xy[:12], ep.giver_xyz[11]),
+                                  agent.predict(ep.receiver_xy[:12], ep.giver_xyz[11]))
