@@ -171,6 +171,10 @@ class EpisodeRunner:
             out.append(self.cache[key])
         return out
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled (to a sweep's workers) with its fitted planner and episode cache, not its env."""
+        return {**self.__dict__, "_env": None, "_env_key": None}
+
     def close(self) -> None:
         if self._env is not None:
             self._env.close()
