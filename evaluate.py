@@ -80,9 +80,10 @@ def build_parser() -> argparse.ArgumentParser:
                             "off by default, as in the paper, where every module sees the receiver base pose only")
         p.add_argument("--workers", type=int, default=None, metavar="N",
                        help="processes that train ACT's fold models, and then run the folds (table1) or "
-                            "the fold x ratio cells (sample-efficiency), in parallel, one torch thread each "
-                            "(default: one per core, at most 2; 1 runs everything in this process); the "
-                            "results do not depend on it. tradeoff always times on one core")
+                            "the fold x ratio cells (sample-efficiency) or the variant x fold fits (tradeoff), in "
+                            "parallel, one torch thread each (default: one per core, at most 2; 1 runs "
+                            "everything in this process; with --backend ray it sizes the local Ray instance); "
+                            "the results do not depend on it. tradeoff then times each variant on one core")
         p.add_argument("--no-reuse", action="store_true", help="retrain BC-MLP/ACT even if a matching checkpoint exists")
         p.add_argument("--quick", action="store_true",
                        help=f"small fast run for tests: {QUICK_EPISODES} episodes, 3 folds, query stride 3, "

@@ -152,10 +152,10 @@ def map_jobs(
 ) -> list[R]:
     """``[fn(shared, job) for job in jobs]`` on the active backend, in job order (module docstring).
 
-    Process backend: ``workers`` spawned processes (1 runs in this process, one torch thread);
-    a script calling this needs the ``if __name__ == "__main__":`` guard. Ray backend: one task
-    per job on the active Ray instance (``workers`` only sizes a local instance that this call
-    starts itself when no :func:`session` is open). The bar counts jobs, or ``weight(job)`` units;
+    Process backend (the default, outside any :func:`session`): ``workers`` spawned processes
+    (1 runs in this process, one torch thread); a script calling this needs the
+    ``if __name__ == "__main__":`` guard. Ray backend (inside a Ray :func:`session`): one task per
+    job, as many at a time as the instance has CPUs. The bar counts jobs, or ``weight(job)`` units;
     ``on_result(job, result)`` is called in this process as each job finishes.
 
     Raises:
@@ -176,13 +176,8 @@ def map_jobs(
             on_result(jobs[i], result)
 
     try:
-        sess = active()
-        if sess.backend.kind == "ray":
-            if _ACTIVE:
-                _ray_map(fn, shared, jobs, done, failed)
-            else:
-                with session(sess.backend, workers, log=None):
-                    _ray_map(fn, shared, jobs, done, failed)
+        if active().backend.kind == "ray":
+            _ray_map(fn, shared, jobs, done, failed)
         elif min(workers, len(jobs)) <= 1:
             _serial_map(fn, shared, jobs, done, failed)
         else:
