@@ -95,6 +95,7 @@ def active() -> Session:
 
 def import_ray() -> Any:
     """``ray``, or a one-line error naming the ``[cluster]`` extra."""
+    os.environ.setdefault("RAY_DEDUP_LOGS", "0")  # read when ray is first imported: every worker's lines
     try:
         import ray
     except ImportError as exc:
@@ -115,7 +116,6 @@ def session(backend: Backend, workers: int = 1, log: Callable[[str], None] | Non
     if backend.kind == "ray":
         ray = import_ray()
         if not ray.is_initialized():
-            os.environ.setdefault("RAY_DEDUP_LOGS", "0")
             t0 = time.perf_counter()
             kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": True,
                                       "runtime_env": {"env_vars": dict(WORKER_ENV)}}
