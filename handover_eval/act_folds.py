@@ -11,8 +11,9 @@ episodes/s, ~3.5 min a fold) and then train on one core while the second core id
    ``ACTAgent.fit_lerobot(export, episodes=...)`` splits train/validation and computes the
    normalisation statistics from those episodes only, and trains exactly the model that exporting
    just those episodes would give (``tests/test_act_folds.py``).
-3. :func:`pretrain_act` trains the missing fold models in ``workers`` spawned processes with one
-   torch thread each and writes them to the same checkpoint folders, with the same completion
+3. :func:`pretrain_act` trains the missing fold models in ``workers`` spawned processes, or as
+   Ray tasks (:mod:`.backend`), with one torch thread each and writes them to the same checkpoint
+   folders, with the same completion
    marker, that :func:`handover_eval.methods.fit_agent` looks up, so the fold loop of
    the experiments only loads them.
 """
@@ -21,12 +22,10 @@ from __future__ import annotations
 
 import hashlib
 import json
-import multiprocessing
 import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -34,6 +33,7 @@ import numpy as np
 from tqdm import tqdm
 
 from handover_env.data.dataset import HandoverDataset
+from handover_eval.backend import active, map_jobs
 from handover_eval.methods import (
     MethodOptions,
     build_agent,
@@ -58,8 +58,8 @@ class ACTJob:
         folder: the checkpoint folder ``fit_agent`` reuses.
         key_src: the checkpoint key source written to the completion marker.
         export_root: the LeRobot export of the whole dataset.
-        progress: show the per-step tqdm bar of the training (the in-process path; workers
-            write their validation passes to the checkpoint's ``train_log.jsonl`` only).
+        progress: show the per-step tqdm bar of the training (the in-process path; other
+            workers write their validation passes to the checkpoint's ``train_log.jsonl`` only).
     """
 
     label: str
@@ -168,13 +168,6 @@ def ensure_export(
     return root, False
 
 
-def _init_worker() -> None:
-    """Worker start-up: one torch thread (the 2 cores are shared by 2 workers)."""
-    import torch
-
-    torch.set_num_threads(1)
-
-
 def train_job(job: ACTJob) -> dict:
     """Train one ACT model on its export episodes into its checkpoint folder (runs in a worker).
 
@@ -269,59 +262,36 @@ def pretrain_act(
     ]
 
 
+def _train(_: None, job: ACTJob) -> dict:
+    """:func:`train_job` in the ``fn(shared, job)`` form of :func:`.backend.map_jobs`."""
+    return train_job(job)
+
+
 def _run_jobs(
     jobs: list[ACTJob], workers: int, progress: bool, log: Callable[[str], None] | None
 ) -> dict[Path, dict]:
-    """Run ``jobs`` (in this process for one worker, else in a spawn pool); results by folder."""
+    """Run ``jobs`` on the active backend (:func:`.backend.map_jobs`: in this process for one
+    process worker, else a spawn pool or Ray tasks); results by folder."""
+    kind = active().backend.kind
     n_proc = 1 if workers == 1 or len(jobs) == 1 else min(workers, len(jobs))
-    bar = tqdm(total=len(jobs), desc=f"act x{n_proc}", unit="model", disable=not progress)
-    start = f"  act: training {len(jobs)} model(s) in {n_proc} process(es), one torch thread each"
+    where = f"{n_proc} process(es)" if kind == "process" else "Ray tasks of one CPU"
+    start = f"  act: training {len(jobs)} model(s) in {where}, one torch thread each"
     if log is not None:
         log(start)
     elif progress:
-        bar.write(start)
+        tqdm.write(start)
 
-    def report(res: dict) -> None:
-        bar.update()
+    def report(job: ACTJob, res: dict) -> None:
         line = (f"  act {res['label']}: {res['seconds']:.0f} s, best val L1 {res['best_val']:.4f} "
                 f"@ step {res['best_step']}")
         if log is not None:
             log(line)
         elif progress:
-            bar.write(line)
+            tqdm.write(line)
 
-    results: dict[Path, dict] = {}
-    try:
-        if n_proc == 1:
-            import torch
-
-            threads = torch.get_num_threads()
-            torch.set_num_threads(1)  # as in a worker; restored afterwards
-            try:
-                for job in jobs:
-                    res = train_job(replace(job, progress=progress))
-                    results[Path(res["folder"])] = res
-                    report(res)
-            finally:
-                torch.set_num_threads(threads)
-            return results
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=n_proc, mp_context=ctx,
-                                 initializer=_init_worker) as pool:
-            pending = {pool.submit(train_job, job) for job in jobs}
-            while pending:
-                # FIRST_COMPLETED, not FIRST_EXCEPTION: the latter only returns once *all* jobs are
-                # done (or one failed), so nothing would be reported while the folds train
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in finished:
-                    if (
-                        fut.exception() is not None
-                    ):  # stop: queued jobs are dropped, running ones finish
-                        pool.shutdown(wait=True, cancel_futures=True)
-                        raise fut.exception()
-                    res = fut.result()
-                    results[Path(res["folder"])] = res
-                    report(res)
-        return results
-    finally:
-        bar.close()
+    if kind == "process" and n_proc == 1:  # in this process: the training's own step bar too
+        jobs = [replace(job, progress=progress) for job in jobs]
+    done = map_jobs(_train, None, jobs, workers=n_proc, progress=progress,
+                    desc=f"act x{n_proc}" if kind == "process" else "act (ray)", unit="model",
+                    label=lambda job: job.label, on_result=report)
+    return {Path(res["folder"]): res for res in done}

@@ -13,6 +13,12 @@ from collections.abc import Callable
 from pathlib import Path
 
 from handover_env.config import THETA_RANGES, HandoverParams
+from handover_eval.backend import (
+    JobError,
+    add_backend_arguments,
+    backend_from_args,
+    session,
+)
 from handover_eval.closedloop import ClosedLoopConfig, run_closed_loop
 from handover_eval.closedloop_agents import AGENTS
 from handover_eval.closedloop_output import run_and_write_sweep, write_closed_loop
@@ -205,6 +211,7 @@ def _common(p: argparse.ArgumentParser) -> None:
         "never for reported numbers",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    add_backend_arguments(p)
 
 
 def _params(theta: list[float] | None) -> HandoverParams:
@@ -279,9 +286,10 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             if args.checkpoints
             else Path("results") / ("table1-quick" if quick else "table1") / "checkpoints"
         )
+        backend = backend_from_args(args)
         dataset = load_dataset(args.data, quick, args.seed)
         out.mkdir(parents=True, exist_ok=True)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
     progress = not args.no_progress
@@ -292,13 +300,18 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
         flush=True,
     )
     try:
-        if sweep is None:
-            run = run_closed_loop(receivers, dataset, args.data, options, cache, progress)
-            write_closed_loop(run, receivers, dataset, args, out)
-        else:
-            run_and_write_sweep(sweep, dataset, args, options, cache, out, progress)
+        with session(backend, workers) as sess:
+            if sweep is None:
+                run = run_closed_loop(receivers, dataset, args.data, options, cache, progress)
+                write_closed_loop(run, receivers, dataset, args, out)
+            else:
+                run_and_write_sweep(sweep, dataset, args, options, cache, out, progress)
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s")
+    except (JobError, ConnectionError) as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 1
+    startup = f" (Ray start-up {sess.startup_s:.1f} s)" if sess.started_here else ""
+    print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s{startup}")
     return 0

@@ -29,6 +29,12 @@ from pathlib import Path
 
 from handover_env.offline import hub_offline
 from handover_eval import closedloop_cli, user_study_cli
+from handover_eval.backend import (
+    JobError,
+    add_backend_arguments,
+    backend_from_args,
+    session,
+)
 from handover_eval.methods import (
     ACT_EVAL_STEPS,
     METHODS,
@@ -124,9 +130,10 @@ def build_parser() -> argparse.ArgumentParser:
             default=None,
             metavar="N",
             help="processes that train ACT's fold models, and then run the folds (table1) or "
-            "the fold x ratio cells (sample-efficiency), in parallel, one torch thread each "
-            "(default: one per core, at most 2; 1 runs everything in this process); the "
-            "results do not depend on it. tradeoff always times on one core",
+            "the fold x ratio cells (sample-efficiency) or the variant x fold fits (tradeoff), "
+            "in parallel, one torch thread each (default: one per core, at most 2; 1 runs "
+            "everything in this process; with --backend ray it sizes the local Ray instance); "
+            "the results do not depend on it. tradeoff then times each variant on one core",
         )
         p.add_argument(
             "--no-reuse",
@@ -140,6 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
             "tiny training budgets; never for reported numbers",
         )
         p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+        add_backend_arguments(p)
 
     p = sub.add_parser(
         "table1",
@@ -240,9 +248,10 @@ def main(argv: list[str] | None = None) -> int:
         )
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out}: exists and is not a folder")
+        backend = backend_from_args(args)
         dataset = load_dataset(args.data, args.quick, args.seed)
         out.mkdir(parents=True, exist_ok=True)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
     progress = not args.no_progress
@@ -255,139 +264,148 @@ def main(argv: list[str] | None = None) -> int:
     )
     start = time.perf_counter()
     try:
-        if args.command == "table1":
-            rows = experiments.run_table1(
-                dataset,
-                methods,
-                folds,
-                args.seed,
-                options,
-                protocol,
-                out,
-                reuse=not args.no_reuse,
-                progress=progress,
-            )
-            print(
-                "\n"
-                + markdown_table(
-                    [
-                        "method",
-                        "ID 3D (mm)",
-                        "OOD 3D (mm)",
-                        "ID current frame",
-                        "OOD current frame",
-                        "ID paper",
-                        "OOD paper",
-                    ],
-                    [
-                        [
-                            METHOD_LABELS[r["method"]],
-                            mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
-                            mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
-                            mean_std(r["id_now_axis_mm"], r["id_now_axis_std_mm"]),
-                            mean_std(r["ood_now_axis_mm"], r["ood_now_axis_std_mm"]),
-                            mean_std(r["paper_id_mm"], r["paper_id_std_mm"]),
-                            mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"]),
-                        ]
-                        for r in rows
-                    ],
+        with session(backend, options.workers) as sess:
+            if args.command == "table1":
+                rows = experiments.run_table1(
+                    dataset,
+                    methods,
+                    folds,
+                    args.seed,
+                    options,
+                    protocol,
+                    out,
+                    reuse=not args.no_reuse,
+                    progress=progress,
                 )
-            )
-        elif args.command == "sample-efficiency":
-            rows = experiments.run_sample_efficiency(
-                dataset,
-                methods,
-                args.ratios,
-                folds,
-                args.seed,
-                options,
-                protocol,
-                out,
-                reuse=not args.no_reuse,
-                progress=progress,
-            )
-            print(
-                "\n"
-                + markdown_table(
-                    [
-                        "method",
-                        "ratio",
-                        "all 3D (mm)",
-                        "ID 3D (mm)",
-                        "OOD 3D (mm)",
-                        "all current frame (mm)",
-                    ],
-                    [
-                        [
-                            METHOD_LABELS[r["method"]],
-                            f"{r['ratio']:g}",
-                            mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
-                            mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
-                            mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
-                            mean_std(r["all_now_axis_mm"], r["all_now_axis_std_mm"]),
-                        ]
-                        for r in rows
-                    ],
-                )
-            )
-            horizon, now = (
-                experiments.degradation_pct(rows),
-                experiments.degradation_pct(rows, "all_now_axis_mm"),
-            )
-            if horizon:
-                lo, hi = min(args.ratios), max(args.ratios)
                 print(
-                    f"RMS at ratio {lo:g} vs {hi:g} (all episodes, 1 s horizon 3D / current "
-                    "frame): "
-                    + ", ".join(
-                        f"{METHOD_LABELS[m]} {horizon[m]:+.1f}% / {now[m]:+.1f}%" for m in horizon
+                    "\n"
+                    + markdown_table(
+                        [
+                            "method",
+                            "ID 3D (mm)",
+                            "OOD 3D (mm)",
+                            "ID current frame",
+                            "OOD current frame",
+                            "ID paper",
+                            "OOD paper",
+                        ],
+                        [
+                            [
+                                METHOD_LABELS[r["method"]],
+                                mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
+                                mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+                                mean_std(r["id_now_axis_mm"], r["id_now_axis_std_mm"]),
+                                mean_std(r["ood_now_axis_mm"], r["ood_now_axis_std_mm"]),
+                                mean_std(r["paper_id_mm"], r["paper_id_std_mm"]),
+                                mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"]),
+                            ]
+                            for r in rows
+                        ],
                     )
                 )
-        else:
-            rates = args.rates if "ours" in methods else []
-            rows = experiments.run_tradeoff(
-                dataset,
-                rates,
-                folds,
-                args.seed,
-                options,
-                protocol,
-                out,
-                timing_episodes=args.timing_episodes,
-                include_iaal="iaal" in methods,
-                progress=progress,
-            )
-            print(
-                "\n"
-                + markdown_table(
-                    [
-                        "method",
-                        "rate",
-                        "median ms/frame",
-                        "p99 ms/frame",
-                        "all 3D (mm)",
-                        "x faster than IAAL",
-                        "RMS vs IAAL",
-                    ],
-                    [
-                        [
-                            METHOD_LABELS[r["method"]],
-                            "" if r["inducing_rate"] is None else f"{r['inducing_rate']:g}",
-                            f"{r['frame_ms_median']:.3f}",
-                            f"{r['frame_ms_p99']:.3f}",
-                            mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
-                            f"{r.get('speedup_vs_iaal', float('nan')):.2f}",
-                            f"{r.get('rms_cost_vs_iaal_pct', float('nan')):+.2f}%",
-                        ]
-                        for r in rows
-                    ],
+            elif args.command == "sample-efficiency":
+                rows = experiments.run_sample_efficiency(
+                    dataset,
+                    methods,
+                    args.ratios,
+                    folds,
+                    args.seed,
+                    options,
+                    protocol,
+                    out,
+                    reuse=not args.no_reuse,
+                    progress=progress,
                 )
-            )
-            print(f"timed on 1 core of {os.cpu_count()}")
+                print(
+                    "\n"
+                    + markdown_table(
+                        [
+                            "method",
+                            "ratio",
+                            "all 3D (mm)",
+                            "ID 3D (mm)",
+                            "OOD 3D (mm)",
+                            "all current frame (mm)",
+                        ],
+                        [
+                            [
+                                METHOD_LABELS[r["method"]],
+                                f"{r['ratio']:g}",
+                                mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
+                                mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
+                                mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+                                mean_std(r["all_now_axis_mm"], r["all_now_axis_std_mm"]),
+                            ]
+                            for r in rows
+                        ],
+                    )
+                )
+                horizon, now = (
+                    experiments.degradation_pct(rows),
+                    experiments.degradation_pct(rows, "all_now_axis_mm"),
+                )
+                if horizon:
+                    lo, hi = min(args.ratios), max(args.ratios)
+                    print(
+                        f"RMS at ratio {lo:g} vs {hi:g} (all episodes, 1 s horizon 3D / current "
+                        "frame): "
+                        + ", ".join(
+                            f"{METHOD_LABELS[m]} {horizon[m]:+.1f}% / {now[m]:+.1f}%"
+                            for m in horizon
+                        )
+                    )
+            else:
+                rates = args.rates if "ours" in methods else []
+                rows = experiments.run_tradeoff(
+                    dataset,
+                    rates,
+                    folds,
+                    args.seed,
+                    options,
+                    protocol,
+                    out,
+                    timing_episodes=args.timing_episodes,
+                    include_iaal="iaal" in methods,
+                    progress=progress,
+                )
+                print(
+                    "\n"
+                    + markdown_table(
+                        [
+                            "method",
+                            "rate",
+                            "median ms/frame",
+                            "p99 ms/frame",
+                            "all 3D (mm)",
+                            "x faster than IAAL",
+                            "RMS vs IAAL",
+                        ],
+                        [
+                            [
+                                METHOD_LABELS[r["method"]],
+                                "" if r["inducing_rate"] is None else f"{r['inducing_rate']:g}",
+                                f"{r['frame_ms_median']:.3f}",
+                                f"{r['frame_ms_p99']:.3f}",
+                                mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
+                                f"{r.get('speedup_vs_iaal', float('nan')):.2f}",
+                                f"{r.get('rms_cost_vs_iaal_pct', float('nan')):+.2f}%",
+                            ]
+                            for r in rows
+                        ],
+                    )
+                )
+                print(f"timed on 1 core of {os.cpu_count()}")
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s")
+    except (
+        JobError,
+        ConnectionError,
+    ) as exc:  # failed jobs named; or no Ray cluster at the address
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 1
+    startup = f" (Ray start-up {sess.startup_s:.1f} s)" if sess.started_here else ""
+    print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s{startup}")
     return 0
 
 

@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from tqdm import tqdm
 
 from handover_env.data.dataset import HandoverDataset
 from handover_eval.fold_pool import map_folds
@@ -499,6 +498,33 @@ def time_streaming_frames(agent, episodes: Sequence, warmup: int = 3) -> np.ndar
     return np.asarray(times)
 
 
+@dataclass(frozen=True)
+class _TradeoffJob:
+    """One (variant, fold) fit of the trade-off sweep."""
+
+    method: str
+    rate: float
+    fold: int
+    train_idx: np.ndarray
+    test_idx: np.ndarray
+    options: MethodOptions
+    protocol: OpenLoopProtocol
+
+
+def _tradeoff_fit(
+    dataset: HandoverDataset, job: _TradeoffJob
+) -> tuple[dict[str, float], object | None]:
+    """Fit one variant on one fold and score it: (RMS by subset, the fitted agent for fold 0 only,
+    which is timed afterwards in the main process)."""
+    agent = build_agent(job.method, job.options, inducing_ratio=job.rate).fit(
+        dataset.subset(job.train_idx)
+    )
+    s = summarise(
+        evaluate_openloop(agent, dataset.subset(job.test_idx), job.protocol, progress=False)
+    )
+    return {k: s[k]["rms_3d_mm"] for k in ("all", "id", "ood")}, agent if job.fold == 0 else None
+
+
 def run_tradeoff(
     dataset: HandoverDataset,
     rates: Sequence[float],
@@ -511,35 +537,49 @@ def run_tradeoff(
     include_iaal: bool = True,
     progress: bool = True,
 ) -> list[dict]:
-    """RMS vs per-frame inference time for ours at several inducing rates and IAAL; CSV + PNG."""
+    """RMS vs per-frame inference time for ours at several inducing rates and IAAL; CSV + PNG.
+
+    The (variant, fold) fits run as backend jobs (:func:`map_folds`); each variant's fold-0 model
+    is then timed here, one variant after another, pinned to one core, with no job running.
+    """
     rates = [float(r) for r in rates]
     if not rates or any(not 0.0 < r <= 1.0 for r in rates):
         raise ValueError(f"inducing rates must lie in (0, 1], got {rates}")
     splits = _splits(dataset, folds, seed)
     variants = [("ours", r) for r in rates] + ([("iaal", 1.0)] if include_iaal else [])
+    jobs = [_TradeoffJob(name, rate, f, train_idx, test_idx, options, protocol)
+            for name, rate in variants for f, (train_idx, test_idx) in enumerate(splits)]
+    fits = map_folds(
+        _tradeoff_fit,
+        dataset,
+        jobs,
+        workers=options.workers,
+        progress=progress,
+        desc="tradeoff",
+        label=lambda job: f"{job.method} {job.rate:g} fold {job.fold}",
+        unit="fit",
+    )
     rows = []
-    bar = tqdm(total=len(variants) * folds, desc="tradeoff", unit="fit", disable=not progress)
-    for name, rate in variants:
-        fold_rms, frame_times = {"all": [], "id": [], "ood": []}, []
-        for f, (train_idx, test_idx) in enumerate(splits):
-            bar.set_postfix_str(f"{name} {rate} fold {f}")
-            agent = build_agent(name, options, inducing_ratio=rate).fit(dataset.subset(train_idx))
-            test = dataset.subset(test_idx)
-            s = summarise(evaluate_openloop(agent, test, protocol, progress=False))
-            for k in fold_rms:
-                fold_rms[k].append(s[k]["rms_3d_mm"])
-            if f == 0:  # time on the first fold's fitted model, pinned to one core
-                with _one_core():
-                    frame_times = time_streaming_frames(agent, list(test)[:timing_episodes])
-            bar.update()
+    for name, rate in variants:  # timed here, one variant after another, on one pinned core
+        mine = [
+            (job, fit)
+            for job, fit in zip(jobs, fits, strict=True)
+            if (job.method, job.rate) == (name, rate)
+        ]
+        fold0_job, (_, agent) = mine[0]
+        with _one_core():
+            frame_times = time_streaming_frames(
+                agent, list(dataset.subset(fold0_job.test_idx))[:timing_episodes]
+            )
         row = {"method": name, "inducing_rate": rate if name == "ours" else None,
                "frame_ms_median": float(np.median(frame_times) * 1e3),
                "frame_ms_p99": float(np.percentile(frame_times, 99) * 1e3),
                "n_timed_frames": int(frame_times.size), "cores": os.cpu_count()}
-        for k, vals in fold_rms.items():
-            row[f"{k}_rms_3d_mm"], row[f"{k}_std_3d_mm"] = _fold_stats(vals)
+        for k in ("all", "id", "ood"):
+            row[f"{k}_rms_3d_mm"], row[f"{k}_std_3d_mm"] = _fold_stats(
+                [rms[k] for _, (rms, _) in mine]
+            )
         rows.append(row)
-    bar.close()
     iaal = next((r for r in rows if r["method"] == "iaal"), None)
     for r in rows:
         if iaal is not None:

@@ -165,6 +165,20 @@ class EpisodeRunner:
         return {"receiver": "replay", "episode": episode, "height": participant.body.height}
 
     # ------------------------------------------------------------------ running
+    def cache_key(
+        self, participant: Participant, theta: HandoverParams, seed: int, static: bool = False
+    ) -> tuple:
+        """The episode cache's key of one walk of ``participant`` with ``theta``."""
+        return (
+            participant.pid,
+            participant.seed,
+            self.receiver,
+            self.agent_name,
+            static,
+            int(seed),
+            tuple(round(v, 9) for v in theta.as_array()),
+        )
+
     def run(self, participant: Participant, theta: HandoverParams, seeds: Sequence[int],
             static: bool = False) -> list[dict[str, Any]]:
         """One episode per walk seed (cached); the static env uses the static agent."""
@@ -174,15 +188,7 @@ class EpisodeRunner:
 
         out = []
         for seed in seeds:
-            key = (
-                participant.pid,
-                participant.seed,
-                self.receiver,
-                self.agent_name,
-                static,
-                int(seed),
-                tuple(round(v, 9) for v in theta.as_array()),
-            )
+            key = self.cache_key(participant, theta, seed, static)
             if key not in self.cache:
                 t0 = time.perf_counter()
                 env = self._make_env(theta, static)
@@ -202,6 +208,10 @@ class EpisodeRunner:
                 self.seconds += time.perf_counter() - t0
             out.append(self.cache[key])
         return out
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled (to a sweep's workers) with its fitted planner and episode cache, not its env."""
+        return {**self.__dict__, "_env": None, "_env_key": None}
 
     def close(self) -> None:
         if self._env is not None:
@@ -300,6 +310,8 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
     """
     import time
 
+    from handover_eval.preference_batch import prefetch
+
     if not participants:
         raise ValueError("need at least one participant")
     start = time.perf_counter()
@@ -336,6 +348,13 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
     for it in steps:
         for p in participants:
             tried = learner.propose()
+            if judge is None:  # the new actions' walks as parallel tasks on a Ray backend
+                prefetch(
+                    runner,
+                    p,
+                    [HandoverParams(*grid[a]) for a in tried if (p.pid, a) not in memory],
+                    seeds[p.pid],
+                )
             buffer = (
                 buffers[p.pid][-config.cospar.buffer_size :] if config.cospar.buffer_size else []
             )

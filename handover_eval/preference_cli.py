@@ -7,7 +7,16 @@ arguments are parsed (``--help`` is instant).
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from pathlib import Path
+
+from handover_eval.backend import (
+    JobError,
+    add_backend_arguments,
+    backend_from_args,
+    session,
+)
 
 PREFERENCE_HELP = """CoSpar (paper Sec. IV-B, V-B-1) tunes Theta = {K, B, t_f, f_r} over the paper's
 ranges from a simulated participant (agents/participants.py) who walks past the robot in the env
@@ -103,6 +112,7 @@ def add_preference_arguments(p: argparse.ArgumentParser) -> None:
         "or results/preference/pooled-N)",
     )
     p.add_argument("--no-progress", action="store_true", help="no tqdm bar")
+    add_backend_arguments(p)
 
 
 def add_check_arguments(p: argparse.ArgumentParser) -> None:
@@ -147,6 +157,10 @@ def run_preference_command(args: argparse.Namespace) -> None:
     out = Path(args.out) if args.out else default_out
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out}: exists and is not a folder")
+    try:
+        backend = backend_from_args(args)
+    except RuntimeError as exc:  # Ray missing: train.py's one-line error
+        raise ValueError(str(exc)) from None
     config = PreferenceConfig(
         iterations=args.iterations,
         walks=args.walks,
@@ -161,7 +175,14 @@ def run_preference_command(args: argparse.Namespace) -> None:
             f"participant {p.pid}: {b.sex}, {b.height:.2f} m, walks {b.speed:.2f} m/s, passes at "
             f"y = {b.pass_y:.2f} m"
         )
-    result = run_preference(participants, config, progress=not args.no_progress)
+    try:  # on Ray, each turn's new walks run as parallel tasks (preference_batch)
+        with session(backend, max(1, min(2, os.cpu_count() or 1))) as sess:
+            result = run_preference(participants, config, progress=not args.no_progress)
+    except (JobError, ConnectionError) as exc:
+        print(f"train.py: error: {exc}", file=sys.stderr)
+        raise SystemExit(1) from None
+    if sess.started_here:
+        print(f"Ray start-up {sess.startup_s:.1f} s (not in the wall time below)")
     paths = save_run(result, participants, config, out)
     print(
         f"Θ̂ (argmax of the posterior mean over the tried actions): {theta_line(result.theta_hat)}"

@@ -38,6 +38,7 @@ import numpy as np
 from agents.cospar import THETA_NAMES, CoSparConfig
 from agents.participants import COST_NAMES, Participant, sample_population
 from handover_env.config import THETA_RANGES, HandoverParams
+from handover_eval.backend import map_jobs
 from handover_eval.preference import (
     EpisodeRunner,
     PreferenceConfig,
@@ -81,6 +82,9 @@ class StudyConfig:
             random Theta of H3.
         theta: skip the pooled CoSpar run and use this population Theta-hat (K, B, t_f, f_r).
         personalised: run the per-participant CoSpar and comparison.
+        agent: the planner whose Theta is tuned.
+        workers: processes running the per-participant CoSpar (part 4) in parallel (1: in this
+            process); with the Ray backend (:mod:`.backend`) they are Ray tasks. Same results.
     """
 
     participants: int = 8
@@ -92,6 +96,7 @@ class StudyConfig:
     theta: tuple[float, float, float, float] | None = None
     personalised: bool = True
     agent: str = "ours"
+    workers: int = 1
 
     def __post_init__(self) -> None:
         if self.participants < 2 or self.trials < 1:
@@ -99,6 +104,8 @@ class StudyConfig:
                              f"{self.participants}, {self.trials}")
         if self.theta is not None:
             HandoverParams(*self.theta)
+        if self.workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {self.workers}")
 
 
 @dataclass
@@ -190,6 +197,42 @@ def _cost_difference(
 def random_theta(rng: np.random.Generator) -> HandoverParams:
     """Theta uniform in the paper's ranges (H3's unoptimised system)."""
     return HandoverParams(*(float(rng.uniform(*THETA_RANGES[n])) for n in THETA_NAMES))
+
+
+@dataclass(frozen=True)
+class _PersonalJob:
+    """Part 4 for one participant (their answer noise already on its own stream)."""
+
+    participant: Participant
+    pcfg: PreferenceConfig
+    theta_pop: HandoverParams
+    trials: int
+
+
+def _personal(
+    runner: EpisodeRunner, job: _PersonalJob
+) -> tuple[dict[str, Any] | None, int, int, float]:
+    """CoSpar on one participant, then their own Theta-hat against the population's on held-out
+    walks. Returns (row or None, unjudged pairs, episodes run, their seconds)."""
+    p, theta_pop = job.participant, job.theta_pop
+    episodes, seconds = runner.episodes_run, runner.seconds
+    own = run_preference([p], job.pcfg, runner=runner).theta_hat
+    seeds = p.walk_seeds(job.trials, HELD_OUT)
+    pairs = [(x, y) for x, y in zip(runner.run(p, own, seeds), runner.run(p, theta_pop, seeds))
+             if UNSTABLE not in (x["outcome"], y["outcome"])]
+    done = (len(seeds) - len(pairs), runner.episodes_run - episodes, runner.seconds - seconds)
+    if not pairs:
+        return (None, *done)
+    a, b = [x for x, _ in pairs], [y for _, y in pairs]
+    wins = sum(p.prefers(p.satisfaction(x), p.satisfaction(y)) for x, y in zip(a, b))
+    oa, ob = summarise_outcomes(a), summarise_outcomes(b)
+    return ({
+        "participant": p.pid, "sex": p.body.sex, "height": p.body.height, "speed": p.body.speed,
+        "pass_y": p.body.pass_y, **{f"own_{n}": v for n, v in zip(THETA_NAMES, own.as_array())},
+        "prefers_own": wins, "comparisons": len(pairs),
+        "u_own": p.utility(a), "u_population": p.utility(b),
+        **{f"own_{k2}": v for k2, v in oa.items()}, **{f"pop_{k2}": v for k2, v in ob.items()},
+    }, *done)
 
 
 # ---------------------------------------------------------------------------- the study
@@ -289,44 +332,31 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     k = sum(c["prefers_optimised"] for c in result.choices)
     result.h3 = binomial_stats(k, len(result.choices))
     timings["h3_s"] = time.perf_counter() - t0
-    # 4. personalised
+    # 4. personalised: one job per participant (:mod:`.backend`), the runner (its fitted planner
+    # and episode cache) sent to each worker once
     t0 = time.perf_counter()
     _reseed(people, 13)
+    episodes, episode_s = runner.episodes_run, runner.seconds  # parts 1-3; part 4's jobs add theirs
     if config.personalised:
-        for p in tqdm(people, desc="personalised CoSpar", unit="participant", disable=not progress):
-            own = run_preference([p], pcfg, runner=runner).theta_hat
-            seeds = p.walk_seeds(config.trials, HELD_OUT)
-            pairs = [
-                (x, y)
-                for x, y in zip(runner.run(p, own, seeds), runner.run(p, theta_pop, seeds))
-                if UNSTABLE not in (x["outcome"], y["outcome"])
-            ]
-            result.unjudged += len(seeds) - len(pairs)
-            if not pairs:
-                continue
-            a, b = [x for x, _ in pairs], [y for _, y in pairs]
-            wins = sum(p.prefers(p.satisfaction(x), p.satisfaction(y)) for x, y in zip(a, b))
-            oa, ob = summarise_outcomes(a), summarise_outcomes(b)
-            result.personal.append(
-                {
-                    "participant": p.pid,
-                    "sex": p.body.sex,
-                    "height": p.body.height,
-                    "speed": p.body.speed,
-                    "pass_y": p.body.pass_y,
-                    **{f"own_{n}": v for n, v in zip(THETA_NAMES, own.as_array())},
-                    "prefers_own": wins,
-                    "comparisons": len(pairs),
-                    "u_own": p.utility(a),
-                    "u_population": p.utility(b),
-                    **{f"own_{k2}": v for k2, v in oa.items()},
-                    **{f"pop_{k2}": v for k2, v in ob.items()},
-                }
-            )
+        jobs = [_PersonalJob(p, pcfg, theta_pop, config.trials) for p in people]
+        for row, unjudged, n, seconds in map_jobs(
+            _personal,
+            runner,
+            jobs,
+            workers=config.workers,
+            progress=progress,
+            desc="personalised CoSpar",
+            unit="participant",
+            label=lambda job: f"participant {job.participant.pid}",
+        ):
+            result.unjudged += unjudged
+            episodes, episode_s = episodes + n, episode_s + seconds
+            if row is not None:
+                result.personal.append(row)
     timings["personalised_s"] = time.perf_counter() - t0
     timings["total_s"] = time.perf_counter() - t_start
-    timings["episodes"] = runner.episodes_run
-    timings["episode_s"] = runner.seconds
+    timings["episodes"] = episodes
+    timings["episode_s"] = episode_s
     result.timings = timings
     write_report(result, out)
     return result

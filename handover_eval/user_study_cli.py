@@ -6,6 +6,12 @@ import argparse
 import sys
 from pathlib import Path
 
+from handover_eval.backend import (
+    JobError,
+    add_backend_arguments,
+    backend_from_args,
+    session,
+)
 from handover_eval.preference_cli import _grid, _int_at_least
 
 #: --quick: a seconds-long run for ``make test``; never for reported numbers.
@@ -59,6 +65,15 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "iterations, 1 walk, a 3x3x3x3 grid; never for reported numbers",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    p.add_argument(
+        "--workers",
+        type=_int_at_least(1),
+        default=1,
+        metavar="N",
+        help="processes running the per-participant CoSpar in parallel (default 1: in this "
+        "process, as before); with --backend ray it sizes the local Ray instance",
+    )
+    add_backend_arguments(p)
     return p
 
 
@@ -81,7 +96,9 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             theta=tuple(args.theta) if args.theta else None,
             personalised=not args.no_personalised,
+            workers=args.workers,
         )
+        backend = backend_from_args(args)
         out = (
             Path(args.out)
             if args.out
@@ -89,9 +106,15 @@ def run(args: argparse.Namespace) -> int:
         )
         if out.exists() and not out.is_dir():
             raise ValueError(f"--out {out}: exists and is not a folder")
-    except ValueError as exc:
+    except (ValueError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
-    result = run_study(config, out, progress=not args.no_progress)
-    print(f"wrote {out}/ in {result.timings['total_s']:.0f} s")
+    try:
+        with session(backend, config.workers) as sess:
+            result = run_study(config, out, progress=not args.no_progress)
+    except (JobError, ConnectionError) as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 1
+    startup = f" (Ray start-up {sess.startup_s:.1f} s)" if sess.started_here else ""
+    print(f"wrote {out}/ in {result.timings['total_s']:.0f} s{startup}")
     return 0

@@ -44,7 +44,8 @@ def test_extras_carry_what_only_some_users_need():
     assert extras["cluster"] == {"ray"}
     assert {"pytest", "ruff", "botorch"} <= extras["test"]
     assert (
-        "handover_env[baselines,rl,video]" in PYPROJECT["project"]["optional-dependencies"]["test"]
+        "handover_env[baselines,rl,video,cluster]"
+        in PYPROJECT["project"]["optional-dependencies"]["test"]
     )
     assert set(extras) >= {"baselines", "rl", "video", "cluster", "test", "all"}
 
