@@ -255,10 +255,9 @@ def _worker_environment() -> Iterator[None]:
 
 
 def _init_worker(shared: Any) -> None:
-    """Pool worker start-up: keep ``shared``, one torch thread, offline hub."""
+    """Pool worker start-up: keep ``shared``, one torch thread (the BLAS and offline-hub variables
+    were inherited: :func:`_worker_environment`)."""
     _SHARED[0] = shared
-    for key, value in WORKER_ENV.items():
-        os.environ.setdefault(key, value)
     import torch
 
     torch.set_num_threads(1)
