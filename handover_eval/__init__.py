@@ -1,7 +1,7 @@
-"""Evaluation: the open-loop RMS protocol every method shares (:mod:`.openloop`) and result
-tables."""
+"""Evaluation: the open-loop RMS protocol every method shares (:mod:`.openloop.protocol`) and
+result tables."""
 
-from handover_eval.openloop import (
+from handover_eval.openloop.protocol import (
     EpisodeRecord,
     OpenLoopProtocol,
     episode_errors,

@@ -32,9 +32,12 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from tqdm import tqdm
+
+if TYPE_CHECKING:
+    from handover_env.data.dataset import HandoverDataset
 
 J = TypeVar("J")
 R = TypeVar("R")
@@ -202,6 +205,30 @@ def map_jobs(
             len(jobs),
         ) from first
     return [out[i] for i in range(len(jobs))]
+
+
+def map_folds(
+    fn: Callable[[HandoverDataset, J], R],
+    dataset: HandoverDataset,
+    jobs: Sequence[J],
+    workers: int = 1,
+    progress: bool = True,
+    desc: str = "folds",
+    label: Callable[[J], str] = str,
+    weight: Callable[[J], int] | None = None,
+    unit: str = "job",
+) -> list[R]:
+    """:func:`map_jobs` with the dataset as the shared input: the evaluations' per-fold work.
+
+    Table I's folds, the sample-efficiency cells, the trade-off fits and the closed-loop episode
+    chunks are independent and seeded, so running them on ``workers`` processes (or as Ray tasks)
+    returns exactly what the serial loop returns, in job order (``tests/test_evaluate.py`` checks
+    the tables are identical with 1 and 2 workers, ``tests/test_ray_backend.py`` with Ray).
+    ``fn(dataset, job)`` must be a module-level function; a job that raises is retried once, then
+    :class:`JobError` names it after the other jobs finished.
+    """
+    return map_jobs(fn, dataset, jobs, workers=workers, progress=progress, desc=desc, label=label,
+                    weight=weight, unit=unit)
 
 
 def _describe(exc: BaseException) -> str:

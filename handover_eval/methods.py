@@ -65,7 +65,7 @@ class MethodOptions:
             (``observation.state``). Off by default: the paper's modules all receive the
             receiver base pose alone (Sec. V-A), and the nonparametric methods never see it.
         workers: processes that pre-train the ACT fold models in parallel (each with one torch
-            thread) and then run the folds (:mod:`handover_eval.fold_pool`); default
+            thread) and then run the folds (:func:`handover_eval.backend.map_folds`); default
             one per core, at most 2. 1 runs everything in this process. Either way every ACT
             fold trains on its episodes of one shared LeRobot export
             (:mod:`handover_eval.act_folds`), and the results are the same.

@@ -175,8 +175,8 @@ def test_failing_workers_are_named(tmp_path):
 
 def test_sample_efficiency_pretrains_every_fold_and_ratio(tmp_path):
     from handover_env.data import generate_synthetic
-    from handover_eval.experiments import run_sample_efficiency
-    from handover_eval.openloop import OpenLoopProtocol
+    from handover_eval.openloop.experiments import run_sample_efficiency
+    from handover_eval.openloop.protocol import OpenLoopProtocol
 
     data = generate_synthetic(n=16, ood_fraction=0.25, seed=5)
     protocol = OpenLoopProtocol(stride=5)

@@ -172,7 +172,7 @@ REAL = (
 )
 def test_learns_real_recordings_by_the_shared_protocol():
     from handover_env.data.public import load_public_dataset
-    from handover_eval.openloop import evaluate_openloop, summarise
+    from handover_eval.openloop.protocol import evaluate_openloop, summarise
 
     real = load_public_dataset(REAL, progress=False)
     train_idx, test_idx = real.stratified_kfold(10, seed=0)[0]

@@ -16,19 +16,19 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 import evaluate
 from handover_env.config import HandoverParams
 from handover_env.data import generate_synthetic
-from handover_eval.closedloop import (
-    ClosedLoopConfig,
-    EpisodeJob,
-    episode_row,
-    plan_jobs,
-)
-from handover_eval.closedloop_agents import AGENTS
-from handover_eval.closedloop_receivers import (
+from handover_eval.closedloop.receivers import (
     ReceiverSpec,
     fold_of,
     pick_evenly,
     replays,
     walkers,
+)
+from handover_eval.closedloop.roster import AGENTS
+from handover_eval.closedloop.run import (
+    ClosedLoopConfig,
+    EpisodeJob,
+    episode_row,
+    plan_jobs,
 )
 from handover_eval.methods import MethodOptions
 
@@ -336,7 +336,7 @@ def test_mujoco_auto_resets_are_counted() -> None:
     """A NaN velocity makes MuJoCo reset the state mid-step; the row's sim_unstable counts it."""
     import mujoco
 
-    from handover_eval.closedloop_worker import _instabilities
+    from handover_eval.closedloop.worker import _instabilities
 
     model = mujoco.MjModel.from_xml_string(
         "<mujoco><worldbody><body><freejoint/><geom size='.1'/></body></worldbody></mujoco>")

@@ -8,8 +8,8 @@ import random
 import numpy as np
 import pytest
 
-from handover_eval.closedloop_report import aggregate, ghosts, paired
-from handover_eval.closedloop_stats import (
+from handover_eval.closedloop.report import aggregate, ghosts, paired
+from handover_eval.closedloop.stats import (
     bootstrap_ci,
     median_iqr,
     pair_up,

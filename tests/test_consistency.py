@@ -24,7 +24,8 @@ def test_the_giver_state_default_is_receiver_only_everywhere():
     pytest.importorskip("torch")
     from baselines.act import ACTAgentConfig
     from baselines.bc_mlp import BCMLPConfig
-    from handover_eval import evaluate_cli, train_cli
+    from handover_eval.cli import evaluate as evaluate_cli
+    from handover_eval.cli import train as train_cli
     from handover_eval.methods import MethodOptions, build_agent
 
     assert BCMLPConfig().use_giver_state is False and ACTAgentConfig().use_giver_state is False
@@ -45,9 +46,9 @@ def test_importing_the_library_leaves_the_hugging_face_variables_alone():
         "agents.nonparametric",
         "handover_eval.methods",
         "handover_eval.act_folds",
-        "handover_eval.evaluate_cli",
-        "handover_eval.train_cli",
-        "handover_eval.closedloop",
+        "handover_eval.cli.evaluate",
+        "handover_eval.cli.train",
+        "handover_eval.closedloop.run",
     ]
     try:
         import torch  # noqa: F401
@@ -71,7 +72,7 @@ def test_the_cli_entry_points_set_offline_mode():
     env = {
         k: v for k, v in os.environ.items() if not (k.startswith("HF_") and k.endswith("OFFLINE"))
     }
-    code = ("import os, sys\nfrom handover_eval.evaluate_cli import main\n"
+    code = ("import os, sys\nfrom handover_eval.cli.evaluate import main\n"
             "try:\n    main(['table1', '--methods', 'nope'])\nexcept SystemExit:\n    pass\n"
             "print(os.environ.get('HF_HUB_OFFLINE'), os.environ.get('HF_DATASETS_OFFLINE'))")
     res = subprocess.run(

@@ -63,7 +63,7 @@ def test_plot_reports_the_file_it_wrote(tmp_path: Path, capsys) -> None:
 
 def test_evaluate_out_that_is_a_file_is_a_one_line_error(tmp_path: Path, capsys) -> None:
     sys.path.insert(0, str(REPO))
-    from handover_eval import evaluate_cli as evaluate
+    from handover_eval.cli import evaluate
 
     target = tmp_path / "results.txt"
     target.write_text("keep me")

@@ -11,7 +11,7 @@ import pytest
 
 from agents.cospar import CoSparConfig, action_grid
 from agents.participants import sample_participant, sample_population
-from handover_eval.preference import (
+from handover_eval.preference.tuning import (
     EpisodeRunner,
     PreferenceConfig,
     lived,
@@ -90,7 +90,7 @@ def test_runner_caches_episodes_and_runs_static_too() -> None:
 
 
 def test_train_preference_cli_writes_theta_history_and_plot(tmp_path: Path, capsys) -> None:
-    from handover_eval import train_cli as train
+    from handover_eval.cli import train
 
     out = tmp_path / "run"
     code = train.main(["preference", "--participant", "3", "--iterations", "2", "--walks", "1",
@@ -123,7 +123,7 @@ def test_train_preference_cli_writes_theta_history_and_plot(tmp_path: Path, caps
     ],
 )
 def test_train_preference_rejects_bad_input(argv: list[str], capsys) -> None:
-    from handover_eval import train_cli as train
+    from handover_eval.cli import train
 
     with pytest.raises(SystemExit) as exc:
         train.main(["preference", *argv])
@@ -132,7 +132,7 @@ def test_train_preference_rejects_bad_input(argv: list[str], capsys) -> None:
 
 
 def test_brute_force_check_scores_cospar_against_the_grid_optimum(tmp_path: Path) -> None:
-    from handover_eval.preference_check import CheckConfig, run_check
+    from handover_eval.preference.check import CheckConfig, run_check
 
     class FakeRunner(EpisodeRunner):
         """Outcomes that depend on Θ (pull grows with f_r, failures at t_f = 1) without physics."""

@@ -133,7 +133,7 @@ def test_train_rebuilds_a_half_written_export_of_older_code(tmp_path: Path, data
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from handover_eval import train_cli as train
+    from handover_eval.cli import train
 
     src = data.save(tmp_path / "d.npz")
     half = tmp_path / "run" / "lerobot_dataset"  # interrupted by the old exporter: no sidecar

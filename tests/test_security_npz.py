@@ -149,7 +149,7 @@ def test_a_file_of_1e308_metres_does_not_reach_training(tmp_path: Path, members,
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from handover_eval import train_cli as train
+    from handover_eval.cli import train
 
     g = members["giver_xyz"].copy()
     g[:, 0] = 1e308

@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "HF_DATASETS_OFFLINE": "1"}
 sys.path.insert(0, str(ROOT))
 
-from handover_eval import train_cli as train  # noqa: E402
+from handover_eval.cli import train  # noqa: E402
 
 
 @pytest.mark.parametrize("method", ["bc-mlp", "act"])

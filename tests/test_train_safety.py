@@ -22,7 +22,7 @@ from baselines_toy import toy_dataset  # noqa: E402
 from safetensors.torch import load_file  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from handover_eval import train_cli as train  # noqa: E402
+from handover_eval.cli import train  # noqa: E402
 
 ACT_TINY = ["--dim-model", "16", "--n-heads", "2", "--dim-feedforward", "32"]
 

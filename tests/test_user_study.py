@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 
 from handover_env.config import THETA_RANGES
-from handover_eval.user_study import binomial_stats, paired_stats, random_theta
+from handover_eval.preference.study import binomial_stats, paired_stats, random_theta
 
 
 def test_paired_stats_closed_forms() -> None:
@@ -45,7 +45,7 @@ def test_random_theta_is_uniform_in_the_papers_ranges() -> None:
 
 
 def test_user_study_quick_end_to_end(tmp_path: Path) -> None:
-    from handover_eval import evaluate_cli as evaluate
+    from handover_eval.cli import evaluate
 
     out = tmp_path / "us"
     assert evaluate.main(["user-study", "--quick", "--out", str(out), "--no-progress"]) == 0
@@ -88,7 +88,7 @@ def test_user_study_quick_end_to_end(tmp_path: Path) -> None:
 
 
 def test_user_study_rejects_bad_input(capsys) -> None:
-    from handover_eval import evaluate_cli as evaluate
+    from handover_eval.cli import evaluate
 
     with pytest.raises(SystemExit) as exc:
         evaluate.main(["user-study", "--participants", "1"])

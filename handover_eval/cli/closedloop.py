@@ -19,11 +19,11 @@ from handover_eval.backend import (
     backend_from_args,
     session,
 )
-from handover_eval.closedloop import ClosedLoopConfig, run_closed_loop
-from handover_eval.closedloop_agents import AGENTS
-from handover_eval.closedloop_output import run_and_write_sweep, write_closed_loop
-from handover_eval.closedloop_receivers import SETS
-from handover_eval.closedloop_stats import N_BOOTSTRAP
+from handover_eval.closedloop.output import run_and_write_sweep, write_closed_loop
+from handover_eval.closedloop.receivers import SETS
+from handover_eval.closedloop.roster import AGENTS
+from handover_eval.closedloop.run import ClosedLoopConfig, run_closed_loop
+from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers
 
 COMMANDS = ("closed-loop", "theta-sweep")
@@ -264,7 +264,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
         )
         sweep = None
         if args.command == "theta-sweep":
-            from handover_eval.theta_sweep import SweepConfig
+            from handover_eval.closedloop.theta_sweep import SweepConfig
 
             sweep = SweepConfig(
                 agent=args.agent,

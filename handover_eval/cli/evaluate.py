@@ -28,13 +28,13 @@ import time
 from pathlib import Path
 
 from handover_env.offline import hub_offline
-from handover_eval import closedloop_cli, user_study_cli
 from handover_eval.backend import (
     JobError,
     add_backend_arguments,
     backend_from_args,
     session,
 )
+from handover_eval.cli import closedloop, user_study
 from handover_eval.methods import (
     ACT_EVAL_STEPS,
     METHODS,
@@ -182,8 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--timing-episodes", type=int, default=20,
                    help="test episodes streamed frame by frame to time each variant (default: 20)")
-    closedloop_cli.add_parsers(sub)
-    user_study_cli.add_parser(sub)
+    closedloop.add_parsers(sub)
+    user_study.add_parser(sub)
     return parser
 
 
@@ -214,12 +214,12 @@ def load_dataset(path: str | None, quick: bool, seed: int):
 def main(argv: list[str] | None = None) -> int:
     hub_offline()
     args = build_parser().parse_args(argv)
-    if args.command in closedloop_cli.COMMANDS:
-        return closedloop_cli.main(args, load_dataset)
+    if args.command in closedloop.COMMANDS:
+        return closedloop.main(args, load_dataset)
     if args.command == "user-study":
-        return user_study_cli.run(args)
-    from handover_eval import experiments
-    from handover_eval.openloop import OpenLoopProtocol
+        return user_study.run(args)
+    from handover_eval.openloop import experiments
+    from handover_eval.openloop.protocol import OpenLoopProtocol
 
     try:
         methods = check_methods(args.methods)

@@ -139,7 +139,7 @@ def run_preference_command(args: argparse.Namespace) -> None:
     """``train.py preference``: CoSpar on the env against one participant or a pooled group."""
     from agents.cospar import CoSparConfig
     from agents.participants import sample_participant, sample_population
-    from handover_eval.preference import (
+    from handover_eval.preference.tuning import (
         PAPER_THETA,
         PreferenceConfig,
         run_preference,
@@ -211,7 +211,7 @@ def _params(values):
 
 def run_check_command(args: argparse.Namespace) -> None:
     """``train.py preference-check``: does CoSpar find a brute-forced optimum?"""
-    from handover_eval.preference_check import CheckConfig, run_check
+    from handover_eval.preference.check import CheckConfig, run_check
 
     config = CheckConfig(
         participants=args.participants,

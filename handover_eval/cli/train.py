@@ -81,11 +81,11 @@ def split_test(data: HandoverDataset, folds: int, test_fold: int | None, seed: i
 # ---------------------------------------------------------------------------- evaluation
 def openloop_rms(agent, test: HandoverDataset) -> dict:
     """Open-loop RMS (mm, 3D and per axis; mean +- std over episodes, ID and OOD apart) on ``test``
-    by the shared protocol (``handover_eval.openloop``: a query at every frame from
+    by the shared protocol (``handover_eval.openloop.protocol``: a query at every frame from
     frame 5, horizon 30, row 0 = the current frame). The protocol calls ``predict_episode``, through
     which the baselines also read the giver position at the query frame (their
     ``observation.state``)."""
-    from handover_eval.openloop import OpenLoopProtocol, evaluate_openloop, summarise
+    from handover_eval.openloop.protocol import OpenLoopProtocol, evaluate_openloop, summarise
 
     return summarise(
         evaluate_openloop(agent, test, OpenLoopProtocol(horizon=agent.horizon), progress=False)
@@ -347,7 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     act.set_defaults(func=train_act)
 
-    from handover_eval import preference_cli as pref
+    from handover_eval.cli import preference as pref
 
     sp = sub.add_parser(
         "preference",

@@ -12,7 +12,7 @@ from handover_eval.backend import (
     backend_from_args,
     session,
 )
-from handover_eval.preference_cli import _grid, _int_at_least
+from handover_eval.cli.preference import _grid, _int_at_least
 
 #: --quick: a seconds-long run for ``make test``; never for reported numbers.
 QUICK = {"participants": 2, "trials": 2, "iterations": 2, "walks": 1, "grid": (3, 3, 3, 3)}
@@ -20,7 +20,7 @@ QUICK = {"participants": 2, "trials": 2, "iterations": 2, "walks": 1, "grid": (3
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``user-study`` on ``evaluate.py``'s subcommands."""
-    from handover_eval import user_study
+    from handover_eval.preference import study as user_study
 
     p = sub.add_parser(
         "user-study",
@@ -79,7 +79,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study from parsed arguments; 0 on success, 2 with a one-line error on bad input."""
-    from handover_eval.user_study import StudyConfig, run_study
+    from handover_eval.preference.study import StudyConfig, run_study
 
     try:
         settings = {

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import math
 
-from handover_eval.closedloop_agents import LABELS
-from handover_eval.closedloop_report import EFFORT, OUTCOMES, QUANTITIES
+from handover_eval.closedloop.report import EFFORT, OUTCOMES, QUANTITIES
+from handover_eval.closedloop.roster import LABELS
 from handover_eval.reporting import markdown_table
 
 NOTE_SIMULATED = (

@@ -11,9 +11,9 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from handover_eval.closedloop import ClosedLoopConfig, ClosedLoopRun
-from handover_eval.closedloop_agents import LABELS, ModelRecord
-from handover_eval.closedloop_receivers import SETS
+from handover_eval.closedloop.receivers import SETS
+from handover_eval.closedloop.roster import LABELS, ModelRecord
+from handover_eval.closedloop.run import ClosedLoopConfig, ClosedLoopRun
 from handover_eval.methods import MethodOptions
 from handover_eval.reporting import markdown_table, write_csv, write_text
 
@@ -73,9 +73,9 @@ def _header(
 
 
 def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, out: Path) -> None:
-    from handover_eval import closedloop_markdown as md
-    from handover_eval import closedloop_report as rep
-    from handover_eval.closedloop_plot import plot_closed_loop
+    from handover_eval.closedloop import markdown as md
+    from handover_eval.closedloop import report as rep
+    from handover_eval.closedloop.plot import plot_closed_loop
 
     agg = rep.aggregate(run.rows)
     pairs = (
@@ -160,7 +160,7 @@ def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, 
 def run_and_write_sweep(
     sweep, dataset, args, options: MethodOptions, cache: Path, out: Path, progress: bool
 ) -> None:
-    from handover_eval import theta_sweep as ts
+    from handover_eval.closedloop import theta_sweep as ts
 
     rows, models, seconds = ts.run_sweep(sweep, dataset, args.data, options, cache, progress)
     per_value, extremes = ts.summarise(rows, args.bootstrap, args.seed)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handover_eval.closedloop_agents import LABELS
+from handover_eval.closedloop.roster import LABELS
 
 SET_COLOURS = {"id": "tab:blue", "ood": "tab:orange", "replay": "tab:green"}
 PANELS = (

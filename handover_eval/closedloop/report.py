@@ -16,9 +16,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from handover_eval.closedloop_agents import AGENTS
-from handover_eval.closedloop_receivers import SETS
-from handover_eval.closedloop_stats import (
+from handover_eval.closedloop.receivers import SETS
+from handover_eval.closedloop.roster import AGENTS
+from handover_eval.closedloop.stats import (
     N_BOOTSTRAP,
     median_iqr,
     pair_up,

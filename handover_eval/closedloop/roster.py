@@ -99,7 +99,7 @@ def prepare_models(
     ACT is trained as Table I trains it (one LeRobot export, ``options.workers`` processes);
     BC-MLP fold by fold in this process. Returns one record per (learned agent, fold).
     """
-    from handover_eval.fold_pool import map_folds
+    from handover_eval.backend import map_folds
 
     records: list[ModelRecord] = []
     if "act" in agents:
@@ -164,7 +164,8 @@ class _BCJob:
 
 
 def _fit_bc(dataset: HandoverDataset, job: _BCJob) -> float:
-    """Train one BC-MLP fold checkpoint into the cache (runs in a fold_pool worker); seconds."""
+    """Train one BC-MLP fold checkpoint into the cache (in a :func:`.backend.map_folds` worker);
+    seconds."""
     t0 = time.perf_counter()
     fit_agent(
         "bc_mlp", build_agent("bc_mlp", job.options), dataset.subset(job.train_idx), job.cache_dir

@@ -7,7 +7,7 @@ The run, top to bottom (:func:`run_closed_loop`):
 2. **Fold models** (:mod:`.closedloop_agents`): BC-MLP / ACT checkpoints of the needed folds are
    loaded from Table I's cache, or trained first (the training time is reported apart).
 3. **Episodes**: chunks of a few receivers for one agent are run in ``workers`` spawned
-   processes (:func:`handover_eval.fold_pool.map_folds`, the dataset sent once per
+   processes (:func:`handover_eval.backend.map_folds`, the dataset sent once per
    worker; :mod:`.closedloop_worker`). Each worker makes its own envs (one per env kind and Θ,
    never pickled) and fits or loads each fold model once. Every episode is seeded and every
    agent reset, so the rows do not depend on the number of workers or on which worker ran what.
@@ -30,14 +30,8 @@ import numpy as np
 
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.closedloop_agents import (
-    AGENTS,
-    LEARNING,
-    ModelRecord,
-    check_agents,
-    prepare_models,
-)
-from handover_eval.closedloop_receivers import (
+from handover_eval.backend import map_folds
+from handover_eval.closedloop.receivers import (
     SETS,
     ReceiverSpec,
     fold_of,
@@ -46,13 +40,19 @@ from handover_eval.closedloop_receivers import (
     replays,
     walkers,
 )
-from handover_eval.closedloop_worker import (  # noqa: F401 - episode_row re-exported
+from handover_eval.closedloop.roster import (
+    AGENTS,
+    LEARNING,
+    ModelRecord,
+    check_agents,
+    prepare_models,
+)
+from handover_eval.closedloop.worker import (  # noqa: F401 - episode_row re-exported
     EpisodeJob,
     clear_worker_state,
     episode_row,
     run_job,
 )
-from handover_eval.fold_pool import map_folds
 from handover_eval.methods import MethodOptions
 
 
@@ -61,7 +61,7 @@ class ClosedLoopConfig:
     """What ``evaluate.py closed-loop`` runs.
 
     Args:
-        agents: agent names (:data:`handover_eval.closedloop_agents.AGENTS`).
+        agents: agent names (:data:`handover_eval.closedloop.roster.AGENTS`).
         sets: receiver sets among "id", "ood", "replay".
         walkers: scripted walkers per set (ID, OOD).
         replay_folds: folds whose episodes are replayed (None: the held-out half).

@@ -24,15 +24,15 @@ import numpy as np
 
 from handover_env.config import THETA_RANGES, HandoverParams
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.closedloop import (
+from handover_eval.closedloop.report import EFFORT, paired_metrics
+from handover_eval.closedloop.roster import ModelRecord, check_agents, prepare_models
+from handover_eval.closedloop.run import (
     ClosedLoopConfig,
     build_receivers,
     plan_jobs,
     run_jobs,
 )
-from handover_eval.closedloop_agents import ModelRecord, check_agents, prepare_models
-from handover_eval.closedloop_report import EFFORT, paired_metrics
-from handover_eval.closedloop_stats import N_BOOTSTRAP, bootstrap_ci, stable_seed
+from handover_eval.closedloop.stats import N_BOOTSTRAP, bootstrap_ci, stable_seed
 from handover_eval.methods import MethodOptions
 from handover_eval.reporting import markdown_table
 

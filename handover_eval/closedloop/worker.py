@@ -1,7 +1,7 @@
 """The worker side of the closed-loop runs: one chunk of episodes of one agent, and its rows.
 
 Each worker process keeps its own envs (one per env kind and Θ, made on first use, never
-pickled) and its fold models (:func:`handover_eval.closedloop_agents.fold_model`).
+pickled) and its fold models (:func:`handover_eval.closedloop.roster.fold_model`).
 Every episode is seeded and the agent reset, so a row does not depend on which worker ran it or
 what ran before in that env. :func:`episode_row` flattens the final ``info`` into one CSV row.
 """
@@ -19,7 +19,8 @@ import numpy as np
 
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.closedloop_agents import (
+from handover_eval.closedloop.receivers import ReceiverSpec, replay_source
+from handover_eval.closedloop.roster import (
     LEARNING,
     ModelRecord,
     clear_models,
@@ -27,7 +28,6 @@ from handover_eval.closedloop_agents import (
     fold_model,
     make_agent,
 )
-from handover_eval.closedloop_receivers import ReceiverSpec, replay_source
 from handover_eval.methods import MethodOptions
 
 ENV_IDS = {"dynamic": "handover_env/DynamicHandover-v0", "static": "handover_env/StaticHandover-v0"}

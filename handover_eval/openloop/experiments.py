@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.fold_pool import map_folds
+from handover_eval.backend import map_folds
 from handover_eval.methods import MethodOptions, build_agent, check_methods, fit_agent
-from handover_eval.openloop import OpenLoopProtocol, evaluate_openloop, summarise
+from handover_eval.openloop.protocol import OpenLoopProtocol, evaluate_openloop, summarise
 from handover_eval.reporting import (
     METHOD_LABELS,
     PAPER_TABLE1,

@@ -25,7 +25,7 @@ import numpy as np
 from agents.cospar import THETA_NAMES, CoSparConfig, action_grid
 from agents.participants import sample_population
 from handover_env.config import HandoverParams
-from handover_eval.preference import (
+from handover_eval.preference.tuning import (
     EpisodeRunner,
     PreferenceConfig,
     lived,

@@ -39,7 +39,7 @@ from agents.cospar import THETA_NAMES, CoSparConfig
 from agents.participants import COST_NAMES, Participant, sample_population
 from handover_env.config import THETA_RANGES, HandoverParams
 from handover_eval.backend import map_jobs
-from handover_eval.preference import (
+from handover_eval.preference.tuning import (
     EpisodeRunner,
     PreferenceConfig,
     run_preference,
@@ -241,7 +241,7 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     """Run every part and write the report (see :mod:`.user_study_report`)."""
     from tqdm import tqdm
 
-    from handover_eval.user_study_report import write_report
+    from handover_eval.preference.study_report import write_report
 
     t_start = time.perf_counter()
     people = sample_population(config.participants, config.seed)

@@ -11,10 +11,10 @@ import numpy as np
 
 from agents.cospar import THETA_NAMES
 from handover_env.config import HandoverParams
-from handover_eval.preference import PAPER_THETA, theta_line, write_csv
+from handover_eval.preference.tuning import PAPER_THETA, theta_line, write_csv
 
 if TYPE_CHECKING:
-    from handover_eval.user_study import StudyResult
+    from handover_eval.preference.study import StudyResult
 
 SOURCE = (
     "**Simulated participants** (`agents/participants.py`: a documented model of how people judge "
@@ -40,7 +40,7 @@ def markdown(result: StudyResult) -> str:
     """The report's text."""
     c, cfg = result.h1_h2, result.config
     com, tim, h3 = c["comfort"], c["time"], result.h3
-    from handover_eval.user_study import PAPER
+    from handover_eval.preference.study import PAPER
 
     pd, ps = PAPER["comfort_dynamic"], PAPER["comfort_static"]
     td, ts = PAPER["time_dynamic"], PAPER["time_static"]
@@ -205,7 +205,7 @@ def _figure(result: StudyResult, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from handover_eval.user_study import PAPER
+    from handover_eval.preference.study import PAPER
 
     c = result.h1_h2
     fig, axes = plt.subplots(

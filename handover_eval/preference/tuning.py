@@ -310,7 +310,7 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
     """
     import time
 
-    from handover_eval.preference_batch import prefetch
+    from handover_eval.preference.batch import prefetch
 
     if not participants:
         raise ValueError("need at least one participant")
