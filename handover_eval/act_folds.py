@@ -247,7 +247,7 @@ def pretrain_act(
             )
             for folder, (label, idx, key_src) in todo.items()
         ]
-        done = _run_jobs(jobs, workers, progress, log)
+        done = run_act_jobs(jobs, workers, progress, log)
     return [
         ACTRun(
             folder,
@@ -267,7 +267,7 @@ def _train(_: None, job: ACTJob) -> dict:
     return train_job(job)
 
 
-def _run_jobs(
+def run_act_jobs(
     jobs: list[ACTJob], workers: int, progress: bool, log: Callable[[str], None] | None
 ) -> dict[Path, dict]:
     """Run ``jobs`` on the active backend (:func:`.backend.map_jobs`: in this process for one

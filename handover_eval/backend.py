@@ -14,8 +14,8 @@ once; if it fails again, the other jobs still run to the end and then :class:`Jo
 every failed job with its error. Whatever the finished jobs wrote to disk (checkpoints) stays, so
 a rerun resumes through the checkpoint reuse.
 
-The backend is chosen per command (``--backend process|ray``, ``--ray-address``:
-:func:`add_backend_arguments`) and made active with :func:`session`, which for Ray connects to
+The backend is chosen per command (``--backend process|ray``, ``--ray-address``, parsed in
+``handover_eval/cli/args.py``) and made active with :func:`session`, which for Ray connects to
 ``ray.init(address=...)`` or starts a small local instance (``num_cpus`` = the workers asked for)
 and shuts it down at the end, and measures that start-up on its own (:attr:`Session.startup_s`).
 Ray tasks declare ``num_cpus=1`` and ``max_retries=1`` (``retry_exceptions=True``); the
@@ -24,7 +24,6 @@ scheduling is Ray's (``ray.remote``, ``ray.wait``, ``ray.get``).
 
 from __future__ import annotations
 
-import argparse
 import multiprocessing
 import os
 import time
@@ -357,33 +356,3 @@ def _ray_map(
                 failed[i] = getattr(exc, "cause", None) or exc
             else:
                 done(i, result)
-
-
-# ------------------------------------------------------------------------------------- CLI
-def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--backend process|ray`` and ``--ray-address`` (shared by every command that fans out)."""
-    parser.add_argument(
-        "--backend",
-        choices=BACKENDS,
-        default="process",
-        help="where the jobs run: 'process' (spawned processes on this machine, the "
-        "default) or 'ray' (Ray tasks of one CPU each; needs the [cluster] extra); "
-        "the results do not depend on it",
-    )
-    parser.add_argument(
-        "--ray-address",
-        default=None,
-        metavar="ADDRESS",
-        help="with --backend ray: the cluster to join ('auto' = the one `ray start` set "
-        "up on this node, or host:port); default: start a local Ray instance with "
-        "--workers CPUs for this command",
-    )
-
-
-def backend_from_args(args: argparse.Namespace) -> Backend:
-    """The :class:`Backend` of parsed ``--backend`` / ``--ray-address``; ValueError or a clear
-    RuntimeError (Ray missing) on bad input."""
-    backend = Backend(getattr(args, "backend", "process"), getattr(args, "ray_address", None))
-    if backend.kind == "ray":
-        import_ray()
-    return backend

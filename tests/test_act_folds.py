@@ -151,7 +151,7 @@ def test_workers_option_and_eval_budget():
 
 
 def test_failing_workers_are_named(tmp_path):
-    from handover_eval.act_folds import ACTJob, _run_jobs
+    from handover_eval.act_folds import ACTJob, run_act_jobs
     from handover_eval.backend import JobError
 
     config = asdict(build_agent("act", OPTIONS).config)
@@ -167,7 +167,7 @@ def test_failing_workers_are_named(tmp_path):
         for i in range(3)
     ]
     with pytest.raises(JobError, match="not a handover LeRobot export") as err:
-        _run_jobs(jobs, workers=2, progress=False, log=None)
+        run_act_jobs(jobs, workers=2, progress=False, log=None)
     assert sorted(err.value.failed) == ["job 0", "job 1", "job 2"]  # each retried once, then named
     assert isinstance(err.value.__cause__, FileNotFoundError)
     assert not any((tmp_path / f"ck{i}" / COMPLETE).exists() for i in range(3))

@@ -25,7 +25,7 @@ from handover_eval.closedloop.receivers import (
 )
 from handover_eval.closedloop.roster import AGENTS
 from handover_eval.closedloop.run import (
-    ClosedLoopConfig,
+    ClosedLoopEvalConfig,
     EpisodeJob,
     episode_row,
     plan_jobs,
@@ -157,7 +157,7 @@ def test_replays_of_fold_f_meet_the_fold_f_model() -> None:
     folds = fold_of(data, 3, 0)
     splits = data.stratified_kfold(3, 0)
     specs = walkers(2) + replays(data, folds, (1, 2), {}, max_per_fold=2)
-    config = ClosedLoopConfig(walkers=2, folds=3, chunk=3)
+    config = ClosedLoopEvalConfig(walkers=2, folds=3, chunk=3)
     jobs = plan_jobs(
         config, specs, splits, MethodOptions(quick=True, workers=1), Path("unused"), "t"
     )
@@ -336,13 +336,13 @@ def test_mujoco_auto_resets_are_counted() -> None:
     """A NaN velocity makes MuJoCo reset the state mid-step; the row's sim_unstable counts it."""
     import mujoco
 
-    from handover_eval.closedloop.worker import _instabilities
+    from handover_eval.closedloop.worker import instabilities
 
     model = mujoco.MjModel.from_xml_string(
         "<mujoco><worldbody><body><freejoint/><geom size='.1'/></body></worldbody></mujoco>")
     data = mujoco.MjData(model)
     mujoco.mj_step(model, data)
-    assert _instabilities(data) == 0
+    assert instabilities(data) == 0
     data.qvel[0] = np.nan
     mujoco.mj_step(model, data)
-    assert _instabilities(data) == 1 and np.all(np.isfinite(data.qvel))
+    assert instabilities(data) == 1 and np.all(np.isfinite(data.qvel))

@@ -189,7 +189,7 @@ def test_act_fold_failing_on_ray_is_named_and_finished_checkpoints_stay(
 ) -> None:
     """ACT pre-training on Ray: one fold's export is missing; the other fold still trains and its
     checkpoint is complete on disk (a rerun reuses it); the error names the failed fold."""
-    from handover_eval.act_folds import ACTJob, _run_jobs
+    from handover_eval.act_folds import ACTJob, run_act_jobs
     from handover_eval.methods import COMPLETE, MethodOptions, build_agent
 
     export = next((table1_runs["ray"] / "checkpoints").glob("act-export-*"))
@@ -209,7 +209,7 @@ def test_act_fold_failing_on_ray_is_named_and_finished_checkpoints_stay(
         session(Backend("ray"), workers=2, log=None),
         pytest.raises(JobError, match="fold 1") as err,
     ):
-        _run_jobs(jobs, workers=2, progress=False, log=None)
+        run_act_jobs(jobs, workers=2, progress=False, log=None)
     assert (
         list(err.value.failed) == ["fold 1"]
         and "not a handover LeRobot export" in err.value.failed["fold 1"]

@@ -1,6 +1,7 @@
 """The ``closed-loop`` and ``theta-sweep`` commands of evaluate.py: their flags and their runs.
 
-``evaluate.py`` keeps only the dispatch; the files are written by :mod:`.closedloop_output`.
+``evaluate.py`` keeps only the dispatch; the runs are :func:`.closedloop.run.run_closed_loop` and
+:func:`.closedloop.theta_sweep.run_sweep`, the files are written by :mod:`.closedloop.output`.
 """
 
 from __future__ import annotations
@@ -15,14 +16,13 @@ from pathlib import Path
 from handover_env.config import THETA_RANGES, HandoverParams
 from handover_eval.backend import (
     JobError,
-    add_backend_arguments,
-    backend_from_args,
     session,
 )
-from handover_eval.closedloop.output import run_and_write_sweep, write_closed_loop
+from handover_eval.cli.args import add_backend_arguments, backend_from_args
+from handover_eval.closedloop.output import write_closed_loop, write_theta_sweep
 from handover_eval.closedloop.receivers import SETS
 from handover_eval.closedloop.roster import AGENTS
-from handover_eval.closedloop.run import ClosedLoopConfig, run_closed_loop
+from handover_eval.closedloop.run import ClosedLoopEvalConfig, run_closed_loop
 from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers
 
@@ -248,7 +248,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             if args.replays_per_fold is not None
             else (QUICK_REPLAYS if quick else None)
         )
-        receivers = ClosedLoopConfig(
+        receivers = ClosedLoopEvalConfig(
             agents=tuple(getattr(args, "agents", ["reactive"])),
             sets=tuple(getattr(args, "sets", SETS)),
             walkers=args.walkers
@@ -303,9 +303,14 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
         with session(backend, workers) as sess:
             if sweep is None:
                 run = run_closed_loop(receivers, dataset, args.data, options, cache, progress)
-                write_closed_loop(run, receivers, dataset, args, out)
+                write_closed_loop(
+                    run, receivers, dataset, out, args.bootstrap, args.seed, args.quick
+                )
             else:
-                run_and_write_sweep(sweep, dataset, args, options, cache, out, progress)
+                from handover_eval.closedloop.theta_sweep import run_sweep
+
+                swept = run_sweep(sweep, dataset, args.data, options, cache, progress)
+                write_theta_sweep(swept, sweep, dataset, out, args.bootstrap, args.seed, args.quick)
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2

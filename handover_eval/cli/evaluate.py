@@ -30,11 +30,10 @@ from pathlib import Path
 from handover_env.offline import hub_offline
 from handover_eval.backend import (
     JobError,
-    add_backend_arguments,
-    backend_from_args,
     session,
 )
 from handover_eval.cli import closedloop, user_study
+from handover_eval.cli.args import add_backend_arguments, backend_from_args
 from handover_eval.methods import (
     ACT_EVAL_STEPS,
     METHODS,

@@ -13,10 +13,11 @@ from pathlib import Path
 
 from handover_eval.backend import (
     JobError,
-    add_backend_arguments,
-    backend_from_args,
     session,
 )
+from handover_eval.cli.args import add_backend_arguments, backend_from_args
+from handover_eval.cli.args import grid_points as _grid
+from handover_eval.cli.args import int_at_least as _int_at_least
 
 PREFERENCE_HELP = """CoSpar (paper Sec. IV-B, V-B-1) tunes Theta = {K, B, t_f, f_r} over the paper's
 ranges from a simulated participant (agents/participants.py) who walks past the robot in the env
@@ -30,32 +31,6 @@ CHECK_HELP = """Acceptance check: for each participant, brute-force their utilit
 of Theta (episodes cached in OUT/episodes.jsonl), run CoSpar on the same grid for 20 iterations
 and report the share of the achievable gain over a random Theta that its Theta-hat reaches (pass
 at >= 90 %)."""
-
-
-def _int_at_least(low: int):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
-        return value
-    parse.__name__ = f"integer >= {low}"
-    return parse
-
-
-def _grid(text: str) -> tuple[int, int, int, int]:
-    parts = text.replace("x", ",").split(",")
-    try:
-        values = tuple(int(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected 4 whole numbers like 7,6,6,7, got {text!r}"
-        ) from None
-    if len(values) != 4 or min(values) < 2:
-        raise argparse.ArgumentTypeError(f"expected 4 numbers >= 2 (K, B, t_f, f_r), got {text!r}")
-    return values  # type: ignore[return-value]
 
 
 def add_preference_arguments(p: argparse.ArgumentParser) -> None:
@@ -139,13 +114,8 @@ def run_preference_command(args: argparse.Namespace) -> None:
     """``train.py preference``: CoSpar on the env against one participant or a pooled group."""
     from agents.cospar import CoSparConfig
     from agents.participants import sample_participant, sample_population
-    from handover_eval.preference.tuning import (
-        PAPER_THETA,
-        PreferenceConfig,
-        run_preference,
-        save_run,
-        theta_line,
-    )
+    from handover_eval.preference.tuning import PAPER_THETA, PreferenceConfig, run_preference
+    from handover_eval.preference.tuning_report import save_run, theta_line
 
     if args.participants is not None:
         participants = sample_population(args.participants, args.population_seed)

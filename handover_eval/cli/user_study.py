@@ -8,11 +8,11 @@ from pathlib import Path
 
 from handover_eval.backend import (
     JobError,
-    add_backend_arguments,
-    backend_from_args,
     session,
 )
-from handover_eval.cli.preference import _grid, _int_at_least
+from handover_eval.cli.args import add_backend_arguments, backend_from_args
+from handover_eval.cli.args import grid_points as _grid
+from handover_eval.cli.args import int_at_least as _int_at_least
 
 #: --quick: a seconds-long run for ``make test``; never for reported numbers.
 QUICK = {"participants": 2, "trials": 2, "iterations": 2, "walks": 1, "grid": (3, 3, 3, 3)}
@@ -80,6 +80,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 def run(args: argparse.Namespace) -> int:
     """Run the study from parsed arguments; 0 on success, 2 with a one-line error on bad input."""
     from handover_eval.preference.study import StudyConfig, run_study
+    from handover_eval.preference.study_report import write_report
 
     try:
         settings = {
@@ -111,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         with session(backend, config.workers) as sess:
-            result = run_study(config, out, progress=not args.no_progress)
+            result = run_study(config, progress=not args.no_progress)
+        write_report(result, out)
     except (JobError, ConnectionError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 1

@@ -2,20 +2,24 @@
 
 closed-loop writes ``closed_loop.md/.csv/.png`` and ``closed_loop_{episodes,paired,ghosts,models,
 timing}.csv``; theta-sweep writes ``theta_sweep.md/.csv/.png`` and
-``theta_sweep_{episodes,extremes}.csv``.
+``theta_sweep_{episodes,extremes}.csv``. Both take the values a run returned
+(:class:`.run.ClosedLoopRun`, :class:`.theta_sweep.SweepRun`) and start no computation beyond
+the tables of :mod:`.report` and :mod:`.theta_sweep`.
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from handover_eval.closedloop.receivers import SETS
 from handover_eval.closedloop.roster import LABELS, ModelRecord
-from handover_eval.closedloop.run import ClosedLoopConfig, ClosedLoopRun
-from handover_eval.methods import MethodOptions
+from handover_eval.closedloop.run import ClosedLoopEvalConfig, ClosedLoopRun
 from handover_eval.reporting import markdown_table, write_csv, write_text
+
+if TYPE_CHECKING:
+    from handover_eval.closedloop.theta_sweep import SweepConfig, SweepRun
 
 
 def timing_rows(rows: list[dict]) -> list[dict]:
@@ -57,9 +61,7 @@ def _models_text(models: list[ModelRecord]) -> str:
     return markdown_table(["agent", "model", "count", "folds", "seconds (sum)"], body)
 
 
-def _header(
-    title: str, dataset, receivers: ClosedLoopConfig, args: argparse.Namespace, n_rec: str
-) -> str:
+def _header(title: str, dataset, receivers: ClosedLoopEvalConfig, quick: bool, n_rec: str) -> str:
     th = receivers.params
     return (
         f"# {title}\n\nDataset: {dataset.name} ({len(dataset)} episodes). Receivers: {n_rec}. "
@@ -68,18 +70,31 @@ def _header(
         f"{receivers.seed}); a replay of fold f meets the model trained on the other folds, the "
         f"scripted walkers meet the fold-{receivers.walker_fold} model. Replays: hand mode "
         f"`{receivers.hand_mode}`."
-        f"{' **Quick run: tiny models, never for reported numbers.**' if args.quick else ''}\n"
+        f"{' **Quick run: tiny models, never for reported numbers.**' if quick else ''}\n"
     )
 
 
-def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, out: Path) -> None:
+def write_closed_loop(
+    run: ClosedLoopRun,
+    cfg: ClosedLoopEvalConfig,
+    dataset,
+    out: Path,
+    n_boot: int,
+    seed: int,
+    quick: bool,
+) -> None:
+    """Write the closed-loop tables, Markdown and plot of ``run`` into ``out``; print a summary.
+
+    ``n_boot`` resamples (seeded by ``seed``) give the paired comparisons' CIs; ``quick`` marks
+    the Markdown as a quick run.
+    """
     from handover_eval.closedloop import markdown as md
     from handover_eval.closedloop import report as rep
     from handover_eval.closedloop.plot import plot_closed_loop
 
     agg = rep.aggregate(run.rows)
     pairs = (
-        rep.paired(run.rows, n_boot=args.bootstrap, seed=args.seed)
+        rep.paired(run.rows, n_boot=n_boot, seed=seed)
         if "reactive" in cfg.agents
         else []
     )
@@ -107,7 +122,7 @@ def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, 
     write_csv(timing, out / "closed_loop_timing.csv")
     write_text(
         md.markdown(
-            agg, pairs, ghost, _header("Closed-loop evaluation", dataset, cfg, args, n_rec), footer
+            agg, pairs, ghost, _header("Closed-loop evaluation", dataset, cfg, quick, n_rec), footer
         ),
         out / "closed_loop.md",
     )
@@ -157,13 +172,17 @@ def write_closed_loop(run: ClosedLoopRun, cfg: ClosedLoopConfig, dataset, args, 
     )
 
 
-def run_and_write_sweep(
-    sweep, dataset, args, options: MethodOptions, cache: Path, out: Path, progress: bool
+def write_theta_sweep(
+    run: SweepRun, sweep: SweepConfig, dataset, out: Path, n_boot: int, seed: int, quick: bool
 ) -> None:
+    """Write the Θ sweep's tables, Markdown and plot of ``run`` into ``out``; print the verdicts.
+
+    ``n_boot`` resamples (seeded by ``seed``) give the CIs; ``quick`` marks the Markdown.
+    """
     from handover_eval.closedloop import theta_sweep as ts
 
-    rows, models, seconds = ts.run_sweep(sweep, dataset, args.data, options, cache, progress)
-    per_value, extremes = ts.summarise(rows, args.bootstrap, args.seed)
+    rows, models, seconds = run.rows, run.models, run.seconds
+    per_value, extremes = ts.summarise(rows, n_boot, seed)
     cfg = sweep.receivers
     n_sets = {s: len({r["receiver"] for r in rows if r["set"] == s}) for s in SETS}
     n_rec = (
@@ -172,7 +191,7 @@ def run_and_write_sweep(
         + ", the same at every value"
     )
     header = _header(
-        f"Θ sweep: {LABELS.get(sweep.agent, sweep.agent)}", dataset, cfg, args, n_rec
+        f"Θ sweep: {LABELS.get(sweep.agent, sweep.agent)}", dataset, cfg, quick, n_rec
     ).replace("Θ = K", "Base Θ (the others while one is swept) = K")
     footer = (
         f"\n## Models and timing\n\n{_models_text(models)}\n{len(rows)} episodes in "

@@ -57,7 +57,7 @@ from handover_eval.methods import MethodOptions
 
 
 @dataclass(frozen=True)
-class ClosedLoopConfig:
+class ClosedLoopEvalConfig:
     """What ``evaluate.py closed-loop`` runs.
 
     Args:
@@ -103,7 +103,7 @@ class ClosedLoopConfig:
 
 
 def plan_jobs(
-    config: ClosedLoopConfig,
+    config: ClosedLoopEvalConfig,
     receivers: list[ReceiverSpec],
     splits: list[tuple[np.ndarray, np.ndarray]],
     options: MethodOptions,
@@ -191,7 +191,7 @@ class ClosedLoopRun:
 
 
 def build_receivers(
-    config: ClosedLoopConfig, dataset: HandoverDataset, data: str | None
+    config: ClosedLoopEvalConfig, dataset: HandoverDataset, data: str | None
 ) -> tuple[list[ReceiverSpec], tuple[int, ...]]:
     """The walkers and replays of ``config`` (replays of recordings when ``data`` is a folder)."""
     specs = walkers(config.walkers, tuple(s for s in config.sets if s != "replay"))
@@ -216,7 +216,7 @@ def build_receivers(
 
 
 def run_closed_loop(
-    config: ClosedLoopConfig,
+    config: ClosedLoopEvalConfig,
     dataset: HandoverDataset,
     data: str | None,
     options: MethodOptions,

@@ -27,7 +27,7 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval.closedloop.report import EFFORT, paired_metrics
 from handover_eval.closedloop.roster import ModelRecord, check_agents, prepare_models
 from handover_eval.closedloop.run import (
-    ClosedLoopConfig,
+    ClosedLoopEvalConfig,
     build_receivers,
     plan_jobs,
     run_jobs,
@@ -78,7 +78,8 @@ class SweepConfig:
         values: points per parameter, evenly spaced over its range (the ends included).
         walkers: scripted walkers per set (ID, OOD), the same at every value.
         replays_per_fold: replays of each held-out fold to add (0: walkers only).
-        receivers: the :class:`ClosedLoopConfig` that picks the receivers (folds, hand mode, ...).
+        receivers: the :class:`ClosedLoopEvalConfig` that picks the receivers (folds, hand mode,
+            ...).
     """
 
     agent: str = "ours"
@@ -86,7 +87,7 @@ class SweepConfig:
     values: int = 5
     walkers: int = 20
     replays_per_fold: int = 0
-    receivers: ClosedLoopConfig = dataclasses.field(default_factory=ClosedLoopConfig)
+    receivers: ClosedLoopEvalConfig = dataclasses.field(default_factory=ClosedLoopEvalConfig)
 
     def __post_init__(self) -> None:
         (agent,) = check_agents([self.agent])
@@ -110,6 +111,16 @@ def grid(param: str, n: int, base: HandoverParams) -> list[HandoverParams]:
     return [dataclasses.replace(base, **{param: float(v)}) for v in np.linspace(lo, hi, n)]
 
 
+@dataclass
+class SweepRun:
+    """What :func:`run_sweep` returns: the episode rows (with ``param`` and ``value``), the fold
+    models' records and the wall seconds of the episodes."""
+
+    rows: list[dict]
+    models: list[ModelRecord]
+    seconds: float
+
+
 def run_sweep(
     config: SweepConfig,
     dataset: HandoverDataset,
@@ -117,8 +128,8 @@ def run_sweep(
     options: MethodOptions,
     cache_dir: Path,
     progress: bool = True,
-) -> tuple[list[dict], list[ModelRecord], float]:
-    """Every (parameter, value) on the same receivers; rows, model records, episode seconds."""
+) -> SweepRun:
+    """Every (parameter, value) on the same receivers: rows, model records, episode seconds."""
     sets = ("id", "ood") + (("replay",) if config.replays_per_fold else ())
     base = dataclasses.replace(
         config.receivers,
@@ -143,7 +154,7 @@ def run_sweep(
             ]
     t0 = time.perf_counter()
     rows, fits = run_jobs(dataset, jobs, base.workers, progress, desc="theta-sweep")
-    return rows, models + fits, time.perf_counter() - t0
+    return SweepRun(rows, models + fits, time.perf_counter() - t0)
 
 
 def _col(rows: Sequence[dict], column: str) -> np.ndarray:

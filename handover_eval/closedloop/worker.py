@@ -133,7 +133,7 @@ def run_job(dataset: HandoverDataset, job: EpisodeJob) -> tuple[list[dict], list
         steps = _StepCounter()
         info = run_episode(env, agent, seed=spec.seed, options=options, on_step=steps)
         row = episode_row(job, spec, info, steps.n, time.perf_counter() - t0)
-        row["sim_unstable"] = _instabilities(env.unwrapped.data)
+        row["sim_unstable"] = instabilities(env.unwrapped.data)
         rows.append(row)
     return rows, fits
 
@@ -148,10 +148,10 @@ class _StepCounter:
         self.n = step + 1
 
 
-def _instabilities(data: Any) -> int:
+def instabilities(data: Any) -> int:
     """MuJoCo's bad-qpos/qvel/qacc warnings since the reset: each one means MuJoCo found the
     simulation unstable and reset its state mid-episode (auto-reset), so the episode's outcome
-    cannot be trusted. Counted here because the env does not report it (yet)."""
+    cannot be trusted. Counted here: the env does not report it."""
     import mujoco
 
     kinds = (

@@ -52,7 +52,7 @@ def prefetch(
             if runner.cache_key(participant, theta, seed) not in runner.cache]
     if len(jobs) < 2:
         return 0
-    runner._planner(jobs[0].theta)  # fit once here, so every task gets the fitted planner
+    runner.planner(jobs[0].theta)  # fit once here, so every task gets the fitted planner
     portable = copy.copy(runner)  # no env (EpisodeRunner.__getstate__), and no episode cache
     portable.cache = {}
     results = map_jobs(_walk, portable, jobs, progress=False, desc="CoSpar walks",

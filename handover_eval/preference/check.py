@@ -30,9 +30,9 @@ from handover_eval.preference.tuning import (
     PreferenceConfig,
     lived,
     run_preference,
-    theta_line,
-    write_csv,
 )
+from handover_eval.preference.tuning_report import theta_line
+from handover_eval.reporting import write_csv, write_text
 
 PASS_GAIN = 0.9
 
@@ -112,7 +112,7 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
             "u_best": float(u[best]), "u_random": float(u.mean()), "u_hat": float(u[hat]),
             "rank_of_hat": int(np.sum(u > u[hat])) + 1, "gain": gain, "passed": gain >= PASS_GAIN,
         })
-    write_csv(out / "check.csv", rows)
+    write_csv(rows, out / "check.csv")
     passed = sum(r["passed"] for r in rows)
     lines = [
         f"# CoSpar learns: Θ̂ after {config.iterations} iterations vs the brute-forced optimum "
@@ -148,6 +148,6 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
             f"cached in `{cache.name}`."
         ),
     ]
-    (out / "check.md").write_text("\n".join(lines) + "\n")
+    write_text("\n".join(lines) + "\n", out / "check.md")
     print("\n".join(lines))
     return rows

@@ -30,7 +30,6 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -42,8 +41,8 @@ from handover_eval.backend import map_jobs
 from handover_eval.preference.tuning import (
     EpisodeRunner,
     PreferenceConfig,
+    PreferenceResult,
     run_preference,
-    save_run,
     summarise_outcomes,
 )
 
@@ -122,6 +121,9 @@ class StudyResult:
     personal: list[dict[str, Any]] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     unjudged: int = 0
+    #: The pooled CoSpar run that gave ``theta_pop`` and its settings (None with ``--theta``).
+    pooled: PreferenceResult | None = None
+    pooled_config: PreferenceConfig | None = None
 
 
 # ---------------------------------------------------------------------------- statistics
@@ -236,12 +238,10 @@ def _personal(
 
 
 # ---------------------------------------------------------------------------- the study
-def run_study(config: StudyConfig, out: Path, progress: bool = True,
+def run_study(config: StudyConfig, progress: bool = True,
               runner: EpisodeRunner | None = None) -> StudyResult:
-    """Run every part and write the report (see :mod:`.user_study_report`)."""
+    """Run every part and return the values; :func:`.study_report.write_report` writes them."""
     from tqdm import tqdm
-
-    from handover_eval.preference.study_report import write_report
 
     t_start = time.perf_counter()
     people = sample_population(config.participants, config.seed)
@@ -253,14 +253,14 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     # 1. population Theta-hat
     t0 = time.perf_counter()
     _reseed(people, 10)
+    pooled = None
     if config.theta is None:
         pooled = run_preference(people, pcfg, runner=runner, progress=progress)
-        save_run(pooled, people, pcfg, out / "pooled")
         theta_pop = pooled.theta_hat
     else:
         theta_pop = HandoverParams(*config.theta)
     timings["pooled_cospar_s"] = time.perf_counter() - t0
-    result = StudyResult(config, people, theta_pop)
+    result = StudyResult(config, people, theta_pop, pooled=pooled, pooled_config=pcfg)
     # 2. H1/H2
     t0 = time.perf_counter()
     _reseed(people, 11)
@@ -358,5 +358,4 @@ def run_study(config: StudyConfig, out: Path, progress: bool = True,
     timings["episodes"] = episodes
     timings["episode_s"] = episode_s
     result.timings = timings
-    write_report(result, out)
     return result

@@ -1,20 +1,20 @@
-"""Markdown, CSV and PNG of the simulated user study (:mod:`.user_study`)."""
+"""Markdown, CSV and PNG of the simulated user study (:func:`.study.run_study`'s result)."""
 
 from __future__ import annotations
 
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from agents.cospar import THETA_NAMES
 from handover_env.config import HandoverParams
-from handover_eval.preference.tuning import PAPER_THETA, theta_line, write_csv
-
-if TYPE_CHECKING:
-    from handover_eval.preference.study import StudyResult
+from handover_eval.preference.study import PAPER, StudyResult
+from handover_eval.preference.tuning import PAPER_THETA
+from handover_eval.preference.tuning_report import save_run, theta_line
+from handover_eval.reporting import write_csv, write_text
 
 SOURCE = (
     "**Simulated participants** (`agents/participants.py`: a documented model of how people judge "
@@ -40,8 +40,6 @@ def markdown(result: StudyResult) -> str:
     """The report's text."""
     c, cfg = result.h1_h2, result.config
     com, tim, h3 = c["comfort"], c["time"], result.h3
-    from handover_eval.preference.study import PAPER
-
     pd, ps = PAPER["comfort_dynamic"], PAPER["comfort_static"]
     td, ts = PAPER["time_dynamic"], PAPER["time_static"]
     lines = [
@@ -205,8 +203,6 @@ def _figure(result: StudyResult, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from handover_eval.preference.study import PAPER
-
     c = result.h1_h2
     fig, axes = plt.subplots(
         1, 3 if result.personal else 2, figsize=(13 if result.personal else 8.5, 3.6)
@@ -259,15 +255,17 @@ def _figure(result: StudyResult, path: Path) -> None:
 
 def write_report(result: StudyResult, out: Path) -> list[Path]:
     """user_study.md, summary.json, trials.csv, h3_choices.csv, personalised.csv, participants.csv,
-    PNG."""
+    PNG, and the pooled CoSpar run in ``pooled/`` (:func:`.tuning_report.save_run`)."""
     out.mkdir(parents=True, exist_ok=True)
+    if result.pooled is not None and result.pooled_config is not None:
+        save_run(result.pooled, result.participants, result.pooled_config, out / "pooled")
     text = markdown(result)
-    (out / "user_study.md").write_text(text)
-    write_csv(out / "trials.csv", result.trials)
-    write_csv(out / "h3_choices.csv", result.choices)
+    write_text(text, out / "user_study.md")
+    write_csv(result.trials, out / "trials.csv")
+    write_csv(result.choices, out / "h3_choices.csv")
     if result.personal:
-        write_csv(out / "personalised.csv", result.personal)
-    write_csv(out / "participants.csv", [p.describe() for p in result.participants])
+        write_csv(result.personal, out / "personalised.csv")
+    write_csv([p.describe() for p in result.participants], out / "participants.csv")
     summary: dict[str, Any] = {
         "source": "simulated participants (agents/participants.py), not people",
         "theta_population": dict(zip(THETA_NAMES, result.theta_pop.as_array())),
@@ -278,7 +276,7 @@ def write_report(result: StudyResult, out: Path) -> list[Path]:
         "h3": result.h3,
         "timings": result.timings,
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    write_text(json.dumps(summary, indent=1, default=float), out / "summary.json")
     _figure(result, out / "user_study.png")
     print(text)
     return [out / "user_study.md", out / "user_study.png"]

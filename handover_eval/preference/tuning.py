@@ -25,11 +25,9 @@ an iteration holds ``participants x n_samples`` new actions.
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -115,7 +113,8 @@ class EpisodeRunner:
             self._dataset = load_any(None)
         return self._dataset
 
-    def _planner(self, theta: HandoverParams) -> Any:
+    def planner(self, theta: HandoverParams) -> Any:
+        """The planning agent (``ours`` or ``reactive``) fitted once, with ``theta`` set."""
         if self._agent is None:
             if self.agent_name == "ours":
                 from agents.nonparametric import NonparametricAgent
@@ -199,7 +198,7 @@ class EpisodeRunner:
                         self._static_agent = StaticAgent()
                     agent = self._static_agent
                 else:
-                    agent = self._planner(theta)
+                    agent = self.planner(theta)
                 info = run_episode(
                     env, agent, seed=int(seed), options=self._options(participant, int(seed))
                 )
@@ -405,112 +404,3 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
         episode_seconds=runner.seconds,
         seconds=time.perf_counter() - start,
     )
-
-
-# ---------------------------------------------------------------------------- outputs
-def write_csv(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
-    """Rows of dicts to CSV (columns: the union, in first-seen order)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    columns: list[str] = []
-    for r in rows:
-        columns.extend(k for k in r if k not in columns)
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-
-
-def posterior_marginals(learner: CoSpar) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Per parameter: (values, mean over the other parameters of the posterior mean, of its sd)."""
-    shape = learner.config.points_per_dim
-    mean = learner.f_hat.reshape(shape)
-    sd = np.sqrt(np.clip(np.diag(learner.cov), 0.0, None)).reshape(shape)
-    out = []
-    for k, (lo, hi) in enumerate(learner.config.ranges):
-        axes = tuple(j for j in range(4) if j != k)
-        out.append((np.linspace(lo, hi, shape[k]), mean.mean(axis=axes), sd.mean(axis=axes)))
-    return out
-
-
-def plot_marginals(learner: CoSpar, theta_hat: HandoverParams, path: Path, title: str) -> None:
-    """PNG: the posterior mean of the utility, averaged over the other three parameters, per
-    parameter."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    labels = ("K (N/m)", "B (N s/m)", "t_f (s)", "f_r (N)")
-    fig, axes = plt.subplots(1, 4, figsize=(13, 3.2), sharey=True)
-    for k, (ax, (x, m, s)) in enumerate(zip(axes, posterior_marginals(learner))):
-        ax.plot(x, m, "o-", color="C0")
-        ax.fill_between(x, m - s, m + s, color="C0", alpha=0.2, label="posterior mean ± sd")
-        ax.axvline(theta_hat.as_array()[k], color="C3", label="our Θ̂")
-        ax.axvline(PAPER_THETA[k], color="0.4", ls="--", label="paper's Θ̂")
-        ax.set_xlabel(labels[k])
-    axes[0].set_ylabel("utility (posterior mean,\naveraged over the others)")
-    axes[0].legend(fontsize=7, loc="lower left")
-    fig.suptitle(title + " (simulated participants)", fontsize=10)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def theta_line(theta: HandoverParams) -> str:
-    k, b, tf, fr = theta.as_array()
-    return f"[K {k:.1f}, B {b:.1f}, t_f {tf:.2f}, f_r {fr:.1f}]"
-
-
-def save_run(
-    result: PreferenceResult,
-    participants: Sequence[Participant],
-    config: PreferenceConfig,
-    out: Path,
-) -> list[Path]:
-    """theta_hat.json, history.csv, preferences.csv, participants.csv, posterior_marginals.png."""
-    import json
-
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [
-        out / "theta_hat.json",
-        out / "history.csv",
-        out / "preferences.csv",
-        out / "participants.csv",
-        out / "posterior_marginals.png",
-    ]
-    iters = config.iterations
-    record = {
-        "source": "simulated participants (agents/participants.py), not people",
-        "theta_hat": dict(zip(THETA_NAMES, result.theta_hat.as_array())),
-        "theta_hat_whole_grid": dict(zip(THETA_NAMES, result.theta_hat_grid.as_array())),
-        "paper_theta_hat": dict(zip(THETA_NAMES, PAPER_THETA)),
-        "participants": [p.pid for p in participants],
-        "iterations": iters,
-        "walks": config.walks,
-        "agent": config.agent,
-        "receiver": config.receiver,
-        "grid": list(config.cospar.points_per_dim),
-        "preferences": len(result.preferences),
-        "episodes": result.episodes,
-        "episode_seconds": result.episode_seconds,
-        "wall_seconds": result.seconds,
-        "seconds_per_iteration": result.seconds / iters,
-    }
-    paths[0].write_text(json.dumps(record, indent=1))
-    write_csv(paths[1], result.history)
-    write_csv(paths[2], result.preferences)
-    write_csv(paths[3], [p.describe() for p in participants])
-    who = (
-        f"participant {participants[0].pid}"
-        if len(participants) == 1
-        else f"{len(participants)} participants pooled"
-    )
-    plot_marginals(
-        result.learner,
-        result.theta_hat,
-        paths[4],
-        f"CoSpar posterior after {iters} iterations, {who}",
-    )
-    return paths
