@@ -1,7 +1,6 @@
 """ACT for the k-fold evaluations: one LeRobot export, fold models trained in parallel processes.
 
-Training ACT per fold used to export every fold's training set to its own LeRobotDataset (~4
-episodes/s, ~3.5 min a fold) and then train on one core while the second core idled. Here:
+Every fold's model trains from one shared export, in parallel:
 
 1. The whole dataset is exported once per (dataset fingerprint, W, H) to
    ``<cache>/act-export-<key>/`` (:func:`ensure_export`), written to a temporary sibling and

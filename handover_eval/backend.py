@@ -267,9 +267,9 @@ def _worker_environment() -> Iterator[None]:
 
     A spawned worker imports numpy, and with it OpenBLAS, while it unpickles its initialiser's
     arguments, before the initialiser runs; OpenBLAS reads its thread count once, at load. So
-    the variables must already be in the environment the worker inherits: with one BLAS thread
-    per worker, not one per core, the GP fits of a 2-worker pool on 2 cores ran 10-60x faster.
-    The caller's environment is restored afterwards (no process-wide side effect).
+    the variables must already be in the environment the worker inherits, so that each worker
+    runs one BLAS thread rather than one per core (which oversubscribes the cores). The caller's
+    environment is restored afterwards (no process-wide side effect).
     """
     added = {k: v for k, v in WORKER_ENV.items() if k not in os.environ}
     os.environ.update(added)

@@ -46,19 +46,11 @@ class MethodOptions:
         quick: tiny training budgets for tests (``--quick``); never used for reported numbers.
         inducing_ratio: the SPGP inducing ratio of ``ours`` (paper: 0.4).
         act_steps: ACT optimisation steps. None = :data:`ACT_EVAL_STEPS` (3000; 40 with ``quick``),
-            the k-fold budget, not ``train.py``'s 8000: 10 folds of ACT must fit in ~40 min on 2
-            cores. Measured on the 2-core box (receiver-only ACT, batch 64, one torch thread per
-            fold, validation every ``steps // 8``): 8.6 steps/s for one fold alone, 8.1-8.2 steps/s
-            each with 2 folds training side by side (6.6 each while another job also loaded the
-            box); a validation pass over a fold's ~10k held-out frames takes ~3.3 s; the single
-            875-episode LeRobot export takes ~100 s. A 3000-step fold thus takes ~6.6 min, and
-            10 folds in 2 workers ~33 min of training + ~2 min export (~44 min on a shared box).
-            The full Table I run measured 41 min for the 10 ACT folds (444-517 s each, 2 at a
-            time) after a 105 s export, 56 min in all with the then still serial fold loop.
-            A 787-episode training set reaches validation L1 0.264 / 0.258 / 0.249 / 0.246
-            after 1000 / 2000 / 3000 / 5000 steps: 3000 is within ~1% of 5000. The held-out
-            current-frame RMS still gains from more: 3-fold, full training sets, 61.16 mm at
-            3000 steps vs 57.46 mm at 6000 (README, Sample efficiency).
+            the k-fold budget, not ``train.py``'s 8000, so that 10 ACT folds train within the
+            make-test-sized machine's budget (2 cores, one torch thread per fold). On a
+            787-episode training set the validation L1 after 3000 steps is within ~1% of the
+            value after 5000; the held-out current-frame RMS still gains from more steps
+            (README, Sample efficiency).
         bc_epochs: BC-MLP maximum epochs (None = the BC-MLP agent's default).
         horizon: predicted frames (the protocol's horizon).
         giver_state: also give BC-MLP and ACT the giver's position at the query frame

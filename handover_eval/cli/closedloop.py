@@ -1,7 +1,9 @@
 """The ``closed-loop`` and ``theta-sweep`` commands of evaluate.py: their flags and their runs.
 
-``evaluate.py`` keeps only the dispatch; the runs are :func:`.closedloop.run.run_closed_loop` and
-:func:`.closedloop.theta_sweep.run_sweep`, the files are written by :mod:`.closedloop.output`.
+``evaluate.py`` keeps only the dispatch; the runs are
+:func:`handover_eval.closedloop.run.run_closed_loop` and
+:func:`handover_eval.closedloop.theta_sweep.run_sweep`; the files are written by
+:mod:`handover_eval.closedloop.output`.
 """
 
 from __future__ import annotations

@@ -145,7 +145,7 @@ def run_preference_command(args: argparse.Namespace) -> None:
             f"participant {p.pid}: {b.sex}, {b.height:.2f} m, walks {b.speed:.2f} m/s, passes at "
             f"y = {b.pass_y:.2f} m"
         )
-    try:  # on Ray, each turn's new walks run as parallel tasks (preference_batch)
+    try:  # on Ray, each turn's new walks run as parallel tasks (handover_eval.preference.batch)
         with session(backend, max(1, min(2, os.cpu_count() or 1))) as sess:
             result = run_preference(participants, config, progress=not args.no_progress)
     except (JobError, ConnectionError) as exc:

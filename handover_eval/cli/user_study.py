@@ -71,7 +71,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         default=1,
         metavar="N",
         help="processes running the per-participant CoSpar in parallel (default 1: in this "
-        "process, as before); with --backend ray it sizes the local Ray instance",
+        "process); with --backend ray it sizes the local Ray instance",
     )
     add_backend_arguments(p)
     return p

@@ -1,5 +1,5 @@
 """closed_loop.md: the closed-loop tables rendered as Markdown, with the notes that say what each
-number measures (the aggregates and paired rows come from :mod:`.closedloop_report`)."""
+number measures (the aggregates and paired rows come from :mod:`.report`)."""
 
 from __future__ import annotations
 

@@ -2,20 +2,21 @@
 
 The run, top to bottom (:func:`run_closed_loop`):
 
-1. **Receivers** (:mod:`.closedloop_receivers`): N seeded scripted ID and OOD walkers, and the
+1. **Receivers** (:mod:`.receivers`): N seeded scripted ID and OOD walkers, and the
    replayed episodes of the chosen folds of Table I's split (default: the held-out half).
-2. **Fold models** (:mod:`.closedloop_agents`): BC-MLP / ACT checkpoints of the needed folds are
+2. **Fold models** (:mod:`.roster`): BC-MLP / ACT checkpoints of the needed folds are
    loaded from Table I's cache, or trained first (the training time is reported apart).
 3. **Episodes**: chunks of a few receivers for one agent are run in ``workers`` spawned
    processes (:func:`handover_eval.backend.map_folds`, the dataset sent once per
-   worker; :mod:`.closedloop_worker`). Each worker makes its own envs (one per env kind and Θ,
+   worker; :mod:`.worker`). Each worker makes its own envs (one per env kind and Θ,
    never pickled) and fits or loads each fold model once. Every episode is seeded and every
    agent reset, so the rows do not depend on the number of workers or on which worker ran what.
-4. **Rows** (:func:`.closedloop_worker.episode_row`): the final ``info`` flattened, ``outcome``
+4. **Rows** (:func:`.worker.episode_row`): the final ``info`` flattened, ``outcome``
    "timeout" for a TimeLimit truncation, for replays the recorded transfer and Δt, Δx, and the
    number of MuJoCo instabilities (auto-resets) in the episode.
 
-The tables and the plot are made by :mod:`.closedloop_report`.
+The tables and the plot are made by :mod:`.report`, :mod:`.markdown` and :mod:`.plot`; the
+files are written by :mod:`.output`.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ CoSpar pools its participants into one posterior: each participant's turn propos
 posterior the previous turn updated, so turns are sequential. What a turn can run in parallel is
 its new actions' walks (Thompson samples x walks episodes). :func:`prefetch` runs those as
 backend jobs on the active Ray backend (:mod:`.backend`) and fills the runner's episode cache,
-from which :meth:`.preference.EpisodeRunner.run` then reads them. Every walk is seeded, so the
+from which :meth:`.tuning.EpisodeRunner.run` then reads them. Every walk is seeded, so the
 episodes, and the run, are those of the serial loop. On the process backend it does nothing: a
 process pool per turn would cost more than the few episodes it parallelises.
 """

@@ -4,7 +4,7 @@ Theta.
 ``python evaluate.py user-study --participants 8 --trials 5`` runs, for a population drawn by
 :func:`agents.participants.sample_population` (75 % male, as the paper's 6 of 8):
 
-1. **Population Theta-hat.** CoSpar pooled over all participants (:mod:`.preference`), 20
+1. **Population Theta-hat.** CoSpar pooled over all participants (:mod:`.tuning`), 20
    iterations, on their tuning walks (walk stream 0): one Theta-hat, as the paper learned one.
 2. **H1/H2.** Each participant does ``trials`` dynamic handovers (``ours`` with the population
    Theta-hat, DynamicHandover-v0) and ``trials`` static ones (the static agent, StaticHandover-v0,
