@@ -13,9 +13,9 @@ new checkpoint, never files of two different epochs.
 **Validated reads.** :func:`read_json` (size-bounded, one error naming the file),
 :func:`load_tensors` (keys, shapes, dtypes and finiteness against what the model expects),
 :func:`config_from_dict` (every field present, of its exact JSON type: ``"no"`` is not a bool, a
-float is not an int) and :func:`load_optimizer` (LeRobot's optimizer format, checked against the
-optimizer being resumed) raise :class:`CheckpointError` naming the file and
-the problem; nothing raw (``SafetensorError``, ``JSONDecodeError``, ``KeyError``...) escapes.
+float is not an int) raise :class:`CheckpointError` naming the file and the problem; nothing raw
+(``SafetensorError``, ``JSONDecodeError``, ``KeyError``...) escapes. The optimizer state is
+:mod:`baselines.optimizer_state`'s, the training state's check :mod:`baselines.trainer`'s.
 
 **Output folders.** :func:`check_out_dir` decides whether ``train.py`` may write into ``--out``.
 """
@@ -249,126 +249,6 @@ def config_from_dict(cls: type, d: Any, source: str, ignore: frozenset[str] = fr
         return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
     except (ValueError, TypeError) as exc:
         raise CheckpointError(f"{source}: invalid config ({exc})") from None
-
-
-def check_training_state(
-    state: Any, source: Path, counter: str, best: str, extra: dict[str, type]
-) -> dict:
-    """A training ``state.json`` whose fields have their JSON types and agree with each other.
-
-    Args:
-        state: the parsed JSON.
-        source: the file, for messages.
-        counter: the progress field (``"epoch"``: one validation pass each; ``"step"``: at most
-            one).
-        best: the field holding the counter value of the best validation pass.
-        extra: further fields and their types.
-
-    Raises:
-        CheckpointError: a field is missing, unknown or mistyped, the counter is negative, the loss
-            curves are not finite or do not fit the counter, or the best pass disagrees with them.
-    """
-    keys = {counter: int, "best_val": float, best: int, "train_loss": list, "val_loss": list,
-            "wall_time_s": float, "split": dict, **extra}
-    if not isinstance(state, dict) or set(state) != set(keys):
-        got = sorted(state) if isinstance(state, dict) else type(state).__name__
-        raise CheckpointError(f"{source}: expected the fields {sorted(keys)}, got {got}")
-    for key, kind in keys.items():
-        value = state[key]
-        if kind is float:  # best_val is inf until the first validation pass
-            ok = (
-                isinstance(value, (int, float))
-                and not isinstance(value, bool)
-                and not math.isnan(value)
-            )
-        else:
-            ok = isinstance(value, kind) if kind in (list, dict) else json_type_ok(value, kind)
-        if not ok:
-            raise CheckpointError(f"{source}: {key} = {value!r} is not a {kind.__name__}")
-    n, losses, train = state[counter], state["val_loss"], state["train_loss"]
-    problems = []
-    if n < 0:
-        problems.append(f"{counter} {n} is negative")
-    if len(train) != len(losses) or (len(losses) != n if counter == "epoch" else len(losses) > n):
-        problems.append(f"{len(train)}/{len(losses)} loss values at {counter} {n}")
-    if not all(json_type_ok(v, float) for v in train + losses):
-        problems.append("a loss value is not a finite number")
-    elif losses and state["best_val"] != min(losses):
-        problems.append("best_val disagrees with val_loss")
-    elif counter == "epoch" and losses and state[best] != losses.index(min(losses)) + 1:
-        problems.append(f"{best} disagrees with val_loss")
-    if not -1 <= state[best] <= max(n, 0) or state["wall_time_s"] < 0:
-        problems.append(f"{best} or wall_time_s out of range")
-    if "bad_epochs" in state and not 0 <= state["bad_epochs"] <= max(n, 0):
-        problems.append("bad_epochs out of range")
-    split = state["split"]
-    if set(split) != {"train", "val"} or not all(
-            isinstance(v, list) and all(isinstance(x, str) for x in v) for v in split.values()):
-        problems.append("split must hold 'train' and 'val' lists of episode ids")
-    if problems:
-        raise CheckpointError(f"{source}: inconsistent training state: {'; '.join(problems)}")
-    return state
-
-
-# ---------------------------------------------------------------------- optimizer state
-OPTIMIZER_STATE = "optimizer_state.safetensors"
-OPTIMIZER_PARAM_GROUPS = "optimizer_param_groups.json"
-
-
-def save_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
-    """LeRobot's optimizer format: flat ``state/<i>/<name>`` tensors + the param groups as JSON."""
-    from safetensors.torch import save_file
-
-    state = opt.state_dict()
-    flat = {
-        f"state/{i}/{name}": t.contiguous()
-        for i, s in state["state"].items()
-        for name, t in s.items()
-    }
-    save_file(flat, folder / OPTIMIZER_STATE)
-    write_json(folder / OPTIMIZER_PARAM_GROUPS, state["param_groups"])
-
-
-def load_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
-    """Restore ``opt`` from :func:`save_optimizer`'s files after checking them against ``opt``.
-
-    The param groups must equal those of ``opt`` (built from the same config: same learning rate,
-    betas, weight decay and parameter indices); every state tensor must be finite and match its
-    parameter's shape.
-    """
-    current = opt.state_dict()
-    groups_file = folder / OPTIMIZER_PARAM_GROUPS
-    groups = read_json(groups_file, "optimizer param groups")
-    want = current["param_groups"]
-    if not isinstance(groups, list) or len(groups) != len(want):
-        raise CheckpointError(f"{groups_file}: expected {len(want)} param group(s)")
-    if json.loads(json.dumps(want)) != groups:  # the optimizer was built from the same config
-        raise CheckpointError(
-            f"{groups_file}: param groups (learning rate, betas, weight decay, ...) differ from "
-            "the "
-            f"optimizer this config builds"
-        )
-    params = [p for group in opt.param_groups for p in group["params"]]
-    flat = load_tensors(folder / OPTIMIZER_STATE)
-    state: dict[int, dict[str, torch.Tensor]] = {}
-    for key, tensor in flat.items():
-        m = re.fullmatch(r"state/([0-9]+)/(exp_avg|exp_avg_sq|step|max_exp_avg_sq)", key)
-        if m is None or int(m.group(1)) >= len(params):
-            raise CheckpointError(f"{folder / OPTIMIZER_STATE}: unexpected key {key!r}")
-        index, name = int(m.group(1)), m.group(2)
-        want_shape = () if name == "step" else tuple(params[index].shape)
-        if tuple(tensor.shape) != want_shape or not tensor.is_floating_point():
-            raise CheckpointError(
-                f"{folder / OPTIMIZER_STATE}: {key} has shape {tuple(tensor.shape)}, "
-                f"expected {want_shape}"
-            )
-        if name == "step" and float(tensor) < 0:
-            raise CheckpointError(f"{folder / OPTIMIZER_STATE}: {key} is negative")
-        state.setdefault(index, {})[name] = tensor
-    try:
-        opt.load_state_dict({"state": state, "param_groups": groups})
-    except (ValueError, KeyError, TypeError, RuntimeError) as exc:
-        raise CheckpointError(f"{folder}: optimizer state does not fit ({exc})") from None
 
 
 # ---------------------------------------------------------------------- output folders

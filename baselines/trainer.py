@@ -46,17 +46,16 @@ except ModuleNotFoundError as _exc:
 from baselines.checkpoint_io import (
     MAX_JSON_BYTES,
     CheckpointError,
-    check_training_state,
     config_from_dict,
     expected_of,
-    load_optimizer,
+    json_type_ok,
     load_tensors,
     read_json,
     recover,
-    save_optimizer,
     staged_write,
     write_json,
 )
+from baselines.optimizer_state import load_optimizer, save_optimizer
 
 TRAINING_STATE = "training_state"
 LOG_FILE = "train_log.jsonl"
@@ -265,6 +264,65 @@ def check_state(
 ) -> dict:
     """A ``state.json`` of :func:`new_state`'s fields (plus ``extra``), consistent with itself."""
     return check_training_state(state, source, counter, f"best_{counter}", extra or {})
+
+
+def check_training_state(
+    state: Any, source: Path, counter: str, best: str, extra: dict[str, type]
+) -> dict:
+    """A training ``state.json`` whose fields have their JSON types and agree with each other.
+
+    Args:
+        state: the parsed JSON.
+        source: the file, for messages.
+        counter: the progress field (``"epoch"``: one validation pass each; ``"step"``: at most
+            one).
+        best: the field holding the counter value of the best validation pass.
+        extra: further fields and their types.
+
+    Raises:
+        CheckpointError: a field is missing, unknown or mistyped, the counter is negative, the loss
+            curves are not finite or do not fit the counter, or the best pass disagrees with them.
+    """
+    keys = {counter: int, "best_val": float, best: int, "train_loss": list, "val_loss": list,
+            "wall_time_s": float, "split": dict, **extra}
+    if not isinstance(state, dict) or set(state) != set(keys):
+        got = sorted(state) if isinstance(state, dict) else type(state).__name__
+        raise CheckpointError(f"{source}: expected the fields {sorted(keys)}, got {got}")
+    for key, kind in keys.items():
+        value = state[key]
+        if kind is float:  # best_val is inf until the first validation pass
+            ok = (
+                isinstance(value, (int, float))
+                and not isinstance(value, bool)
+                and not math.isnan(value)
+            )
+        else:
+            ok = isinstance(value, kind) if kind in (list, dict) else json_type_ok(value, kind)
+        if not ok:
+            raise CheckpointError(f"{source}: {key} = {value!r} is not a {kind.__name__}")
+    n, losses, train = state[counter], state["val_loss"], state["train_loss"]
+    problems = []
+    if n < 0:
+        problems.append(f"{counter} {n} is negative")
+    if len(train) != len(losses) or (len(losses) != n if counter == "epoch" else len(losses) > n):
+        problems.append(f"{len(train)}/{len(losses)} loss values at {counter} {n}")
+    if not all(json_type_ok(v, float) for v in train + losses):
+        problems.append("a loss value is not a finite number")
+    elif losses and state["best_val"] != min(losses):
+        problems.append("best_val disagrees with val_loss")
+    elif counter == "epoch" and losses and state[best] != losses.index(min(losses)) + 1:
+        problems.append(f"{best} disagrees with val_loss")
+    if not -1 <= state[best] <= max(n, 0) or state["wall_time_s"] < 0:
+        problems.append(f"{best} or wall_time_s out of range")
+    if "bad_epochs" in state and not 0 <= state["bad_epochs"] <= max(n, 0):
+        problems.append("bad_epochs out of range")
+    split = state["split"]
+    if set(split) != {"train", "val"} or not all(
+            isinstance(v, list) and all(isinstance(x, str) for x in v) for v in split.values()):
+        problems.append("split must hold 'train' and 'val' lists of episode ids")
+    if problems:
+        raise CheckpointError(f"{source}: inconsistent training state: {'; '.join(problems)}")
+    return state
 
 
 # ---------------------------------------------------------------------- checkpoint JSON
