@@ -22,7 +22,8 @@ Training state, checkpoints, resume and progress are the shared :mod:`baselines.
 checkpoint is written as one unit, and :meth:`BCMLPAgent.load` / ``--resume`` validate every file
 before using it: all config fields present and of their JSON type, weights of the model's shapes
 and dtypes, finite, positive normalisation scales, a ``state.json`` consistent with its loss
-curves. Plain torch: no LeRobot import.
+curves. Loading writes nothing (an interrupted commit is refused, never finished: ``--resume``
+finishes it). Plain torch: no LeRobot import.
 
 In an env (``reset``/``act``) it is a :class:`agents.predictive.PredictiveAgent`, exactly like the
 planner: one chunk per new camera frame, ACT-style temporal ensembling, the target at t_f of Theta,
@@ -53,6 +54,7 @@ from agents.predictive import ClosedLoopConfig
 from baselines import trainer
 from baselines.checkpoint_io import (
     CheckpointError,
+    check_loadable,
     config_from_dict,
     expected_of,
     load_tensors,
@@ -440,8 +442,7 @@ class BCMLPAgent(GiverConditionedAgent):
         :class:`~baselines.checkpoint_io.CheckpointError` naming the file. ``closed_loop_kwargs``
         (params, closed_loop, layout) go to the constructor.
         """
-        path = Path(path)
-        trainer.recover_checkpoint(path)
+        path = check_loadable(path, ("config.json", "model.safetensors"), "BC-MLP")
         saved = _read_config(path)
         cfg = BCMLPConfig.from_dict(
             {**saved["config"], "device": device}, str(path / "config.json")

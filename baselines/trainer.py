@@ -12,10 +12,12 @@ steps through LeRobot's ``ACTPolicy.forward``); everything around the loop is he
   :func:`~baselines.checkpoint_io.staged_write`: the model files (the caller's ``write_model``:
   best weights and configs), ``training_state/`` (last weights, optimizer in LeRobot's format,
   optionally the torch RNG, ``state.json``) and the JSON-lines log :data:`LOG_FILE`.
-* **Resume** (:func:`load_training_state`): every file validated before it is used (a config
-  that differs in a field the run may not change, a state inconsistent with its loss curves, a
-  different split, weights of other shapes, a foreign optimizer state: each a
-  :class:`~baselines.checkpoint_io.CheckpointError` naming the file).
+* **Resume** (:func:`load_training_state`): the one reader that finishes an interrupted commit
+  (checked, :func:`~baselines.checkpoint_io.recover`), then every file validated before it is
+  used (a config that differs in a field the run may not change, a state inconsistent with its
+  loss curves, a different split, weights of other shapes, a foreign optimizer state, a file
+  linked out of the folder: each a :class:`~baselines.checkpoint_io.CheckpointError` naming the
+  file). Loading a model (:func:`read_checkpoint_json`) never recovers: it writes nothing.
 * **Checkpoint JSON** (:func:`checkpoint_json`, :func:`read_checkpoint_json`): the
   ``{"type", "format", "config", "features", "training"}`` record both baselines write, read back
   with every config field present and of its JSON type.
@@ -46,6 +48,7 @@ except ModuleNotFoundError as _exc:
 from baselines.checkpoint_io import (
     MAX_JSON_BYTES,
     CheckpointError,
+    check_loadable,
     config_from_dict,
     expected_of,
     json_type_ok,
@@ -55,7 +58,12 @@ from baselines.checkpoint_io import (
     staged_write,
     write_json,
 )
-from baselines.optimizer_state import load_optimizer, save_optimizer
+from baselines.optimizer_state import (
+    OPTIMIZER_PARAM_GROUPS,
+    OPTIMIZER_STATE,
+    load_optimizer,
+    save_optimizer,
+)
 
 TRAINING_STATE = "training_state"
 LOG_FILE = "train_log.jsonl"
@@ -228,8 +236,12 @@ def load_training_state(
         check_best: further checks of the best weights (e.g. positive normalisation scales).
         rng: restore the torch RNG saved by :func:`save_checkpoint`.
     """
-    recover(out)
+    recover(out)  # --resume is the command that wrote it: finish its interrupted commit (checked)
     ts = out / TRAINING_STATE
+    saved = ("state.json", "last.safetensors", "rng.safetensors", OPTIMIZER_STATE,
+             OPTIMIZER_PARAM_GROUPS)
+    check_loadable(out, [f"{TRAINING_STATE}/{n}" for n in saved] + ["model.safetensors", LOG_FILE],
+                   "training")
     if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
         raise CheckpointError(f"cannot resume: no training state in {ts}")
     theirs = saved_config(out)
@@ -357,8 +369,7 @@ def read_checkpoint_json(
         upgrades: {older format: function(config, source) -> the config in this format}; the
             function validates the old config and raises CheckpointError if it cannot.
     """
-    if not path.is_dir():
-        raise CheckpointError(f"no {label} checkpoint folder at {path}")
+    check_loadable(path, [file], label)
     f = path / file
     if not f.is_file():
         raise CheckpointError(f"{path}: missing {file} (not a {label} checkpoint of this project)")
@@ -378,16 +389,6 @@ def read_checkpoint_json(
     if not isinstance(saved.get("training", {}), dict):
         raise CheckpointError(f"{f}: training must be a JSON object")
     return saved
-
-
-def recover_checkpoint(path: Path) -> None:
-    """Finish or discard an interrupted checkpoint write in ``path`` before it is read."""
-    try:
-        recover(path)
-    except OSError as exc:
-        raise CheckpointError(
-            f"{path}: cannot finish an interrupted checkpoint write ({exc})"
-        ) from None
 
 
 def out_path(out_dir: str | os.PathLike | None) -> Path | None:
