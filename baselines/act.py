@@ -98,6 +98,7 @@ from baselines.checkpoint_io import (
     write_json,
 )
 from baselines.giver_conditioned import GiverConditionedAgent
+from baselines.norm_bounds import feature_limits
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import Episode, HandoverDataset
 from handover_env.data.features import (
@@ -1039,7 +1040,8 @@ class ACTAgent(GiverConditionedAgent):
         }
         state_files = {**pre_state, **post_state}
         check_loadable(path, [f.name for f in state_files.values()], "ACT")
-        stats = {i: act_files.load_stats(f, shapes) for i, f in state_files.items()}
+        limits = feature_limits(cfg.spec.env_dim)
+        stats = {i: act_files.load_stats(f, shapes, limits) for i, f in state_files.items()}
         pre_stats, post_stats = stats[3], stats[0]  # the normaliser and unnormaliser steps
         agent = cls.__new__(cls)
         GiverConditionedAgent.__init__(agent, **closed_loop_kwargs)

@@ -21,7 +21,7 @@ import torch  # noqa: E402
 torch.set_num_threads(1)
 
 from baselines_toy import toy_dataset  # noqa: E402
-from safetensors.torch import load_file  # noqa: E402
+from safetensors.torch import load_file, save_file  # noqa: E402
 
 from baselines.act import ACTAgent, ACTAgentConfig  # noqa: E402
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig  # noqa: E402
@@ -376,3 +376,57 @@ def test_a_kill_during_the_first_commit_is_resumed(data_path, tmp_path, monkeypa
     for name in ("model.safetensors", "training_state/last.safetensors"):
         a, b = load_file(tmp_path / "straight" / name), load_file(killed / name)
         assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a), name
+
+
+# ---------------------------------------------------------------------- item 9
+def _edit(path: Path, key: str, index: int, value: float) -> None:
+    tensors = load_file(path)
+    tensors[key] = tensors[key].clone()
+    tensors[key].view(-1)[index] = value
+    save_file(tensors, path)
+
+
+@pytest.mark.parametrize("key, index, value, message", [
+    ("out_std", 0, 1e30, r"out_std\[0\] = 1e\+30 is not in \[1e-06, 100\] m"),
+    ("out_mean", 2, -1e3, r"out_mean\[2\] = -1000 is not within ±100 m"),
+    ("in_std", 1, 1e-30, r"in_std\[1\] = 1e-30 is not in \[1e-06, 100\] m"),
+    ("in_mean", 5, 250.0, r"in_mean\[5\] = 250 is not within ±200 m"),  # a history offset
+    ("in_mean", 1, 150.0, r"in_mean\[1\] = 150 is not within ±100 m"),  # the current position
+])
+def test_bc_mlp_statistics_beyond_the_data_are_one_error_naming_file_and_key(
+    bc_dir, tmp_path, key, index, value, message
+):
+    folder = shutil.copytree(bc_dir, tmp_path / "ckpt")
+    assert float(load_file(bc_dir / "model.safetensors")["out_std"].max()) < 100
+    _edit(folder / "model.safetensors", key, index, value)
+    with pytest.raises(CheckpointError, match=message) as info:
+        BCMLPAgent.load(folder)
+    assert str(info.value).startswith(f"{folder / 'model.safetensors'}: ")
+    assert "\n" not in str(info.value)
+
+
+def test_resume_checks_the_statistics_too(data_path, tmp_path, capsys):
+    folder = tmp_path / "run"
+    assert train.main(cli("bc-mlp", data_path, folder)) == 0
+    _edit(folder / "model.safetensors", "out_std", 0, 1e30)
+    capsys.readouterr()
+    assert train.main(cli("bc-mlp", data_path, folder, "--resume")) == 2
+    assert f"{folder / 'model.safetensors'}: out_std[0] = 1e+30" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("file, key, index, value, message", [
+    (POST_STATS, "action.std", 0, 1e30, r"action\.std\[0\] = 1e\+30 is not in \(0, 100\] m"),
+    (POST_STATS, "action.mean", 1, 1e9, r"action\.mean\[1\] = 1e\+09 is not within ±100 m"),
+    (PRE_STATS, "observation.environment_state.std", 4, 500.0,
+     r"observation\.environment_state\.std\[4\] = 500 is not in \(0, 200\] m"),
+    (PRE_STATS, "observation.state.max", 0, -1e6,
+     r"observation\.state\.max\[0\] = -1e\+06 is not within ±100 m"),
+])
+def test_act_statistics_beyond_the_data_are_one_error_naming_file_and_key(
+    act_dir, tmp_path, file, key, index, value, message
+):
+    folder = shutil.copytree(act_dir, tmp_path / "ckpt")
+    _edit(folder / file, key, index, value)
+    with pytest.raises(CheckpointError, match=message) as info:
+        ACTAgent.load(folder)
+    assert str(info.value).startswith(f"{folder / file}: ") and "\n" not in str(info.value)
