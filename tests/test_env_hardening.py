@@ -20,7 +20,12 @@ from handover_env.data.limits import MIN_BONE_M
 from handover_env.data.recording import Recording, load_recording
 from handover_env.gait import walking_pose
 from handover_env.person import replay_input
-from handover_env.receiver import SETTING_RANGES, ReceiverConfig, person_config
+from handover_env.receiver import (
+    LONGEST_EPISODE,
+    SETTING_RANGES,
+    ReceiverConfig,
+    person_config,
+)
 from handover_env.skeleton import BodyDims, joints_of, shortest_bone
 
 ENV_ID = "handover_env/DynamicHandover-v0"
@@ -376,6 +381,15 @@ def test_every_person_setting_is_checked(field):
     value = np.float32(getattr(ReceiverConfig(), field))  # numpy numbers are numbers ...
     config = person_config({field: value}, miss_distance=0.35)
     assert getattr(config, field) == float(value) and type(getattr(config, field)) is float
+
+
+def test_the_time_ranges_come_from_the_registered_episodes():
+    longest = max(
+        gym.spec(env_id).max_episode_steps
+        for env_id in ("handover_env/DynamicHandover-v0", "handover_env/StaticHandover-v0")
+    ) / 30.0
+    assert LONGEST_EPISODE == longest and rm.MAX_WALK_TIME == 6 * longest
+    assert SETTING_RANGES["reach_duration"][1] == longest
 
 
 @pytest.mark.parametrize(
