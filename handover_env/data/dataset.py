@@ -86,7 +86,13 @@ class Episode:
     def __post_init__(self) -> None:
         lengths = set()
         for name, width in _ARRAY_FIELDS.items():
-            arr = np.asarray(getattr(self, name), dtype=np.float64)
+            raw = np.asarray(getattr(self, name))
+            if raw.dtype.kind not in "iuf":  # strings, objects, bools, complex: never coerced
+                raise DatasetError(
+                    f"episode {self.source_id!r}: {name} must be a real numeric array, got dtype "
+                    f"{raw.dtype}"
+                )
+            arr = raw.astype(np.float64, copy=False)
             if arr.ndim != 2 or arr.shape[1] != width:
                 raise DatasetError(
                     f"episode {self.source_id!r}: {name} must have shape (T, {width}), got "
