@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from handover_env.extras import missing_extra
+from handover_env.paths import OUTPUT_LOCK, UnsafePathError, output_folder
 
 try:
     import torch
@@ -391,8 +392,8 @@ _ACT_STATE_FILE = re.compile(
     r"policy_(pre|post)processor_step_[0-9]+_[a-z_]+\.safetensors", re.ASCII
 )
 #: Entries train.py may find in an --out that holds no checkpoint yet (an export made before the
-#: first checkpoint, an interrupted first write).
-_HARMLESS = {"lerobot_dataset", STAGING}
+#: first checkpoint, an interrupted first write, the lock of the run that writes it).
+_HARMLESS = {"lerobot_dataset", STAGING, OUTPUT_LOCK}
 
 
 def checkpoint_kind(folder: str | os.PathLike) -> str | None:
@@ -454,13 +455,11 @@ def check_out_dir(out: str | os.PathLike, kind: str, resume: bool, overwrite: bo
     * a checkpoint of the other kind: only with ``overwrite`` (never with ``resume``);
     * anything else (a folder of someone's files, a file): never, not even with ``overwrite``.
     """
-    text = os.fspath(out)
-    if not text.strip():
-        raise CheckpointError("--out is empty (an unset shell variable?)")
-    out = Path(text)
+    try:
+        out = output_folder(out, "--out")
+    except UnsafePathError as exc:
+        raise CheckpointError(str(exc)) from None
     label = {"act": "ACT", "bc_mlp": "BC-MLP"}
-    if out.exists() and not out.is_dir():
-        raise CheckpointError(f"--out {out} exists and is not a folder")
     if not out.is_dir():
         if resume:
             raise CheckpointError(f"cannot resume: no checkpoint folder at {out}")

@@ -1,5 +1,9 @@
-"""Path safety for the tools that replace folders: nothing outside our own outputs is ever deleted.
+"""Path safety for the tools that write or replace folders: nothing outside our outputs is deleted.
 
+* :func:`output_folder` is the one check of every output-folder option (``--out``,
+  ``--checkpoints``, ``--export-root``, ...): empty or blank is refused (an unset shell variable),
+  ``~`` is expanded, and a path that exists but is not a folder is refused. Each running command
+  locks its ``--out`` with the file :data:`OUTPUT_LOCK` in it (``handover_eval.output_lock``).
 * :func:`check_replaceable_root` refuses the paths an ``--overwrite`` must never touch: the empty
   string (an unset shell variable), ``.``, the file-system root, the home folder, and any folder
   that holds the current one or the home folder.
@@ -24,8 +28,35 @@ from pathlib import Path
 _SIBLING = re.compile(r"\.(?P<name>.+)\.(?P<kind>partial|old)-(?P<pid>[0-9]+)-[0-9a-f]+", re.ASCII)
 
 
+#: The lock file a running command holds in its output folder (never a result; always ignored).
+OUTPUT_LOCK = ".lock"
+
+
 class UnsafePathError(ValueError):
-    """An output path that a tool must not replace; the message names it."""
+    """An output path that a tool must not use or replace; the message names it."""
+
+
+def output_folder(path: str | os.PathLike, flag: str = "--out") -> Path:
+    """``path`` (the value of option ``flag``) as the Path of an output folder, ``~`` expanded.
+
+    Raises :class:`UnsafePathError` naming ``flag`` if it is empty or blank, holds a NUL byte, or
+    names something that exists (or a dangling symbolic link) and is not a folder. The folder
+    itself need not exist yet.
+    """
+    text = os.fsdecode(path)
+    if not text.strip():
+        raise UnsafePathError(f"{flag} is empty (an unset shell variable?)")
+    if "\0" in text:
+        raise UnsafePathError(f"{flag} {text!r}: a path cannot hold a NUL byte")
+    try:
+        folder = Path(text).expanduser()
+    except RuntimeError as exc:  # ~user that does not exist, or no home folder
+        raise UnsafePathError(f"{flag} {text}: {exc}") from None
+    if folder.exists() and not folder.is_dir():
+        raise UnsafePathError(f"{flag} {folder}: exists and is not a folder")
+    if folder.is_symlink() and not folder.exists():
+        raise UnsafePathError(f"{flag} {folder}: a symbolic link to nothing")
+    return folder
 
 
 def check_replaceable_root(path: str | os.PathLike) -> Path:
