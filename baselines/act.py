@@ -49,7 +49,8 @@ Checkpoint folder: ``config.json`` + ``model.safetensors`` (``ACTPolicy.save_pre
 ``policy_preprocessor*.json/.safetensors`` and ``policy_postprocessor*`` (the normalisation
 statistics), ``handover_act.json`` (our config, features and training summary) and
 ``training_state/`` (last weights, optimizer, RNG and step) for ``--resume``. Each checkpoint is
-written as one unit (:func:`baselines.checkpoint_io.staged_write`). Loading validates every file
+written as one unit (:func:`baselines.checkpoint_io.staged_write`). Loading writes nothing (an
+interrupted commit is refused, never finished; ``--resume`` finishes it) and validates every file
 first (:mod:`baselines.act_files`: LeRobot's processor JSON can name any importable class, so it is
 checked against an allow-list and never handed to LeRobot) and builds the policy and processors
 from our own validated config.
@@ -88,6 +89,7 @@ from agents.predictive import ClosedLoopConfig
 from baselines import act_files, trainer
 from baselines.checkpoint_io import (
     CheckpointError,
+    check_loadable,
     config_from_dict,
     expected_of,
     json_type_ok,
@@ -96,6 +98,7 @@ from baselines.checkpoint_io import (
     write_json,
 )
 from baselines.giver_conditioned import GiverConditionedAgent
+from baselines.norm_bounds import feature_limits
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import Episode, HandoverDataset
 from handover_env.data.features import (
@@ -1008,8 +1011,9 @@ class ACTAgent(GiverConditionedAgent):
         from lerobot.policies.act.modeling_act import ACTPolicy
         from lerobot.policies.act.processor_act import make_act_pre_post_processors
 
-        path = Path(path)
-        trainer.recover_checkpoint(path)
+        path = check_loadable(path, (HANDOVER_JSON, "config.json", "model.safetensors",
+                                     act_files.PREPROCESSOR_JSON, act_files.POSTPROCESSOR_JSON),
+                              "ACT")  # writes nothing: an interrupted commit is refused
         saved = _read_handover_json(path)
         trained = ACTAgentConfig.from_dict(saved["config"], str(path / HANDOVER_JSON))
         cfg = ACTAgentConfig.from_dict(
@@ -1034,7 +1038,10 @@ class ACTAgent(GiverConditionedAgent):
             OBS_STATE: (STATE_DIM,),
             ACTION: (ACTION_DIM,),
         }
-        stats = {i: act_files.load_stats(f, shapes) for i, f in {**pre_state, **post_state}.items()}
+        state_files = {**pre_state, **post_state}
+        check_loadable(path, [f.name for f in state_files.values()], "ACT")
+        limits = feature_limits(cfg.spec.env_dim)
+        stats = {i: act_files.load_stats(f, shapes, limits) for i, f in state_files.items()}
         pre_stats, post_stats = stats[3], stats[0]  # the normaliser and unnormaliser steps
         agent = cls.__new__(cls)
         GiverConditionedAgent.__init__(agent, **closed_loop_kwargs)

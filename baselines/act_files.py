@@ -15,7 +15,8 @@ checkpoint is read here first, and LeRobot never parses its JSON at all:
   writes: this cross-checks ``use_giver_state`` (the ``observation.state`` input feature), the
   sizes, the chunk and the normalisation.
 * the normalisation statistics (the steps' safetensors) must be finite float32 of the feature
-  shapes, with positive standard deviations.
+  shapes, within what the data can produce (:mod:`baselines.norm_bounds`: means, extrema and
+  quantiles within the features' ±100 m / ±200 m, standard deviations positive and at most that).
 
 :meth:`baselines.act.ACTAgent.load` then builds the policy and the processors from our validated
 config (``ACTPolicy(config)``, ``make_act_pre_post_processors``) and loads only tensors into them.
@@ -29,6 +30,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from handover_env.extras import missing_extra
 
 try:
@@ -37,6 +40,7 @@ except ModuleNotFoundError as _exc:
     raise missing_extra("baselines", _exc, __name__) from None
 
 from baselines.checkpoint_io import CheckpointError, load_tensors, read_json
+from baselines.norm_bounds import check_stat
 
 PREPROCESSOR_JSON = "policy_preprocessor.json"
 POSTPROCESSOR_JSON = "policy_postprocessor.json"
@@ -135,13 +139,17 @@ def validate_processor_json(
     return state_files
 
 
-def load_stats(path: Path, features: dict[str, tuple[int, ...]]) -> dict[str, torch.Tensor]:
+def load_stats(
+    path: Path, features: dict[str, tuple[int, ...]], limits: dict[str, np.ndarray]
+) -> dict[str, torch.Tensor]:
     """The normalisation statistics of one normaliser step, validated.
 
     Args:
         path: the step's safetensors file.
         features: {feature key: shape} the statistics may describe (every key ``<feature>.<stat>``
             must name one of them and one of LeRobot's statistics).
+        limits: {feature key: largest |value| per entry}
+            (:func:`baselines.norm_bounds.feature_limits`).
     """
     tensors = load_tensors(path)
     if not tensors:
@@ -155,8 +163,7 @@ def load_stats(path: Path, features: dict[str, tuple[int, ...]]) -> dict[str, to
             raise CheckpointError(
                 f"{path}: {key} is {t.dtype} {tuple(t.shape)}, expected float32 {shape}"
             )
-        if stat == "std" and not bool((t > 0).all()):
-            raise CheckpointError(f"{path}: {key} has a zero or negative standard deviation")
+        check_stat(path, key, t, stat, limits[feature])
     return tensors
 
 

@@ -21,8 +21,10 @@ Checkpoint folder (``save``/``load``):
 Training state, checkpoints, resume and progress are the shared :mod:`baselines.trainer`'s: every
 checkpoint is written as one unit, and :meth:`BCMLPAgent.load` / ``--resume`` validate every file
 before using it: all config fields present and of their JSON type, weights of the model's shapes
-and dtypes, finite, positive normalisation scales, a ``state.json`` consistent with its loss
-curves. Plain torch: no LeRobot import.
+and dtypes, finite, normalisation statistics within what the data can produce
+(:mod:`baselines.norm_bounds`), a ``state.json`` consistent with its loss curves. Loading writes
+nothing (an interrupted commit is refused, never finished: ``--resume`` finishes it). Plain torch:
+no LeRobot import.
 
 In an env (``reset``/``act``) it is a :class:`agents.predictive.PredictiveAgent`, exactly like the
 planner: one chunk per new camera frame, ACT-style temporal ensembling, the target at t_f of Theta,
@@ -53,6 +55,7 @@ from agents.predictive import ClosedLoopConfig
 from baselines import trainer
 from baselines.checkpoint_io import (
     CheckpointError,
+    check_loadable,
     config_from_dict,
     expected_of,
     load_tensors,
@@ -60,9 +63,17 @@ from baselines.checkpoint_io import (
     write_json,
 )
 from baselines.giver_conditioned import GiverConditionedAgent
+from baselines.norm_bounds import MIN_STD, check_stat, feature_limits
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
-from handover_env.data.features import FeatureSpec, FrameArrays, dataset_frames, split_train_val
+from handover_env.data.features import (
+    ACTION,
+    OBS_ENV_STATE,
+    FeatureSpec,
+    FrameArrays,
+    dataset_frames,
+    split_train_val,
+)
 from handover_env.envs.observation import ObsLayout
 
 CHECKPOINT_TYPE = "bc_mlp"
@@ -171,11 +182,10 @@ class BCMLPNet(nn.Module):
         parts = [frames.env_state, frames.state] if self.use_state else [frames.env_state]
         x = np.concatenate(parts, axis=1).astype(np.float64)
         y = frames.action[~frames.action_is_pad].astype(np.float64)
-        eps = 1e-6
         self.in_mean.copy_(torch.as_tensor(x.mean(0)))
-        self.in_std.copy_(torch.as_tensor(np.maximum(x.std(0), eps)))
+        self.in_std.copy_(torch.as_tensor(np.maximum(x.std(0), MIN_STD)))
         self.out_mean.copy_(torch.as_tensor(y.mean(0)))
-        self.out_std.copy_(torch.as_tensor(np.maximum(y.std(0), eps)))
+        self.out_std.copy_(torch.as_tensor(np.maximum(y.std(0), MIN_STD)))
 
     def forward_normalized(self, env_state: torch.Tensor, state: torch.Tensor) -> torch.Tensor:
         """(B, H, 3) standardised chunk."""
@@ -303,7 +313,7 @@ class BCMLPAgent(GiverConditionedAgent):
                 saved_config=lambda o: _read_config(o)["config"],
                 resumable=RESUMABLE_CHANGES,
                 check_state=_check_state,
-                check_best=_check_scales,
+                check_best=lambda tensors, source: _check_stats(tensors, source, cfg),
             )
 
         tr = _tensors(train, cfg.device)
@@ -440,8 +450,7 @@ class BCMLPAgent(GiverConditionedAgent):
         :class:`~baselines.checkpoint_io.CheckpointError` naming the file. ``closed_loop_kwargs``
         (params, closed_loop, layout) go to the constructor.
         """
-        path = Path(path)
-        trainer.recover_checkpoint(path)
+        path = check_loadable(path, ("config.json", "model.safetensors"), "BC-MLP")
         saved = _read_config(path)
         cfg = BCMLPConfig.from_dict(
             {**saved["config"], "device": device}, str(path / "config.json")
@@ -449,7 +458,7 @@ class BCMLPAgent(GiverConditionedAgent):
         agent = cls(cfg, **closed_loop_kwargs)
         weights = path / "model.safetensors"
         tensors = load_tensors(weights, expected_of(agent.net.state_dict()))
-        _check_scales(tensors, weights)
+        _check_stats(tensors, weights, cfg)
         agent.net.load_state_dict(tensors)
         agent.net.to(device).eval()
         agent.fitted = True
@@ -457,11 +466,18 @@ class BCMLPAgent(GiverConditionedAgent):
         return agent
 
 
-def _check_scales(tensors: dict[str, torch.Tensor], source: Path) -> None:
-    """The normalisation scales must be positive (a zero std turns every prediction into NaN)."""
-    for key in ("in_std", "out_std"):
-        if key in tensors and not bool((tensors[key] > 0).all()):
-            raise CheckpointError(f"{source}: {key} has a zero or negative entry")
+def _check_stats(tensors: dict[str, torch.Tensor], source: Path, cfg: BCMLPConfig) -> None:
+    """The normalisation statistics within what the data can produce (:mod:`baselines.norm_bounds`:
+    means within the features' ±100 m / ±200 m, std in [``MIN_STD``, that bound]); a zero std
+    would turn every prediction into NaN, a huge one into a huge number."""
+    limits = feature_limits(cfg.spec.env_dim)
+    giver = limits[ACTION]
+    inputs = limits[OBS_ENV_STATE]
+    if cfg.use_giver_state:  # the giver xyz follows the receiver history
+        inputs = np.concatenate([inputs, giver])
+    for key, limit in (("in_mean", inputs), ("in_std", inputs), ("out_mean", giver),
+                       ("out_std", giver)):
+        check_stat(source, key, tensors[key], key.rpartition("_")[2], limit, MIN_STD)
 
 
 def _check_state(state: object, source: Path) -> dict:

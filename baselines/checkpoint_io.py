@@ -1,21 +1,26 @@
 """Checkpoint folders of the learned baselines: written as one unit, read back only after
-validation.
+validation, and loaded without writing anything.
 
 **Atomic writes.** :func:`staged_write` gives the caller an empty ``<out>/.staging`` folder to write
 a whole checkpoint into (weights, optimizer, RNG, ``state.json``, configs). When the caller is done
 the file list is recorded in ``.staging/COMMIT.json`` (written to a temporary name and renamed,
-after every file was flushed to disk), and only then are the files renamed over the old ones. A
-reader first calls :func:`recover`: a staging folder without ``COMMIT.json`` is an interrupted
-write and is deleted (the previous checkpoint is intact); one with it is a commit that was
-interrupted half way and is finished. So a kill at any moment leaves either the previous or the
-new checkpoint, never files of two different epochs.
+after every file was flushed to disk), and only then are the files renamed over the old ones. So a
+kill at any moment leaves either the previous or the new checkpoint, never files of two epochs.
+
+**Recovery, by the writer only.** :func:`recover` discards a staging folder without
+``COMMIT.json`` (the previous checkpoint is intact) and finishes one with it. Only the command
+that wrote it calls it (the next :func:`staged_write`, ``--resume``), and only after
+:func:`pending_commit` / :func:`check_commit` checked every entry: a plain relative path, no
+symbolic link in the destination or the staged source, the destination inside the resolved
+folder, the source a regular file. A refused entry is a CheckpointError naming it, with nothing
+changed. Loading never recovers (:func:`check_loadable`): it writes nothing at all.
 
 **Validated reads.** :func:`read_json` (size-bounded, one error naming the file),
-:func:`load_tensors` (keys, shapes, dtypes and finiteness against what the model expects),
+:func:`load_tensors` (keys, shapes, dtypes and finiteness against what the model expects) and
 :func:`config_from_dict` (every field present, of its exact JSON type: ``"no"`` is not a bool, a
-float is not an int) and :func:`load_optimizer` (LeRobot's optimizer format, checked against the
-optimizer being resumed) raise :class:`CheckpointError` naming the file and
-the problem; nothing raw (``SafetensorError``, ``JSONDecodeError``, ``KeyError``...) escapes.
+float is not an int) raise :class:`CheckpointError` naming the file and the problem; nothing raw
+(``SafetensorError``, ``JSONDecodeError``, ``KeyError``...) escapes. Optimizer and training state:
+:mod:`baselines.optimizer_state`, :mod:`baselines.trainer`.
 
 **Output folders.** :func:`check_out_dir` decides whether ``train.py`` may write into ``--out``.
 """
@@ -28,19 +33,20 @@ import math
 import os
 import re
 import shutil
+import stat
 import typing
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 from handover_env.extras import missing_extra
+from handover_env.paths import OUTPUT_LOCK, UnsafePathError, output_folder
 
 try:
     import torch
 except ModuleNotFoundError as _exc:
     raise missing_extra("baselines", _exc, __name__) from None
-
 
 
 class CheckpointError(ValueError):
@@ -67,9 +73,11 @@ def _fsync_path(path: Path) -> None:
 def staged_write(out: str | os.PathLike) -> Iterator[Path]:
     """Write a checkpoint into ``out`` as one unit (see the module docstring).
 
+    An interrupted commit of an earlier write into ``out`` is finished first (:func:`recover`).
     Yields the empty staging folder; every file written under it replaces the file of the same
-    relative path in ``out`` when the block exits normally. On an exception the staging folder is
-    deleted and ``out`` is left as it was.
+    relative path in ``out`` when the block exits normally, after every destination was checked
+    to lie inside ``out`` (:func:`check_commit`). On an exception (or a refused destination) the
+    staging folder is deleted and ``out`` is left as it was.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -79,6 +87,7 @@ def staged_write(out: str | os.PathLike) -> Iterator[Path]:
     try:
         yield stage
         files = sorted(p.relative_to(stage).as_posix() for p in stage.rglob("*") if p.is_file())
+        check_commit(out, files)
         for rel in files:
             _fsync_path(stage / rel)
         tmp = stage / (COMMIT + ".tmp")
@@ -88,40 +97,147 @@ def staged_write(out: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
-    _apply(out)
+    _apply(out, files)
 
 
 def recover(out: str | os.PathLike) -> None:
-    """Finish (``COMMIT.json`` present) or discard (absent) an interrupted :func:`staged_write`."""
+    """Finish (``COMMIT.json`` present) or discard (absent) an interrupted :func:`staged_write`.
+
+    Only the writers call this: :func:`staged_write` (the next write of the same run) and
+    ``--resume`` (:func:`baselines.trainer.load_training_state`); loading a checkpoint never does
+    (:func:`check_loadable`). A commit is finished only after :func:`pending_commit` checked every
+    entry; a refused one raises :class:`CheckpointError` naming the entry, with nothing changed.
+    """
     out = Path(out)
-    stage = out / STAGING
-    if not stage.exists():
-        return
-    if (stage / COMMIT).is_file():
-        _apply(out)
-    else:
-        shutil.rmtree(stage, ignore_errors=True)
+    files = pending_commit(out)
+    if files is not None:
+        _apply(out, files)
+    elif os.path.lexists(out / STAGING):
+        shutil.rmtree(out / STAGING, ignore_errors=True)
 
 
-def _apply(out: Path) -> None:
+def pending_commit(out: str | os.PathLike) -> list[str] | None:
+    """The files of the interrupted commit in ``out/.staging`` (all checked), or None if none.
+
+    None when there is no staging folder or it holds no ``COMMIT.json`` (a write interrupted
+    before its commit record: the committed files are the previous checkpoint, whole).
+
+    Raises:
+        CheckpointError: ``.staging`` or ``COMMIT.json`` is a symbolic link or not a folder /
+            file, the record is unreadable, or an entry fails :func:`check_commit`.
+    """
+    out = Path(out)
+    stage, record = out / STAGING, out / STAGING / COMMIT
+    if not os.path.lexists(stage):
+        return None
+    if stage.is_symlink() or not stage.is_dir():
+        raise CheckpointError(f"{stage}: not a folder (a symbolic link?); refused, nothing changed")
+    if not os.path.lexists(record):
+        return None
+    if not stat.S_ISREG(record.lstat().st_mode):
+        raise CheckpointError(f"{record}: not a regular file; refused, nothing changed")
+    saved = read_json(record, "commit record")
+    files = saved.get("files") if isinstance(saved, dict) else None
+    if set(saved if isinstance(saved, dict) else ()) != {"files"} or not isinstance(files, list):
+        raise CheckpointError(f"{record}: expected {{'files': [...]}}; delete {stage}")
+    check_commit(out, files, staged=True)
+    return files
+
+
+def check_commit(out: Path, files: list, staged: bool = False) -> None:
+    """May the staged ``files`` (paths relative to ``out``) be renamed into ``out``?
+
+    Each entry must be a plain relative path (ASCII letters, digits, ``_.-``; no ``..``, ``.``,
+    ``.staging`` or empty component); no existing component of its destination under ``out`` may
+    be a symbolic link, or a file where a folder is needed, or a folder where the file goes; the
+    destination must resolve inside the resolved ``out``. With ``staged`` the source
+    ``.staging/<entry>`` must be a regular file reached through no symbolic link, or be gone with
+    the destination a regular file already (moved by an earlier, interrupted pass).
+
+    Raises:
+        CheckpointError: naming ``out``, the entry and the reason; nothing is changed.
+    """
+    for rel in files:
+        why = _commit_problem(out, rel, staged)
+        if why is not None:
+            raise CheckpointError(f"{out}: commit entry {rel!r}: {why}; refused, nothing changed")
+
+
+def _commit_problem(out: Path, rel: Any, staged: bool) -> str | None:
+    """Why the commit entry ``rel`` may not be renamed into ``out`` (see :func:`check_commit`)."""
+    if not isinstance(rel, str) or not _SAFE_REL.fullmatch(rel) or any(
+            part in ("..", ".", STAGING) for part in rel.split("/")):
+        return "not a plain relative path"
+    parts = rel.split("/")
+    prefixes = [Path(*parts[:i]) for i in range(1, len(parts) + 1)]
+    for p in prefixes:
+        if (out / p).is_symlink():
+            return f"{out / p} is a symbolic link"
+        if p != prefixes[-1] and (out / p).exists() and not (out / p).is_dir():
+            return f"{out / p} is not a folder"
+    dst, stage = out / rel, out / STAGING
+    if dst.is_dir():
+        return f"{dst} is a folder"
+    if not dst.resolve().is_relative_to(out.resolve()):
+        return f"{dst} resolves outside {out.resolve()}"
+    if staged:
+        for p in prefixes:
+            if (stage / p).is_symlink():
+                return f"the staged {stage / p} is a symbolic link"
+        src = stage / rel
+        if os.path.lexists(src) and not stat.S_ISREG(src.lstat().st_mode):
+            return f"the staged {src} is not a regular file"
+        if not os.path.lexists(src) and not dst.is_file():
+            return f"neither the staged {src} nor {dst} exists"
+    return None
+
+
+def _apply(out: Path, files: list[str]) -> None:
+    """Rename the checked staged ``files`` into ``out``; then delete the staging folder."""
     stage = out / STAGING
-    try:
-        files = json.loads((stage / COMMIT).read_text())["files"]
-        if not isinstance(files, list) or not all(isinstance(f, str) and _SAFE_REL.fullmatch(f)
-                                                  and ".." not in f.split("/") for f in files):
-            raise ValueError("bad file list")
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise CheckpointError(
-            f"{stage / COMMIT}: unreadable commit record ({exc}); delete {stage}"
-        ) from None
     for rel in files:
         src = stage / rel
-        if src.exists():  # files already moved by an interrupted earlier pass are gone
+        if os.path.lexists(src):  # files already moved by an interrupted earlier pass are gone
             dst = out / rel
             dst.parent.mkdir(parents=True, exist_ok=True)
             os.replace(src, dst)
     (stage / COMMIT).unlink()
     shutil.rmtree(stage, ignore_errors=True)
+
+
+def check_loadable(folder: str | os.PathLike, files: Iterable[str], label: str) -> Path:
+    """A checkpoint folder checked for a read-only load (any loader, present or future).
+
+    Loading writes nothing, so an interrupted write is never finished here: a ``.staging`` folder
+    without a commit record is ignored (the committed files are the previous checkpoint, whole);
+    one with a record is refused, since the folder may then hold files of two checkpoints and only
+    the run that wrote it may finish it. Each of ``files`` (relative paths the loader reads) must
+    not resolve outside the folder (a symbolic link leaving it); a missing file is the loader's to
+    report.
+
+    Returns:
+        ``folder`` as a Path.
+
+    Raises:
+        CheckpointError: no such folder, an interrupted commit, or a file leaving the folder.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise CheckpointError(f"no {label} checkpoint folder at {folder}")
+    stage = folder / STAGING
+    if os.path.lexists(stage) and (
+            stage.is_symlink() or not stage.is_dir() or os.path.lexists(stage / COMMIT)):
+        raise CheckpointError(
+            f"{stage}: an interrupted checkpoint write (its commit record is there, so some files "
+            "may be of the next checkpoint); loading changes nothing: finish it with the command "
+            f"that wrote it (train.py ... --resume --out {folder}) or delete {stage}"
+        )
+    root = folder.resolve()
+    for rel in files:
+        path = folder / rel
+        if not path.resolve().is_relative_to(root):
+            raise CheckpointError(f"{path}: a symbolic link out of the checkpoint folder {root}")
+    return folder
 
 
 # ---------------------------------------------------------------------- validated reads
@@ -251,126 +367,6 @@ def config_from_dict(cls: type, d: Any, source: str, ignore: frozenset[str] = fr
         raise CheckpointError(f"{source}: invalid config ({exc})") from None
 
 
-def check_training_state(
-    state: Any, source: Path, counter: str, best: str, extra: dict[str, type]
-) -> dict:
-    """A training ``state.json`` whose fields have their JSON types and agree with each other.
-
-    Args:
-        state: the parsed JSON.
-        source: the file, for messages.
-        counter: the progress field (``"epoch"``: one validation pass each; ``"step"``: at most
-            one).
-        best: the field holding the counter value of the best validation pass.
-        extra: further fields and their types.
-
-    Raises:
-        CheckpointError: a field is missing, unknown or mistyped, the counter is negative, the loss
-            curves are not finite or do not fit the counter, or the best pass disagrees with them.
-    """
-    keys = {counter: int, "best_val": float, best: int, "train_loss": list, "val_loss": list,
-            "wall_time_s": float, "split": dict, **extra}
-    if not isinstance(state, dict) or set(state) != set(keys):
-        got = sorted(state) if isinstance(state, dict) else type(state).__name__
-        raise CheckpointError(f"{source}: expected the fields {sorted(keys)}, got {got}")
-    for key, kind in keys.items():
-        value = state[key]
-        if kind is float:  # best_val is inf until the first validation pass
-            ok = (
-                isinstance(value, (int, float))
-                and not isinstance(value, bool)
-                and not math.isnan(value)
-            )
-        else:
-            ok = isinstance(value, kind) if kind in (list, dict) else json_type_ok(value, kind)
-        if not ok:
-            raise CheckpointError(f"{source}: {key} = {value!r} is not a {kind.__name__}")
-    n, losses, train = state[counter], state["val_loss"], state["train_loss"]
-    problems = []
-    if n < 0:
-        problems.append(f"{counter} {n} is negative")
-    if len(train) != len(losses) or (len(losses) != n if counter == "epoch" else len(losses) > n):
-        problems.append(f"{len(train)}/{len(losses)} loss values at {counter} {n}")
-    if not all(json_type_ok(v, float) for v in train + losses):
-        problems.append("a loss value is not a finite number")
-    elif losses and state["best_val"] != min(losses):
-        problems.append("best_val disagrees with val_loss")
-    elif counter == "epoch" and losses and state[best] != losses.index(min(losses)) + 1:
-        problems.append(f"{best} disagrees with val_loss")
-    if not -1 <= state[best] <= max(n, 0) or state["wall_time_s"] < 0:
-        problems.append(f"{best} or wall_time_s out of range")
-    if "bad_epochs" in state and not 0 <= state["bad_epochs"] <= max(n, 0):
-        problems.append("bad_epochs out of range")
-    split = state["split"]
-    if set(split) != {"train", "val"} or not all(
-            isinstance(v, list) and all(isinstance(x, str) for x in v) for v in split.values()):
-        problems.append("split must hold 'train' and 'val' lists of episode ids")
-    if problems:
-        raise CheckpointError(f"{source}: inconsistent training state: {'; '.join(problems)}")
-    return state
-
-
-# ---------------------------------------------------------------------- optimizer state
-OPTIMIZER_STATE = "optimizer_state.safetensors"
-OPTIMIZER_PARAM_GROUPS = "optimizer_param_groups.json"
-
-
-def save_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
-    """LeRobot's optimizer format: flat ``state/<i>/<name>`` tensors + the param groups as JSON."""
-    from safetensors.torch import save_file
-
-    state = opt.state_dict()
-    flat = {
-        f"state/{i}/{name}": t.contiguous()
-        for i, s in state["state"].items()
-        for name, t in s.items()
-    }
-    save_file(flat, folder / OPTIMIZER_STATE)
-    write_json(folder / OPTIMIZER_PARAM_GROUPS, state["param_groups"])
-
-
-def load_optimizer(opt: torch.optim.Optimizer, folder: Path) -> None:
-    """Restore ``opt`` from :func:`save_optimizer`'s files after checking them against ``opt``.
-
-    The param groups must equal those of ``opt`` (built from the same config: same learning rate,
-    betas, weight decay and parameter indices); every state tensor must be finite and match its
-    parameter's shape.
-    """
-    current = opt.state_dict()
-    groups_file = folder / OPTIMIZER_PARAM_GROUPS
-    groups = read_json(groups_file, "optimizer param groups")
-    want = current["param_groups"]
-    if not isinstance(groups, list) or len(groups) != len(want):
-        raise CheckpointError(f"{groups_file}: expected {len(want)} param group(s)")
-    if json.loads(json.dumps(want)) != groups:  # the optimizer was built from the same config
-        raise CheckpointError(
-            f"{groups_file}: param groups (learning rate, betas, weight decay, ...) differ from "
-            "the "
-            f"optimizer this config builds"
-        )
-    params = [p for group in opt.param_groups for p in group["params"]]
-    flat = load_tensors(folder / OPTIMIZER_STATE)
-    state: dict[int, dict[str, torch.Tensor]] = {}
-    for key, tensor in flat.items():
-        m = re.fullmatch(r"state/([0-9]+)/(exp_avg|exp_avg_sq|step|max_exp_avg_sq)", key)
-        if m is None or int(m.group(1)) >= len(params):
-            raise CheckpointError(f"{folder / OPTIMIZER_STATE}: unexpected key {key!r}")
-        index, name = int(m.group(1)), m.group(2)
-        want_shape = () if name == "step" else tuple(params[index].shape)
-        if tuple(tensor.shape) != want_shape or not tensor.is_floating_point():
-            raise CheckpointError(
-                f"{folder / OPTIMIZER_STATE}: {key} has shape {tuple(tensor.shape)}, "
-                f"expected {want_shape}"
-            )
-        if name == "step" and float(tensor) < 0:
-            raise CheckpointError(f"{folder / OPTIMIZER_STATE}: {key} is negative")
-        state.setdefault(index, {})[name] = tensor
-    try:
-        opt.load_state_dict({"state": state, "param_groups": groups})
-    except (ValueError, KeyError, TypeError, RuntimeError) as exc:
-        raise CheckpointError(f"{folder}: optimizer state does not fit ({exc})") from None
-
-
 # ---------------------------------------------------------------------- output folders
 #: What each kind of checkpoint writes into its folder (besides ``.staging``).
 CHECKPOINT_FILES = {
@@ -396,16 +392,27 @@ _ACT_STATE_FILE = re.compile(
     r"policy_(pre|post)processor_step_[0-9]+_[a-z_]+\.safetensors", re.ASCII
 )
 #: Entries train.py may find in an --out that holds no checkpoint yet (an export made before the
-#: first checkpoint, an interrupted first write).
-_HARMLESS = {"lerobot_dataset", STAGING}
+#: first checkpoint, an interrupted first write, the lock of the run that writes it).
+_HARMLESS = {"lerobot_dataset", STAGING, OUTPUT_LOCK}
 
 
 def checkpoint_kind(folder: str | os.PathLike) -> str | None:
-    """``"act"`` or ``"bc_mlp"`` for a checkpoint folder of this project, else None."""
+    """``"act"`` or ``"bc_mlp"`` for a checkpoint folder of this project, else None.
+
+    An interrupted commit counts (a kill during the first checkpoint's commit leaves only
+    ``.staging``): its files are looked for where they will be once ``--resume`` finishes it,
+    after :func:`pending_commit` checked its entries (an unsafe one raises CheckpointError).
+    """
     folder = Path(folder)
-    if (folder / "handover_act.json").is_file():
+    pending = pending_commit(folder) or []
+
+    def where(name: str) -> Path:
+        staged = folder / STAGING / name
+        return staged if name in pending and staged.is_file() else folder / name
+
+    if where("handover_act.json").is_file():
         return "act"
-    config = folder / "config.json"
+    config = where("config.json")
     if config.is_file():
         try:
             saved = read_json(config)
@@ -417,8 +424,16 @@ def checkpoint_kind(folder: str | os.PathLike) -> str | None:
 
 
 def remove_checkpoint(folder: Path, kind: str) -> None:
-    """Delete the files a ``kind`` checkpoint writes (and nothing else) from ``folder``."""
-    recover(folder)
+    """Delete the files a ``kind`` checkpoint writes (and nothing else) from ``folder``.
+
+    An interrupted write in ``.staging`` is discarded, never finished; symbolic links are removed,
+    never followed.
+    """
+    stage = folder / STAGING
+    if stage.is_dir() and not stage.is_symlink():
+        shutil.rmtree(stage)
+    elif os.path.lexists(stage):
+        stage.unlink()
     for name in CHECKPOINT_FILES[kind]:
         path = folder / name
         if path.is_dir() and not path.is_symlink():
@@ -440,13 +455,11 @@ def check_out_dir(out: str | os.PathLike, kind: str, resume: bool, overwrite: bo
     * a checkpoint of the other kind: only with ``overwrite`` (never with ``resume``);
     * anything else (a folder of someone's files, a file): never, not even with ``overwrite``.
     """
-    text = os.fspath(out)
-    if not text.strip():
-        raise CheckpointError("--out is empty (an unset shell variable?)")
-    out = Path(text)
+    try:
+        out = output_folder(out, "--out")
+    except UnsafePathError as exc:
+        raise CheckpointError(str(exc)) from None
     label = {"act": "ACT", "bc_mlp": "BC-MLP"}
-    if out.exists() and not out.is_dir():
-        raise CheckpointError(f"--out {out} exists and is not a folder")
     if not out.is_dir():
         if resume:
             raise CheckpointError(f"cannot resume: no checkpoint folder at {out}")
@@ -473,6 +486,9 @@ def check_out_dir(out: str | os.PathLike, kind: str, resume: bool, overwrite: bo
         remove_checkpoint(out, found)
         return
     if resume:
+        links = sorted(n for n in CHECKPOINT_FILES[kind] if (out / n).is_symlink())
+        if links:  # a resumed run rewrites them: never through a link
+            raise CheckpointError(f"cannot resume in {out}: {', '.join(links)} is a symbolic link")
         return
     if not overwrite:
         raise CheckpointError(

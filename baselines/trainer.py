@@ -12,10 +12,12 @@ steps through LeRobot's ``ACTPolicy.forward``); everything around the loop is he
   :func:`~baselines.checkpoint_io.staged_write`: the model files (the caller's ``write_model``:
   best weights and configs), ``training_state/`` (last weights, optimizer in LeRobot's format,
   optionally the torch RNG, ``state.json``) and the JSON-lines log :data:`LOG_FILE`.
-* **Resume** (:func:`load_training_state`): every file validated before it is used (a config
-  that differs in a field the run may not change, a state inconsistent with its loss curves, a
-  different split, weights of other shapes, a foreign optimizer state: each a
-  :class:`~baselines.checkpoint_io.CheckpointError` naming the file).
+* **Resume** (:func:`load_training_state`): the one reader that finishes an interrupted commit
+  (checked, :func:`~baselines.checkpoint_io.recover`), then every file validated before it is
+  used (a config that differs in a field the run may not change, a state inconsistent with its
+  loss curves, a different split, weights of other shapes, a foreign optimizer state, a file
+  linked out of the folder: each a :class:`~baselines.checkpoint_io.CheckpointError` naming the
+  file). Loading a model (:func:`read_checkpoint_json`) never recovers: it writes nothing.
 * **Checkpoint JSON** (:func:`checkpoint_json`, :func:`read_checkpoint_json`): the
   ``{"type", "format", "config", "features", "training"}`` record both baselines write, read back
   with every config field present and of its JSON type.
@@ -46,16 +48,21 @@ except ModuleNotFoundError as _exc:
 from baselines.checkpoint_io import (
     MAX_JSON_BYTES,
     CheckpointError,
-    check_training_state,
+    check_loadable,
     config_from_dict,
     expected_of,
-    load_optimizer,
+    json_type_ok,
     load_tensors,
     read_json,
     recover,
-    save_optimizer,
     staged_write,
     write_json,
+)
+from baselines.optimizer_state import (
+    OPTIMIZER_PARAM_GROUPS,
+    OPTIMIZER_STATE,
+    load_optimizer,
+    save_optimizer,
 )
 
 TRAINING_STATE = "training_state"
@@ -229,8 +236,12 @@ def load_training_state(
         check_best: further checks of the best weights (e.g. positive normalisation scales).
         rng: restore the torch RNG saved by :func:`save_checkpoint`.
     """
-    recover(out)
+    recover(out)  # --resume is the command that wrote it: finish its interrupted commit (checked)
     ts = out / TRAINING_STATE
+    saved = ("state.json", "last.safetensors", "rng.safetensors", OPTIMIZER_STATE,
+             OPTIMIZER_PARAM_GROUPS)
+    check_loadable(out, [f"{TRAINING_STATE}/{n}" for n in saved] + ["model.safetensors", LOG_FILE],
+                   "training")
     if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
         raise CheckpointError(f"cannot resume: no training state in {ts}")
     theirs = saved_config(out)
@@ -267,6 +278,65 @@ def check_state(
     return check_training_state(state, source, counter, f"best_{counter}", extra or {})
 
 
+def check_training_state(
+    state: Any, source: Path, counter: str, best: str, extra: dict[str, type]
+) -> dict:
+    """A training ``state.json`` whose fields have their JSON types and agree with each other.
+
+    Args:
+        state: the parsed JSON.
+        source: the file, for messages.
+        counter: the progress field (``"epoch"``: one validation pass each; ``"step"``: at most
+            one).
+        best: the field holding the counter value of the best validation pass.
+        extra: further fields and their types.
+
+    Raises:
+        CheckpointError: a field is missing, unknown or mistyped, the counter is negative, the loss
+            curves are not finite or do not fit the counter, or the best pass disagrees with them.
+    """
+    keys = {counter: int, "best_val": float, best: int, "train_loss": list, "val_loss": list,
+            "wall_time_s": float, "split": dict, **extra}
+    if not isinstance(state, dict) or set(state) != set(keys):
+        got = sorted(state) if isinstance(state, dict) else type(state).__name__
+        raise CheckpointError(f"{source}: expected the fields {sorted(keys)}, got {got}")
+    for key, kind in keys.items():
+        value = state[key]
+        if kind is float:  # best_val is inf until the first validation pass
+            ok = (
+                isinstance(value, (int, float))
+                and not isinstance(value, bool)
+                and not math.isnan(value)
+            )
+        else:
+            ok = isinstance(value, kind) if kind in (list, dict) else json_type_ok(value, kind)
+        if not ok:
+            raise CheckpointError(f"{source}: {key} = {value!r} is not a {kind.__name__}")
+    n, losses, train = state[counter], state["val_loss"], state["train_loss"]
+    problems = []
+    if n < 0:
+        problems.append(f"{counter} {n} is negative")
+    if len(train) != len(losses) or (len(losses) != n if counter == "epoch" else len(losses) > n):
+        problems.append(f"{len(train)}/{len(losses)} loss values at {counter} {n}")
+    if not all(json_type_ok(v, float) for v in train + losses):
+        problems.append("a loss value is not a finite number")
+    elif losses and state["best_val"] != min(losses):
+        problems.append("best_val disagrees with val_loss")
+    elif counter == "epoch" and losses and state[best] != losses.index(min(losses)) + 1:
+        problems.append(f"{best} disagrees with val_loss")
+    if not -1 <= state[best] <= max(n, 0) or state["wall_time_s"] < 0:
+        problems.append(f"{best} or wall_time_s out of range")
+    if "bad_epochs" in state and not 0 <= state["bad_epochs"] <= max(n, 0):
+        problems.append("bad_epochs out of range")
+    split = state["split"]
+    if set(split) != {"train", "val"} or not all(
+            isinstance(v, list) and all(isinstance(x, str) for x in v) for v in split.values()):
+        problems.append("split must hold 'train' and 'val' lists of episode ids")
+    if problems:
+        raise CheckpointError(f"{source}: inconsistent training state: {'; '.join(problems)}")
+    return state
+
+
 # ---------------------------------------------------------------------- checkpoint JSON
 def checkpoint_json(kind: str, fmt: int, config: Any, state: dict | None) -> dict:
     """The record a checkpoint carries: type, format, config (a dataclass), features, run
@@ -299,8 +369,7 @@ def read_checkpoint_json(
         upgrades: {older format: function(config, source) -> the config in this format}; the
             function validates the old config and raises CheckpointError if it cannot.
     """
-    if not path.is_dir():
-        raise CheckpointError(f"no {label} checkpoint folder at {path}")
+    check_loadable(path, [file], label)
     f = path / file
     if not f.is_file():
         raise CheckpointError(f"{path}: missing {file} (not a {label} checkpoint of this project)")
@@ -320,16 +389,6 @@ def read_checkpoint_json(
     if not isinstance(saved.get("training", {}), dict):
         raise CheckpointError(f"{f}: training must be a JSON object")
     return saved
-
-
-def recover_checkpoint(path: Path) -> None:
-    """Finish or discard an interrupted checkpoint write in ``path`` before it is read."""
-    try:
-        recover(path)
-    except OSError as exc:
-        raise CheckpointError(
-            f"{path}: cannot finish an interrupted checkpoint write ({exc})"
-        ) from None
 
 
 def out_path(out_dir: str | os.PathLike | None) -> Path | None:

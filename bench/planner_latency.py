@@ -12,7 +12,13 @@ the prediction of that ratio from the stored per-query entries (sum over demos o
 (M_k + 2) M_k for FITC against (N_k + 2) N_k for the exact GP: the variance mat-vec dominates);
 then the cost at inducing ratios 0.1 ... 1.0.
 
-Usage: ``python bench/planner_latency.py [--quick] [--data PATH] [--precision float32|float64]``
+``--against REV`` also times the planner code of git revision REV (its ``agents/`` extracted with
+``git archive`` into a temporary folder and imported as ``agents_REV``, the current
+``handover_env`` underneath) interleaved with today's, on the same data, and reports their ratio
+and the largest difference of their chunks.
+
+Usage: ``python bench/planner_latency.py [--quick] [--data PATH] [--precision float32|float64]
+[--against REV]``
 """
 
 from __future__ import annotations
@@ -23,7 +29,12 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # one core: set before numpy loads its BLAS
 
 import argparse  # noqa: E402
+import importlib  # noqa: E402
+import re  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
+import tarfile  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -82,6 +93,23 @@ def _frame_costs(
     return [(np.asarray(w), np.asarray(c)) for w, c in zip(wall, cpu)]
 
 
+def _planner_of_revision(rev: str, folder: Path):
+    """``NonparametricAgent`` of git revision ``rev``: its agents/ as package ``agents_<rev>``."""
+    root = Path(__file__).resolve().parents[1]
+    tar = folder / "agents.tar"
+    with open(tar, "wb") as f:
+        subprocess.run(["git", "-C", str(root), "archive", rev, "agents"], stdout=f, check=True)
+    with tarfile.open(tar) as t:
+        t.extractall(folder, filter="data")
+    name = "agents_" + re.sub(r"\W", "_", rev)
+    (folder / "agents").rename(folder / name)
+    for py in (folder / name).glob("*.py"):
+        src = py.read_text()
+        py.write_text(re.sub(r"\b(from|import) agents(\.| )", rf"\1 {name}\2", src))
+    sys.path.insert(0, str(folder))
+    return importlib.import_module(f"{name}.nonparametric")
+
+
 def _fmt(x: np.ndarray) -> str:
     return f"median {np.median(x) * 1e3:6.3f} ms  p99 {np.percentile(x, 99) * 1e3:6.3f} ms"
 
@@ -98,6 +126,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--precision", default=None, choices=("float32", "float64"),
                         help="per-frame mat-vec precision (default: the planner's default)")
+    parser.add_argument("--against", default=None, metavar="REV",
+                        help="also time the planner code of this git revision, side by side")
     args = parser.parse_args(argv)
 
     print(_pin_one_core(), flush=True)
@@ -166,6 +196,28 @@ def main(argv: list[str] | None = None) -> int:
         "for both",
         flush=True,
     )
+
+    if args.against:
+        with tempfile.TemporaryDirectory() as tmp:
+            old_mod = _planner_of_revision(args.against, Path(tmp))
+            old = old_mod.NonparametricAgent(
+                old_mod.NonparametricConfig(**vars(replace(base, inducing_ratio=0.4)))
+            ).fit(dataset)
+            (nw, nc), (pw, pc) = _frame_costs([ours, old], tracks)
+            diff = 0.0
+            for track in tracks:
+                for a in (ours, old):
+                    a.stream_reset()
+                for xy in track:
+                    ours.stream_update(xy)
+                    old.stream_update(xy)
+                    diff = max(diff, float(np.max(np.abs(ours.stream_predict()
+                                                         - old.stream_predict()))))
+        print(f"\nthis code vs the planner of {args.against}, interleaved track by track:")
+        print(f"  this  cpu {_fmt(nc)}\n  {args.against:5s} cpu {_fmt(pc)}")
+        print(f"  ratio {args.against}/this: cpu {np.median(pc) / np.median(nc):.3f}x, wall "
+              f"{np.median(pw) / np.median(nw):.3f}x (medians); largest chunk difference "
+              f"{diff:.1e} m", flush=True)
 
     print("\ncost per frame against the inducing ratio (IAAL = exact GP for reference):")
     print(

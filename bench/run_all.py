@@ -17,7 +17,14 @@ import time
 from pathlib import Path
 
 BENCH_DIR = Path(__file__).resolve().parent
-ORDER = ("env_speed", "planner_latency", "baseline_latency", "reactive_success", "sweep_backends")
+ORDER = (
+    "env_speed",
+    "physics_breakdown",
+    "planner_latency",
+    "baseline_latency",
+    "reactive_success",
+    "sweep_backends",
+)
 
 
 def main(argv: list[str] | None = None) -> int:

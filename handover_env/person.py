@@ -24,13 +24,17 @@ Sources:
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from handover_env import receiver_motion as rm
+from handover_env.data.dataset import Episode
 from handover_env.data.filtering import smooth_track
+from handover_env.data.limits import MAX_ID_CHARS
+from handover_env.data.recording import Recording, position_array, skeleton_array
 from handover_env.gait import walking_pose
 from handover_env.skeleton import (
     RIGHT_ARM,
@@ -168,7 +172,7 @@ def _from_pose(pose: BodyPose, dims: BodyDims, camera_xy: np.ndarray, heading: n
 def scripted_motion(rng: np.random.Generator, kind: str = "id", height: float | None = None,
                     speed: float | None = None, overrides: dict | None = None) -> PersonMotion:
     """A scripted ID/OOD walker drawn from ``rng`` (see :func:`receiver_motion.sample_walker`)."""
-    fixed = dict(overrides or {})
+    fixed = rm.check_overrides(overrides) if overrides is not None else {}
     if height is not None:
         fixed["height"] = float(height)
     if speed is not None:
@@ -182,22 +186,41 @@ def scripted_motion(rng: np.random.Generator, kind: str = "id", height: float | 
                       source_id=f"scripted_{kind}", walker=walker)
 
 
-def _get(source: Any, key: str) -> Any:
-    if isinstance(source, dict):
-        return source.get(key)
-    if key == "receiver_pose":
-        return getattr(source, "receiver_pose", None)
-    episode = getattr(source, "episode", source)
-    return getattr(episode, key, None)
+def replay_input(source: Any) -> tuple[np.ndarray, np.ndarray | None, str]:
+    """The checked ``(receiver_xy (T, 2), receiver_pose (T, 34, 3) or None, source_id)`` of a
+    replay, one check for every form (:func:`recorded_motion`'s ``source``).
 
+    Tracks and skeletons go through :func:`handover_env.data.recording.position_array`: real
+    numbers only, finite, within the +-MAX_ABS_COORD_M an :class:`Episode` may hold; a skeleton
+    also needs every bone (:func:`handover_env.skeleton.shortest_bone`) at least MIN_BONE_M long.
 
-def _as_track(value: Any, width: int, name: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim != 2 or arr.shape[1] != width or arr.shape[0] < 2:
-        raise ValueError(f"replay {name} must have shape (T>=2, {width}), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"replay {name} contains NaN or inf")
-    return arr
+    Raises:
+        ValueError (:class:`~handover_env.data.dataset.DatasetError`): naming the field.
+    """
+    if isinstance(source, Recording):
+        xy, pose, source_id = source.episode.receiver_xy, source.receiver_pose, source.source_id
+    elif isinstance(source, Episode):
+        xy, pose, source_id = source.receiver_xy, None, source.source_id
+    elif isinstance(source, Mapping):
+        xy, pose = source.get("receiver_xy"), source.get("receiver_pose")
+        source_id = source.get("source_id")
+        source_id = "replay" if source_id is None else source_id
+        if xy is None:
+            raise ValueError("a replayed receiver needs 'receiver_xy' (T, 2)")
+        if not isinstance(source_id, str) or not 0 < len(source_id) <= MAX_ID_CHARS:
+            raise ValueError(
+                f"replay source_id must be a string of 1 to {MAX_ID_CHARS} characters, got "
+                f"{source_id!r:.80}"
+            )
+    else:
+        raise ValueError(
+            "a replayed receiver is a Recording, an Episode or a dict with 'receiver_xy', got "
+            f"{type(source).__name__}"
+        )
+    xy = position_array(xy, "replay receiver_xy", (2,))
+    if pose is not None:
+        pose = skeleton_array(pose, xy.shape[0], "replay receiver_pose")
+    return xy, pose, source_id
 
 
 def recorded_motion(source: Any, height: float | None = None) -> PersonMotion:
@@ -208,24 +231,23 @@ def recorded_motion(source: Any, height: float | None = None) -> PersonMotion:
             :class:`~handover_env.data.dataset.Episode`, or a dict with ``receiver_xy`` (T, 2) and
             optionally ``receiver_pose`` (T, 34, 3) and ``source_id``; 30 Hz.
         height: body height, m (default: measured from the skeleton, else 1.725).
+
+    Raises:
+        ValueError: a malformed replay (:func:`replay_input`), or a skeleton whose body height
+            is not a person's (:data:`handover_env.receiver_motion.HEIGHT_RANGE`).
     """
-    raw_xy = _get(source, "receiver_xy")
-    if raw_xy is None:
-        raise ValueError("a replayed receiver needs 'receiver_xy' (T, 2)")
-    raw_xy = _as_track(raw_xy, 2, "receiver_xy")
-    skeleton = _get(source, "receiver_pose")
-    source_id = str(_get(source, "source_id") or "replay")
+    raw_xy, skeleton, source_id = replay_input(source)
     if skeleton is not None:
-        joints = np.asarray(skeleton, dtype=np.float64)
-        if joints.shape != (raw_xy.shape[0], 34, 3):
-            raise ValueError(
-                f"replay receiver_pose must have shape ({raw_xy.shape[0]}, 34, 3), got "
-                f"{joints.shape}"
-            )
-        if not np.all(np.isfinite(joints)):
-            raise ValueError("replay receiver_pose contains NaN or inf")
-        joints = smooth_track(joints, RATE)
+        joints = smooth_track(skeleton, RATE)
         dims = measure_dims(joints, height)
+        lo, hi = rm.HEIGHT_RANGE
+        if not lo <= dims.height <= hi:
+            raise ValueError(
+                f"replay receiver_pose: the body height "
+                f"{'given' if height is not None else 'measured from the HEAD joint'} is "
+                f"{dims.height:.3g} m, outside [{lo:g}, {hi:g}] m (the skeleton must be a person "
+                "standing in the dataset's frame: z up, floor at z = 0)"
+            )
         pose = retarget(joints, dims)
         xy = joints[:, 0, :2]
         heading = _heading(xy)

@@ -38,12 +38,14 @@ down and the slowest speed factor, and how far contact pushed the pelvis off its
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import mujoco
 import numpy as np
 
+from handover_env import receiver_motion as rm
 from handover_env.body_model import apply_dims, weld_lag_times
 from handover_env.gait import arm_pose
 from handover_env.grip import ArmGrip
@@ -80,6 +82,45 @@ PASS_DISTANCE = 1.2
 #: Where the static receiver holds the raised right hand: forward, right and up from the
 #: shoulder in the body frame, m (a hand held out in front, below shoulder height).
 PRESENT_OFFSET = (0.30, -0.15, -0.15)
+
+# Ranges of the person settings (ReceiverConfig; the envs' ``person=`` overrides). A value
+# outside its range is refused with the setting and the range named.
+#: The env's longest episode, s (StaticHandover-v0: 600 steps at 30 Hz): a slower movement never
+#: ends within an episode.
+LONGEST_EPISODE = 20.0
+#: The shortest movement, s: one env step (the hand's path is re-planned once per step).
+SHORTEST_MOVE = 1.0 / RATE
+#: The longest arm's reach, m: shoulder to grip centre of a 2.3 m body (ARM_REACH_RATIO 0.386).
+LONGEST_REACH = 0.9
+#: The ``height`` reset option's range, m (adults; the walker model itself takes 1.0 .. 2.3).
+HEIGHT_OPTION_RANGE = (1.2, 2.2)
+#: Half the height of the bottle handed over, m (handover_env/assets/scene.xml: size 0.033 0.1).
+OBJECT_HALF_HEIGHT = 0.1
+#: (low, high, unit, where the range comes from) of every ReceiverConfig field.
+SETTING_RANGES: dict[str, tuple[float, float, str, str]] = {
+    "reach_duration": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "reach_lead_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "meet_forward": (0.0, LONGEST_REACH, "m", "ahead of the pelvis within the longest reach"),
+    "comfort_fraction": (0.1, 2.0, "", "of the arm's length"),
+    "min_speed_factor": (0.05, 1.0, "", "a waiting person walks at least 1/20 of their speed"),
+    "slow_rate": (1.0 / LONGEST_EPISODE, RATE, "1/s",
+                  "changes the speed factor by 1 over the longest episode .. in one env step"),
+    "give_up_behind": (0.0, 1.0, "m", f"an object is walked past only within {PASS_DISTANCE} m"),
+    "hold_time": (0.0, LONGEST_EPISODE, "s", "up to the longest episode"),
+    "pull_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "pull_distance": (0.0, LONGEST_REACH, "m", "within the longest reach"),
+    "grasp_radius": (0.005, 2 * OBJECT_HALF_HEIGHT, "m", "5 mm .. the bottle's height"),
+    "grasp_speed": (0.01, MAX_SEGMENT_SPEED, "m/s", "up to a fast human hand"),
+    "grasp_offset": (-OBJECT_HALF_HEIGHT, OBJECT_HALF_HEIGHT, "m",
+                     "on the bottle's axis, within its half-height"),
+    "approach_distance": (0.0, 0.5 * LONGEST_REACH, "m", "within half the longest reach"),
+    "approach_height": (0.0, 0.5 * LONGEST_REACH, "m", "within half the longest reach"),
+    "close_radius": (0.005, LONGEST_REACH, "m", "5 mm .. the longest reach"),
+    "close_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "carry_forward": (0.0, 0.5 * LONGEST_REACH, "m", "within half the longest reach"),
+    "present_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "present_reach": (0.005, LONGEST_REACH, "m", "5 mm .. the longest reach"),
+}
 
 
 @dataclass(frozen=True)
@@ -156,21 +197,66 @@ class ReceiverConfig:
     present_reach: float = 0.15
 
     def __post_init__(self) -> None:
-        for name, value in self.__dict__.items():
-            if not math.isfinite(value):
-                raise ValueError(f"ReceiverConfig.{name} must be finite, got {value}")
-        positive = ("reach_lead_time", "reach_duration", "slow_rate", "grasp_radius", "grasp_speed",
-                    "close_radius", "close_time", "pull_time", "present_time", "present_reach")
-        for name in positive:
-            if getattr(self, name) <= 0:
-                raise ValueError(f"ReceiverConfig.{name} must be > 0, got {getattr(self, name)}")
-        for name in ("hold_time", "approach_distance", "approach_height"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"ReceiverConfig.{name} must be >= 0, got {getattr(self, name)}")
-        if not 0 < self.min_speed_factor <= 1:
-            raise ValueError(f"min_speed_factor must be in (0, 1], got {self.min_speed_factor}")
-        if not 0 < self.comfort_fraction <= 2:
-            raise ValueError(f"comfort_fraction must be in (0, 2], got {self.comfort_fraction}")
+        for name in self.__dataclass_fields__:
+            object.__setattr__(self, name, _setting(name, getattr(self, name)))
+
+
+def _setting(name: str, value: object) -> float:
+    """``value`` as a float if it is a valid person setting ``name`` (:data:`SETTING_RANGES`)."""
+    lo, hi, unit, why = SETTING_RANGES[name]
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        raise ValueError(f"person setting {name} must be a number, got {value!r:.80}")
+    x = float(value)
+    if not (math.isfinite(x) and lo <= x <= hi):
+        raise ValueError(
+            f"person setting {name} must be {'' if math.isfinite(x) else 'finite and '}in "
+            f"[{lo:.4g}, {hi:.4g}]{' ' + unit if unit else ''} ({why}), got {value!r}"
+        )
+    return x
+
+
+def _option(name: str, value: object, bounds: tuple[float, float], unit: str) -> float:
+    """A numeric reset option as a float: a real number (not a bool), finite, within bounds."""
+    lo, hi = bounds
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}] {unit}, got {value!r:.80}")
+    x = float(value)
+    if not (math.isfinite(x) and lo <= x <= hi):
+        raise ValueError(f"{name} must be in [{lo:g}, {hi:g}] {unit}, got {value!r}")
+    return x
+
+
+def person_config(person: object, miss_distance: float) -> ReceiverConfig:
+    """The env's ``person=`` overrides as a :class:`ReceiverConfig` (``give_up_behind`` defaults
+    to the env's ``miss_distance``).
+
+    Raises:
+        ValueError: ``person`` is not a dict, names an unknown setting, or a value is not a
+            number within its range (:data:`SETTING_RANGES`); the message names the setting.
+    """
+    if person is None:
+        person = {}
+    if not isinstance(person, Mapping):
+        raise ValueError(
+            f"person must be a dict of ReceiverConfig settings, got {type(person).__name__}"
+        )
+    known = ReceiverConfig.__dataclass_fields__
+    unknown = sorted(repr(k) for k in person if not isinstance(k, str) or k not in known)
+    if unknown:
+        raise ValueError(
+            f"unknown person setting(s) {unknown}; see handover_env.receiver.ReceiverConfig"
+        )
+    overrides = dict(person)
+    if "give_up_behind" not in overrides:
+        try:
+            overrides["give_up_behind"] = _setting("give_up_behind", miss_distance)
+        except ValueError as exc:
+            raise ValueError(f"miss_distance (the person's give_up_behind): {exc}") from None
+    return ReceiverConfig(**overrides)
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -243,10 +329,10 @@ class Receiver:
             raise ValueError(f"receiver must be 'id', 'ood' or 'replay', got {kind!r}")
         if hand_mode not in ("reach", "recorded"):
             raise ValueError(f"hand_mode must be 'reach' or 'recorded', got {hand_mode!r}")
-        if height is not None and not (1.2 <= float(height) <= 2.2):
-            raise ValueError(f"height must be in [1.2, 2.2] m, got {height}")
-        if speed is not None and not (0.1 <= float(speed) <= 2.5):
-            raise ValueError(f"speed must be in [0.1, 2.5] m/s, got {speed}")
+        if height is not None:
+            height = _option("height", height, HEIGHT_OPTION_RANGE, "m")
+        if speed is not None:
+            speed = _option("speed", speed, rm.SPEED_RANGE, "m/s")
         if kind == "replay":
             if episode is None:
                 raise ValueError(

@@ -28,6 +28,7 @@ shoulder height = 0.818 x body height.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -80,6 +81,140 @@ FREE_CURVATURE = 1.5  # 1/m: curves gentler than this (radius > 0.67 m) are walk
 
 KINDS = ("id", "ood")
 OOD_MODES = ("wander", "pause")
+
+# --------------------------------------------------------------------------------------------
+# Physical ranges of a walker's fields. WalkerParams refuses a value outside them, naming the
+# field and the range; each range holds everything the sampler draws with a wide margin.
+# --------------------------------------------------------------------------------------------
+#: Half-size of the scene's floor plane, m (handover_env/assets/scene.xml: floor size="6 6").
+FLOOR_HALF_SIZE = 6.0
+#: How far the body reaches out sideways from the pelvis while walking, m: the right hand's rest
+#: offset for the tallest body (HAND_REST_LATERAL_RATIO x 2.3 m = 0.36 m), rounded up.
+BODY_HALF_WIDTH = 0.4
+#: The pelvis track stays within +-PELVIS_LIMIT m in x and y, so that the whole body stays on
+#: the floor (:func:`base_trajectory` refuses a walk that would leave it).
+PELVIS_LIMIT = FLOOR_HALF_SIZE - BODY_HALF_WIDTH
+#: The widest lateral gait sway, m (the sampler draws 0.006 .. 0.02; 0.1 m is a staggering gait).
+MAX_SWAY = 0.1
+#: The walk's points (start, passing line, end, convergence and fade x) lie within
+#: +-WALK_HALF_SIZE m: the pelvis limit less the widest sway.
+WALK_HALF_SIZE = PELVIS_LIMIT - MAX_SWAY
+#: Longest a walk may take, s: six times the env's longest episode (StaticHandover-v0: 600
+#: steps at 30 Hz = 20 s); the recordings last 2.3 .. 9.6 s (69 .. 287 frames).
+MAX_WALK_TIME = 120.0
+#: Walking speeds, m/s: a shuffle to a brisk walk (people start to run at about 2 m/s; the
+#: recordings' per-recording medians are 0.57 .. 1.13). The env's ``speed`` option uses it too.
+SPEED_RANGE = (0.1, 2.5)
+#: Human body heights, m (as :meth:`handover_env.skeleton.BodyDims.from_height`).
+HEIGHT_RANGE = (1.0, 2.3)
+#: (low, high, unit, where the range comes from) of every numeric WalkerParams field.
+FIELD_RANGES: dict[str, tuple[float, float, str, str]] = {
+    "speed": (*SPEED_RANGE, "m/s", "walking speeds, SPEED_RANGE"),
+    "pass_y": (-WALK_HALF_SIZE, 0.0, "m",
+               "on the giver's right (y <= 0, as in every recording) and on the floor"),
+    "end_x": (-WALK_HALF_SIZE, WALK_HALF_SIZE, "m", "on the floor (WALK_HALF_SIZE)"),
+    "height": (*HEIGHT_RANGE, "m", "human body heights, HEIGHT_RANGE"),
+    "approach_x": (-WALK_HALF_SIZE, WALK_HALF_SIZE, "m", "on the floor (WALK_HALF_SIZE)"),
+    "start_turn": (-math.pi / 2, math.pi / 2, "rad",
+                   "a walker that turns more than 90 deg away starts by walking away"),
+    "start_bulge": (0.25, 3.0, "",
+                    "sampled 1.0 .. 1.6; longer start tangents swing the path far out"),
+    "step_length_ratio": (0.15, 0.5, "", "step length / height of walking: shuffle to stride"),
+    "sway_amplitude": (0.0, MAX_SWAY, "m", "lateral gait sway, MAX_SWAY"),
+    "speed_ripple": (0.0, 0.5, "", "relative; with drift_amplitude below 0.9"),
+    "drift_amplitude": (0.0, 0.5, "", "relative; with speed_ripple below 0.9"),
+    "drift_frequency": (0.01, 1.0, "Hz", "a slow variation, below the ~1.7 Hz step frequency"),
+    "drift_phase": (-2 * math.pi, 2 * math.pi, "rad", "a phase"),
+    "gait_phase": (-2 * math.pi, 2 * math.pi, "rad", "a phase"),
+    "pause_time": (0.0, MAX_WALK_TIME, "s", "within the longest walk, MAX_WALK_TIME"),
+    "pause_duration": (0.0, MAX_WALK_TIME, "s", "within the longest walk, MAX_WALK_TIME"),
+    "pause_ramp": (0.3, 5.0, "s", "sampled 0.4 .. 0.8; 0.3 s brakes 1 m/s at a peak 5 m/s^2"),
+    "wander_amplitude": (0.0, 0.6, "m", "sampled 0.15 .. 0.45"),
+    "wander_wavelength": (0.5, 10.0, "m", "sampled 1.0 .. 2.2; not shorter than a step"),
+    "wander_phase": (-2 * math.pi, 2 * math.pi, "rad", "a phase"),
+    "wander_loop": (0.0, 1.0, "", "0: a lateral meander .. 1: loops"),
+    "wander_fade_x": (-WALK_HALF_SIZE, WALK_HALF_SIZE, "m", "on the floor (WALK_HALF_SIZE)"),
+}
+
+
+def _is_number(value: object) -> bool:
+    """A real number: int, float or a numpy one, and not a bool."""
+    return not isinstance(value, (bool, np.bool_)) and isinstance(
+        value, (int, float, np.integer, np.floating)
+    )
+
+
+def check_field(name: str, value: object) -> float:
+    """``value`` as a float if it is a valid ``WalkerParams.<name>`` (see :data:`FIELD_RANGES`).
+
+    Raises:
+        ValueError: not a real number (bools are not), not finite, or outside the field's range;
+            the message names the field and the range.
+    """
+    lo, hi, unit, why = FIELD_RANGES[name]
+    if not _is_number(value):
+        raise ValueError(f"walker {name} must be a number, got {value!r}")
+    x = float(value)  # type: ignore[arg-type]
+    if not (math.isfinite(x) and lo <= x <= hi):
+        raise ValueError(
+            f"walker {name} must be {'' if math.isfinite(x) else 'finite and '}in [{lo:g}, "
+            f"{hi:g}]{' ' + unit if unit else ''} ({why}), got {value!r}"
+        )
+    return x
+
+
+def check_overrides(overrides: object) -> dict[str, object]:
+    """Validate walker overrides (reset's ``options["walker"]``) field by field, as a dict.
+
+    ``kind`` is not an override: the env's ``receiver`` option chooses ID or OOD.
+
+    Raises:
+        ValueError: not a mapping, a key that is not a WalkerParams field, or a bad value.
+    """
+    if not isinstance(overrides, Mapping):
+        raise ValueError(
+            "walker overrides must be a dict of WalkerParams fields, got "
+            f"{type(overrides).__name__}"
+        )
+    known = {f.name for f in fields(WalkerParams)} - {"kind"}
+    bad = [k for k in overrides if not isinstance(k, str)]
+    if bad:
+        raise ValueError(f"walker override names must be strings, got {bad!r}")
+    if "kind" in overrides:
+        raise ValueError(
+            "walker 'kind' is not an override: choose the walker with the receiver option "
+            f"('id' or 'ood'), got walker kind {overrides['kind']!r}"
+        )
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise ValueError(f"unknown WalkerParams field(s) {unknown}; known: {sorted(known)}")
+    out = dict(overrides)
+    for name, value in out.items():
+        if name == "ood_mode":
+            if value is not None and value not in OOD_MODES:
+                raise ValueError(f"walker ood_mode must be None or one of {OOD_MODES}, "
+                                 f"got {value!r}")
+        elif name == "start_xy":
+            _start_xy(value)
+        else:
+            check_field(name, value)
+    return out
+
+
+def _start_xy(value: object) -> tuple[float, float]:
+    """A valid start point (two numbers on the floor, see :data:`WALK_HALF_SIZE`)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)):
+        raise ValueError(f"walker start_xy must be a pair of numbers, got {value!r}")
+    items = list(value)
+    if len(items) != 2 or not all(_is_number(v) for v in items):
+        raise ValueError(f"walker start_xy must be a pair of numbers, got {value!r}")
+    start = (float(items[0]), float(items[1]))
+    if not all(math.isfinite(v) and abs(v) <= WALK_HALF_SIZE for v in start):
+        raise ValueError(
+            f"walker start_xy must lie in [{-WALK_HALF_SIZE:g}, {WALK_HALF_SIZE:g}] m in x and y "
+            f"(on the floor), got {value!r}"
+        )
+    return start
 
 
 def _quantile_sample(
@@ -162,63 +297,26 @@ class WalkerParams:
     wander_fade_x: float = 0.2
 
     def __post_init__(self) -> None:
-        if self.kind not in KINDS:
+        if not isinstance(self.kind, str) or self.kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
         if self.kind == "id" and self.ood_mode is not None:
             raise ValueError(f"an ID walker has ood_mode=None, got {self.ood_mode!r}")
-        if self.kind == "ood" and self.ood_mode not in OOD_MODES:
+        if self.kind == "ood" and (
+            not isinstance(self.ood_mode, str) or self.ood_mode not in OOD_MODES
+        ):
             raise ValueError(f"an OOD walker needs ood_mode in {OOD_MODES}, got {self.ood_mode!r}")
-        try:
-            start = tuple(float(v) for v in self.start_xy)
-        except TypeError as exc:
-            raise ValueError(f"start_xy must be a pair of numbers, got {self.start_xy!r}") from exc
-        if len(start) != 2:
-            raise ValueError(f"start_xy must be a pair of numbers, got {self.start_xy!r}")
+        start = _start_xy(self.start_xy)
         object.__setattr__(self, "start_xy", start)
-        for f in fields(self):
-            if f.name in ("kind", "ood_mode", "start_xy"):
-                continue
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(
-                value, (int, float, np.integer, np.floating)
-            ):
-                raise TypeError(f"{f.name} must be a number, got {value!r}")
-            if not math.isfinite(float(value)):
-                raise ValueError(f"{f.name} must be finite, got {value!r}")
-            object.__setattr__(self, f.name, float(value))
-        if not all(math.isfinite(v) for v in start):
-            raise ValueError(f"start_xy must be finite, got {start}")
-        if self.speed <= 0:
-            raise ValueError(f"speed must be > 0, got {self.speed}")
-        if not 1.0 <= self.height <= 2.3:
-            raise ValueError(
-                f"height must be a human body height in [1.0, 2.3] m, got {self.height}"
-            )
+        for name in FIELD_RANGES:
+            object.__setattr__(self, name, check_field(name, getattr(self, name)))
         if start[0] <= self.end_x + 0.1:
             raise ValueError(
                 f"start x ({start[0]:.3f}) must be ahead of end_x ({self.end_x:.3f}) by > 0.1 m"
             )
-        for name in (
-            "step_length_ratio",
-            "start_bulge",
-            "pause_ramp",
-            "wander_wavelength",
-            "drift_frequency",
-        ):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in (
-            "sway_amplitude",
-            "pause_duration",
-            "pause_time",
-            "wander_amplitude",
-            "drift_amplitude",
-        ):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if self.speed_ripple < 0 or self.speed_ripple + self.drift_amplitude >= 0.9:
+        if self.speed_ripple + self.drift_amplitude >= 0.9:
             raise ValueError(
-                "speed_ripple >= 0 and speed_ripple + drift_amplitude < 0.9 are required"
+                "speed_ripple + drift_amplitude must be < 0.9 (the walker never stops by itself), "
+                f"got {self.speed_ripple} + {self.drift_amplitude}"
             )
 
     @property
@@ -244,14 +342,12 @@ def sample_walker(rng: np.random.Generator, kind: str = "id", **overrides: objec
         **overrides: fields of :class:`WalkerParams` to fix, e.g. ``height=1.8, speed=1.0``.
 
     Raises:
-        ValueError: unknown kind or unknown override name, or an invalid resulting walker.
+        ValueError: unknown kind, an invalid override (:func:`check_overrides`) or an invalid
+            resulting walker.
     """
-    if kind not in KINDS:
+    if not isinstance(kind, str) or kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    known = {f.name for f in fields(WalkerParams)}
-    unknown = sorted(set(overrides) - known)
-    if unknown:
-        raise ValueError(f"unknown WalkerParams field(s) {unknown}; known: {sorted(known)}")
+    overrides = check_overrides(overrides)
     # Start point: Gaussian copula of (bearing, distance) with the data's rank correlation,
     # restricted to the region where recordings start (a fixed number of candidates, so the
     # number of draws does not depend on the outcome).
@@ -297,8 +393,6 @@ def sample_walker(rng: np.random.Generator, kind: str = "id", **overrides: objec
         "start_turn": math.radians(float(_quantile_sample(g[11], START_TURN_DEG_Q))),
     }
     params.update(overrides)
-    if "kind" in overrides and "ood_mode" not in overrides:
-        params["ood_mode"] = None if overrides["kind"] == "id" else OOD_MODES[int(mode_draw < 0.5)]
     return WalkerParams(**params)  # type: ignore[arg-type]
 
 
@@ -457,6 +551,15 @@ def base_trajectory(params: WalkerParams, rate_hz: float = 30.0) -> BaseTrajecto
         (params.pause_duration + 2 * params.pause_ramp) if params.ood_mode == "pause" else 0.0
     )
     slowest = params.speed * (1.0 - params.speed_ripple - params.drift_amplitude)
+    pausing = params.pause_time + pause_total if params.ood_mode == "pause" else 0.0
+    if pausing + total / slowest > MAX_WALK_TIME:
+        raise ValueError(
+            f"the walk would take up to {pausing + total / slowest:.0f} s ({total:.1f} m of "
+            "path at down to "
+            f"{slowest:.2f} m/s, pauses included), more than MAX_WALK_TIME = {MAX_WALK_TIME:g} s: "
+            "walk faster (speed, speed_ripple, drift_amplitude), shorter (start_xy, end_x) or "
+            "pause less (pause_time, pause_duration)"
+        )
     t = (
         np.arange(
             math.ceil((params.pause_time + pause_total + total / slowest + 1.0) * rate_hz) + 2
@@ -489,6 +592,12 @@ def base_trajectory(params: WalkerParams, rate_hz: float = 30.0) -> BaseTrajecto
     sway = params.sway_amplitude * np.sin(gait) * moving
     right = np.stack([np.sin(heading), -np.cos(heading)], axis=-1)
     xy = xy + sway[:, None] * right
+    if np.abs(xy).max() > PELVIS_LIMIT:
+        raise ValueError(
+            f"the walk leaves the floor: the pelvis reaches {np.abs(xy).max():.2f} m from the "
+            f"giver in x or y, beyond PELVIS_LIMIT = {PELVIS_LIMIT:g} m (start_xy, start_turn, "
+            "start_bulge, pass_y, end_x and the wander settings shape the path)"
+        )
     return BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=np.mod(gait, 2 * math.pi))
 
 

@@ -385,6 +385,33 @@ def joints_of(pose: BodyPose, dims: BodyDims) -> np.ndarray:
     )
 
 
+def _bone_pairs() -> tuple[tuple[int, int], ...]:
+    """(joint, other joint) pairs whose distance the body model needs to be non-zero."""
+    pairs = [(j, PARENTS[j]) for j in range(1, N_JOINTS)]  # measure_dims' bone lengths
+    pairs += [(s.tip, s.origin) for s in SEGMENTS if s.tip >= 0]  # retarget's bone directions
+    pairs += [(J["LEFT_HIP"], J["RIGHT_HIP"]), (J["LEFT_SHOULDER"], J["RIGHT_SHOULDER"]),
+              (J["LEFT_EAR"], J["RIGHT_EAR"])]  # the pelvis', torso's and head's twist
+    return tuple(dict.fromkeys(pairs))
+
+
+BONE_PAIRS = _bone_pairs()
+
+
+def shortest_bone(joints: np.ndarray) -> tuple[float, int, str]:
+    """The shortest bone of recorded joints (T, 34, 3): (length in m, frame, ``"A-B"`` name).
+
+    Bones are :data:`BONE_PAIRS`: every joint to its parent, every segment's bone and the hip,
+    shoulder and ear lines; a zero-length one leaves :func:`retarget` without a direction.
+    """
+    joints = np.asarray(joints, dtype=np.float64)
+    if joints.ndim != 3 or joints.shape[1:] != (N_JOINTS, 3) or joints.shape[0] < 1:
+        raise ValueError(f"joints must have shape (T, {N_JOINTS}, 3), got {joints.shape}")
+    a, b = (np.array(side) for side in zip(*BONE_PAIRS, strict=True))
+    lengths = np.linalg.norm(joints[:, a] - joints[:, b], axis=-1)  # (T, bones)
+    frame, k = np.unravel_index(int(np.argmin(lengths)), lengths.shape)
+    return float(lengths[frame, k]), int(frame), f"{JOINTS[a[k]]}-{JOINTS[b[k]]}"
+
+
 def measure_dims(joints: np.ndarray, height: float | None = None) -> BodyDims:
     """Rest geometry of a recorded person: median joint offsets in the pelvis frame.
 

@@ -332,9 +332,11 @@ def test_giver_replay_on_recordings_is_compared_with_the_recorded_transfer(tmp_p
     assert any(math.isfinite(float(r["recorded_transfer_time"])) for r in rows)
 
 
-def test_mujoco_auto_resets_are_counted() -> None:
+def test_mujoco_auto_resets_are_counted(monkeypatch, tmp_path: Path) -> None:
     """A NaN velocity makes MuJoCo reset the state mid-step; the row's sim_unstable counts it."""
     import mujoco
+
+    monkeypatch.chdir(tmp_path)  # MuJoCo's warning writes MUJOCO_LOG.TXT into the cwd
 
     from handover_eval.closedloop.worker import instabilities
 

@@ -38,6 +38,22 @@ def test_episode_validation() -> None:
         ep.receiver_xy[0, 0] = 1.0  # arrays are read-only
 
 
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.full((10, 2), "1.0"),  # strings that float() would parse
+        np.zeros((10, 2), dtype=object),
+        np.zeros((10, 2), dtype=bool),
+        np.zeros((10, 2), dtype=complex),
+    ],
+    ids=["str", "object", "bool", "complex"],
+)
+def test_episode_refuses_non_numeric_arrays(bad: np.ndarray) -> None:
+    with pytest.raises(DatasetError, match=r"receiver_xy must be a real numeric array, got dtype"):
+        _episode(receiver_xy=bad)
+    assert _episode(receiver_xy=np.zeros((10, 2), dtype=np.int16)).receiver_xy.dtype == np.float64
+
+
 def test_npz_round_trip(tmp_path: Path, small: HandoverDataset) -> None:
     path = small.save(tmp_path / "demo.npz")
     back = HandoverDataset.load(path)

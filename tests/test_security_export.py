@@ -1,10 +1,14 @@
-"""Issue 16 items 2, 3, 9: the LeRobot export never deletes a user's folder, never trains on stale
-data, and an interrupted export blocks nothing."""
+"""Issue 16 items 2, 3, 9 and issue 20 items 1, 7: the LeRobot export never deletes a user's
+folder (nor a file in an export, nor a folder named like its temporary ones), writes where it
+checked (``~`` expanded once), never trains on stale data, and an interrupted export blocks
+nothing."""
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import shutil
 from pathlib import Path
 
 import pytest
@@ -35,6 +39,12 @@ def data():
 
 def _tree(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def _snapshot(folder: Path) -> dict[str, bytes | None]:
+    """Every file (its bytes) and every folder (None) under ``folder``, hidden ones included."""
+    return {str(p.relative_to(folder)): None if p.is_dir() else p.read_bytes()
+            for p in folder.rglob("*")}
 
 
 # ---------------------------------------------------------------------- item 2
@@ -129,27 +139,33 @@ def test_an_interrupted_export_leaves_nothing_that_blocks_a_rerun(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
 
 
-def test_train_rebuilds_a_half_written_export_of_older_code(tmp_path: Path, data, capsys) -> None:
+def test_train_rebuilds_only_a_real_export(tmp_path: Path, data, capsys) -> None:
+    """Issue 20 item 1: a folder holding just LeRobot metadata with our robot type is not an export
+    (it was trusted as one and replaced); a real export of other data is rebuilt with --overwrite.
+    """
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from handover_eval.cli import train
 
     src = data.save(tmp_path / "d.npz")
-    half = tmp_path / "run" / "lerobot_dataset"  # interrupted by the old exporter: no sidecar
-    (half / "meta").mkdir(parents=True)
-    (half / "meta" / "info.json").write_text(json.dumps({"robot_type": "handover_giver"}))
+    forged = tmp_path / "run" / "lerobot_dataset"
+    (forged / "meta").mkdir(parents=True)
+    (forged / "meta" / "info.json").write_text(json.dumps({"robot_type": "handover_giver"}))
+    before = _tree(forged)
     argv = ["act", "--smoke", "--data", str(src), "--out", str(tmp_path / "run"), "--steps", "2",
             "--eval-every", "1", "--no-progress", "--dim-model", "16", "--n-heads", "2"]
-    assert train.main(argv) == 0, capsys.readouterr().err
-    assert read_sidecar(half)["fingerprint"] == data.fingerprint()
-    other = tmp_path / "shared_export"
-    (other / "meta").mkdir(parents=True)
-    (other / "meta" / "info.json").write_text(json.dumps({"robot_type": "handover_giver"}))
+    assert train.main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"refusing to overwrite {forged}: it is not a handover LeRobot export (no " \
+        "meta/handover.json); nothing was deleted" in err, err
+    assert _tree(forged) == before
+    other = export_lerobot(data.subset([0, 1]), tmp_path / "shared_export", history=10)
     argv2 = [*argv[:5], str(tmp_path / "run2"), *argv[6:], "--export-root", str(other)]
     assert train.main(argv2) == 2
     assert "pass --overwrite to rebuild it" in capsys.readouterr().err
-    assert train.main([*argv2, "--overwrite"]) == 0
+    assert read_sidecar(other)["n_frames"] == data.subset([0, 1]).n_frames
+    assert train.main([*argv2, "--overwrite"]) == 0, capsys.readouterr().err
     assert read_sidecar(other)["fingerprint"] == data.fingerprint()
 
 
@@ -171,3 +187,185 @@ def test_a_second_fold_trains_on_its_own_episodes(tmp_path: Path) -> None:
     seen = set(agent.train_log["split"]["train"]) | set(agent.train_log["split"]["val"])
     assert seen == {ep.source_id for ep in fold1}
     assert not seen & {data[i].source_id for i in test1}  # no test episode leaks into training
+
+
+# ---------------------------------------------------------------------- issue 20 item 1
+def _user_folder(folder: Path, marker: str) -> Path:
+    """A user's folder with a git repository, a paper and a forged export marker."""
+    (folder / ".git" / "objects").mkdir(parents=True)
+    (folder / ".git" / "HEAD").write_text("ref: refs/heads/main\n")
+    (folder / "paper.tex").write_text("\\documentclass{article}")
+    (folder / "meta").mkdir()
+    if marker.startswith("empty-sidecar"):
+        (folder / "meta" / "handover.json").write_text("")
+    elif marker == "info-robot-type":
+        (folder / "meta" / "info.json").write_text(json.dumps({"robot_type": "handover_giver"}))
+    return folder
+
+
+@pytest.mark.parametrize(
+    "marker, reason",
+    [
+        ("empty-sidecar", r"it holds '\.git/', which an export does not write"),
+        ("empty-sidecar-only", r"meta/handover\.json: not valid JSON"),
+        ("info-robot-type", r"no meta/handover\.json"),
+    ],
+)
+def test_a_forged_marker_does_not_make_a_folder_an_export(
+    tmp_path: Path, data, capsys, marker: str, reason: str
+) -> None:
+    """An empty meta/handover.json, or a meta/info.json with our robot type, made any folder an
+    "export": --overwrite deleted the user's files and .git."""
+    src = data.save(tmp_path / "d.npz")
+    user = _user_folder(tmp_path / "thesis", marker)
+    if marker == "empty-sidecar-only":  # pass the check of the entries: the sidecar is read
+        for extra in (".git", "paper.tex"):
+            path = user / extra
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+        (user / "data" / "chunk-000").mkdir(parents=True)
+        (user / "data" / "chunk-000" / "file-000.parquet").write_bytes(b"the user's table")
+    before = _snapshot(user)
+    assert main(["export-lerobot", str(src), str(user), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert re.search(
+        rf"^error: refusing to overwrite {re.escape(str(user))}: it is not a handover LeRobot "
+        rf"export \(.*{reason}.*\); nothing was deleted",
+        err,
+    ), err
+    assert _snapshot(user) == before
+    with pytest.raises(ValueError, match="refusing to overwrite"):
+        export_lerobot(data, user, overwrite=True)
+    assert _snapshot(user) == before
+
+
+@pytest.fixture()
+def earlier(tmp_path: Path, data) -> Path:
+    return export_lerobot(data.subset([0, 1]), tmp_path / "ds", history=4)
+
+
+@pytest.mark.parametrize(
+    "tamper, reason",
+    [
+        ("extra-file", r"it holds 'notes\.txt', which an export does not write"),
+        ("extra-folder", r"it holds 'data/chunk-000/mine/', which an export does not write"),
+        ("git", r"it holds '\.git/', which an export does not write"),
+        ("symlink", r"'meta/stats\.json' is a symbolic link"),
+        ("sidecar-field", r"fields \['mine'\] differ from those an export writes"),
+        ("sidecar-missing-field", r"fields \['fingerprint'\] differ"),
+        ("sidecar-rate", r"rate_hz is 1e-300 Hz, outside"),
+        ("sidecar-frames", r"meta/info\.json: total_frames \d+, but meta/handover\.json says 1"),
+        ("info-robot", r"robot_type 'koch', an export has 'handover_giver'"),
+    ],
+)
+def test_overwrite_of_a_real_export_with_anything_else_in_it_deletes_nothing(
+    tmp_path: Path, data, earlier: Path, capsys, tamper: str, reason: str
+) -> None:
+    """Overwriting a real export deleted everything else in it."""
+    src = data.save(tmp_path / "d.npz")
+    sidecar = earlier / "meta" / "handover.json"
+    meta = json.loads(sidecar.read_text())
+    if tamper == "extra-file":
+        (earlier / "notes.txt").write_text("my notes")
+    elif tamper == "extra-folder":
+        (earlier / "data" / "chunk-000" / "mine").mkdir()
+    elif tamper == "git":
+        (earlier / ".git").mkdir()
+        (earlier / ".git" / "HEAD").write_text("ref: refs/heads/main\n")
+    elif tamper == "symlink":
+        (tmp_path / "elsewhere.json").write_text("{}")
+        (earlier / "meta" / "stats.json").unlink()
+        (earlier / "meta" / "stats.json").symlink_to(tmp_path / "elsewhere.json")
+    elif tamper == "info-robot":
+        info = json.loads((earlier / "meta" / "info.json").read_text())
+        (earlier / "meta" / "info.json").write_text(json.dumps({**info, "robot_type": "koch"}))
+    else:
+        if tamper == "sidecar-field":
+            meta["mine"] = 1
+        elif tamper == "sidecar-missing-field":
+            del meta["fingerprint"]
+        elif tamper == "sidecar-rate":
+            meta["rate_hz"] = 1e-300
+        else:
+            meta["n_frames"] = 1
+        sidecar.write_text(json.dumps(meta))
+    before = _snapshot(earlier)
+    assert main(["export-lerobot", str(src), str(earlier), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "nothing was deleted" in err, err
+    assert re.search(rf"refusing to overwrite {re.escape(str(earlier))}: .*{reason}", err), err
+    assert _snapshot(earlier) == before
+
+
+def test_overwrite_never_deletes_the_dataset_being_exported(
+    tmp_path: Path, data, earlier: Path, capsys
+) -> None:
+    """The .npz being exported, saved inside the export, was deleted with it."""
+    src = data.save(earlier / "d.npz")
+    before = _snapshot(earlier)
+    assert main(["export-lerobot", str(src), str(earlier), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert f"refusing to overwrite {earlier}: it holds {src}, the dataset being exported" in err
+    assert err.count("\n") == 1
+    link = tmp_path / "link.npz"  # a link to it elsewhere is resolved
+    link.symlink_to(src)
+    assert main(["export-lerobot", str(link), str(earlier), "--overwrite"]) == 2
+    assert "the dataset being exported" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="the dataset being exported"):
+        export_lerobot(data, earlier, overwrite=True, inputs=[src])
+    assert _snapshot(earlier) == before
+    src.unlink()  # without it, the export is replaceable again
+    export_lerobot(data, earlier, history=4, overwrite=True)
+    assert read_sidecar(earlier)["fingerprint"] == data.fingerprint()
+
+
+def test_a_user_folder_named_like_a_stale_sibling_is_left_alone(
+    tmp_path: Path, data, earlier: Path
+) -> None:
+    """``.<root>.old-<pid>-<hex>`` of a dead pid was deleted silently, whatever it held."""
+    users = tmp_path / ".ds.old-999999999-ab12"
+    (users / ".git").mkdir(parents=True)
+    (users / "paper.tex").write_text("\\documentclass{article}")
+    partial = tmp_path / ".ds.partial-999999998-cd34"
+    (partial / "meta").mkdir(parents=True)
+    (partial / "meta" / "info.json").write_text(json.dumps({"robot_type": "handover_giver"}))
+    (partial / "meta" / "todo.txt").write_text("mine")
+    stale_old = tmp_path / ".ds.old-999999997-ef56"  # a real export a killed run was replacing
+    shutil.copytree(earlier, stale_old)
+    stale_partial = tmp_path / ".ds.partial-999999996-0a0b"  # a killed export, mid-way
+    shutil.copytree(earlier, stale_partial)
+    (stale_partial / "meta" / "handover.json").unlink()
+    kept = {users: _snapshot(users), partial: _snapshot(partial)}
+    with pytest.warns(UserWarning) as caught:
+        export_lerobot(data, earlier, history=4, overwrite=True)
+    messages = sorted(str(w.message) for w in caught)
+    assert len(messages) == 2, messages
+    assert messages[1].startswith(f"left {partial} in place: it is named like a temporary folder "
+                                  "of ds but it is not a handover LeRobot export (it holds "
+                                  "'meta/todo.txt'")
+    assert messages[0].startswith(f"left {users} in place") and "(no meta/handover.json)" in \
+        messages[0]
+    assert {p: _snapshot(p) for p in kept} == kept
+    assert not stale_old.exists() and not stale_partial.exists()
+    assert read_sidecar(earlier)["fingerprint"] == data.fingerprint()
+
+
+# ---------------------------------------------------------------------- issue 20 item 7
+def test_a_quoted_tilde_root_is_expanded_once(tmp_path: Path, data, monkeypatch, capsys) -> None:
+    """``export-lerobot "~/x"`` checked the expanded path, then wrote a literal ``~`` folder."""
+    home, work = tmp_path / "home", tmp_path / "work"
+    home.mkdir()
+    work.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(work)
+    data.save(home / "d.npz")
+    assert main(["export-lerobot", "~/d.npz", "~/x", "--history", "4"]) == 0, \
+        capsys.readouterr().err
+    assert f"to {home / 'x'} as" in capsys.readouterr().out
+    assert read_sidecar(home / "x")["fingerprint"] == data.fingerprint()
+    assert main(["export-lerobot", "~/d.npz", "~/x", "--history", "4"]) == 2
+    assert f"error: {home / 'x'} already exists" in capsys.readouterr().err
+    assert main(["export-lerobot", "~/d.npz", "~/x", "--history", "4", "--overwrite"]) == 0
+    assert export_lerobot(data, "~/y", history=4) == home / "y"
+    assert list(work.iterdir()) == []  # no literal "~" folder in the current folder
+    assert sorted(p.name for p in home.iterdir()) == ["d.npz", "x", "y"]

@@ -1,7 +1,8 @@
-"""Issue 16 items 5 and 13: bounded, validated ``.npz`` datasets."""
+"""Issue 16 items 5 and 13, issue 20 item 9 (rate): bounded, validated ``.npz`` datasets."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ from crafted import lying_header_npy, many_members_npz, npz_members, write_npz
 
 from handover_env.data import DatasetError, HandoverDataset, npz_io
 from handover_env.data.__main__ import main
+from handover_env.data.dataset import MAX_RATE_HZ, MIN_RATE_HZ
 from handover_env.data.limits import MAX_ABS_COORD_M
 
 
@@ -175,3 +177,30 @@ def test_compare_says_when_a_side_has_no_episodes_of_a_kind(tmp_path: Path, caps
     assert out.count("rel. diff") == 2  # the all and ood tables are still printed
     assert main(["compare", str(a), str(b), "--subset", "id"]) == 2
     assert "no subset of ['id'] has episodes on both sides" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------- issue 20 item 9: rate
+@pytest.mark.parametrize("rate", [1e-300, 0.5, 1e6, np.inf, -30.0], ids=str)
+def test_an_implausible_rate_is_refused_naming_file_and_field(
+    tmp_path: Path, members, rate: float, capsys
+) -> None:
+    """``rate_hz = 1e-300`` was accepted: every time step became 1e300 s."""
+    path = write_npz(tmp_path / "slow.npz", {**members, "rate_hz": np.array(rate)})
+    shown = re.escape(f"{rate:g}")
+    bounds = rf"{MIN_RATE_HZ:g} \.\. {MAX_RATE_HZ:g} Hz"
+    message = rf"slow\.npz: rate_hz is {shown} Hz, outside the {bounds}"
+    with pytest.raises(DatasetError, match=message):
+        HandoverDataset.load(path)
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"slow.npz: rate_hz is {rate:g} Hz" in err
+    good = HandoverDataset.load(write_npz(tmp_path / "ok.npz", members))
+    with pytest.raises(DatasetError, match=rf"rate_hz is {shown} Hz, outside"):
+        HandoverDataset(good.episodes, rate_hz=rate)
+
+
+@pytest.mark.parametrize("rate", [MIN_RATE_HZ, 30.0, 120.0, MAX_RATE_HZ])
+def test_plausible_rates_still_load(tmp_path: Path, members, rate: float) -> None:
+    path = write_npz(tmp_path / "d.npz", {**members, "rate_hz": np.array(rate)})
+    ds = HandoverDataset.load(path)
+    assert ds.rate_hz == rate and ds.dt == pytest.approx(1.0 / rate)

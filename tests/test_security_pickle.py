@@ -1,5 +1,5 @@
-"""Issue 16 items 4-6: crafted pickles end with a named DatasetError, before anything runs or is
-allocated."""
+"""Issue 16 items 4-6, issue 20 item 9 (dtypes, protocols): crafted pickles end with a named
+DatasetError, before anything runs or is allocated."""
 
 from __future__ import annotations
 
@@ -125,4 +125,111 @@ def test_every_error_names_the_file(tmp_path: Path) -> None:
             DatasetError, match=r"motion_normal_0\.pkl: cannot load \(MemoryError: boom\)"
         ),
     ):
+        load_public_file(path)
+
+
+# ---------------------------------------------------------------------- issue 20 item 9: dtypes
+def _big_endian_record() -> dict:
+    from crafted import good_record
+
+    record = good_record(t=12)
+    record["pose_object"] = record["pose_object"].astype(">f8")
+    return record
+
+
+def test_a_big_endian_array_keeps_its_values(tmp_path: Path) -> None:
+    """numpy's own big-endian pickle (dtype(code, False, True) + state '>') is read correctly."""
+    import pickle
+
+    import numpy as np
+
+    record = _big_endian_record()
+    path = tmp_path / "motion_normal_5.pkl"
+    path.write_bytes(pickle.dumps(record, protocol=4))
+    episode = load_public_file(path)
+    np.testing.assert_array_equal(episode.giver_xyz, record["pose_object"].astype("<f8"))
+
+
+def test_a_copy_false_dtype_is_refused_not_misread(tmp_path: Path) -> None:
+    """``dtype('f8', False, False)`` returns numpy's shared dtype, which ignores the '>' state:
+    the array's bytes were silently read as little-endian numbers."""
+    import pickle
+
+    import numpy as np
+
+    record = _big_endian_record()
+    good = pickle.dumps(record, protocol=4)
+    crafted = good.replace(b"\x89\x88\x87", b"\x89\x89\x87")  # (False, True) -> (False, False)
+    assert crafted != good and len(crafted) == len(good)
+    misread = pickle.loads(crafted)["pose_object"]  # what a plain unpickler makes of it
+    assert not np.array_equal(misread, record["pose_object"])
+    path = tmp_path / "motion_normal_6.pkl"
+    path.write_bytes(crafted)
+    with pytest.raises(
+        DatasetError,
+        match=r"motion_normal_6\.pkl: refused to load: dtype\('f8', align=False, copy=False\): "
+        r"numpy pickles dtype\(code, False, True\)",
+    ):
+        load_public_file(path)
+
+
+# ---------------------------------------------------------------------- issue 20 item 9: protocols
+@pytest.mark.parametrize("protocol", [3, 4, 5])
+def test_numpy_pickles_of_protocols_3_to_5_load(tmp_path: Path, protocol: int) -> None:
+    """Protocol 5 pickles arrays as ``_frombuffer(bytearray, dtype, shape, order)``; it was
+    refused although protocols 3-5 were documented."""
+    import pickle
+
+    import numpy as np
+    from crafted import good_record
+
+    from handover_env.data.pickle_scan import scan_pickle
+    from handover_env.data.public import safe_load_pickle
+
+    plain = tmp_path / "plain.pkl"
+    plain.write_bytes(pickle.dumps(np.arange(3), protocol=protocol))
+    scan_pickle(plain.read_bytes(), "plain.pkl")
+    np.testing.assert_array_equal(safe_load_pickle(plain), np.arange(3))
+    record = good_record(t=12)
+    record["pose_giver"] = np.asfortranarray(record["pose_giver"])  # order 'F' at protocol 5
+    record["pose_object"] = record["pose_object"].astype(">f8")
+    path = tmp_path / "motion_normal_7.pkl"
+    path.write_bytes(pickle.dumps(record, protocol=protocol))
+    loaded = safe_load_pickle(path)
+    for key, value in record.items():
+        np.testing.assert_array_equal(loaded[key], value)
+    episode = load_public_file(path)
+    np.testing.assert_array_equal(episode.giver_xyz, record["pose_object"])
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        ("out-of-band", r"an out-of-band buffer \(NEXT_BUFFER\)"),
+        ("protocol-2", r"pickle protocol 2 \(this loader reads 3 to 5\)"),
+        ("short-buffer", r"declares 288 bytes but the file holds 280"),
+        ("bad-order", r"_frombuffer called other than as _frombuffer\(bytes, dtype, shape, 'C'"),
+    ],
+)
+def test_protocol_5_buffers_are_checked(tmp_path: Path, make: str, message: str) -> None:
+    import pickle
+
+    from crafted import good_record
+
+    record = good_record(t=12)
+    if make == "out-of-band":
+        raw = pickle.dumps(record, protocol=5, buffer_callback=lambda buf: False)
+    elif make == "protocol-2":
+        raw = pickle.dumps(record, protocol=2)
+    else:
+        raw = pickle.dumps(record, protocol=5)
+        if make == "short-buffer":  # pose_object (12, 3): the buffer loses its last 8 bytes
+            start = raw.index(b"\x96" + (12 * 3 * 8).to_bytes(8, "little"))  # BYTEARRAY8
+            head, data = raw[:start], raw[start + 9:start + 9 + 280]
+            raw = head + b"\x96" + (280).to_bytes(8, "little") + data + raw[start + 9 + 288:]
+        else:
+            raw = raw.replace(b"\x8c\x01C", b"\x8c\x01K", 1)
+    path = tmp_path / "motion_normal_8.pkl"
+    path.write_bytes(raw)
+    with pytest.raises(DatasetError, match=rf"motion_normal_8\.pkl: refused to load: .*{message}"):
         load_public_file(path)

@@ -154,7 +154,7 @@ def test_a_kill_between_checkpoint_files_resumes_exactly(data_path, tmp_path, mo
         ), name
 
 
-def test_an_interrupted_commit_is_finished_by_the_next_reader(tmp_path):
+def test_an_interrupted_commit_is_finished_by_the_writers_recovery(tmp_path):
     from baselines.checkpoint_io import recover, staged_write
 
     out = tmp_path / "ckpt"

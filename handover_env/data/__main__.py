@@ -19,6 +19,7 @@ for the embedded default (900 ID + 100 OOD, seed 0).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -143,24 +144,30 @@ def _count(stats: dict, subset: str) -> int:
 def cmd_export_lerobot(args: argparse.Namespace) -> int:
     from handover_env.paths import check_replaceable_root
 
-    check_replaceable_root(args.root)  # before loading anything: "", ".", "/", home are refused
+    # before loading anything: "", ".", "/", home are refused; "~" is expanded here, once, and
+    # this path is the one checked and written
+    root = check_replaceable_root(args.root)
+    source = os.path.expanduser(args.dataset)
+    inputs = [source] if Path(source).exists() else []
     try:
-        from handover_env.data.lerobot_export import export_lerobot
+        from handover_env.data.lerobot_export import check_overwrite, export_lerobot
     except ImportError as exc:
         raise DatasetError(
             f"the LeRobot export is not available ({exc}); it lives in "
             "handover_env/data/lerobot_export.py"
         ) from exc
-    dataset = _load(args.dataset)
+    check_overwrite(root, args.overwrite, inputs)  # refused before the dataset is read
+    dataset = _load(source)
     start = time.perf_counter()
     root = export_lerobot(
         dataset,
-        args.root,
+        root,
         repo_id=args.repo_id,
         history=args.history,
         horizon=args.horizon,
         overwrite=args.overwrite,
         progress=True,
+        inputs=inputs,
     )
     print(
         f"exported {len(dataset)} episodes ({dataset.n_frames:,} frames) to {root} "
@@ -308,8 +315,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace an existing ROOT, only if it holds an "
-        "earlier export (its meta/handover.json); any other folder is refused",
+        help="replace an existing ROOT, only if it is an earlier export and nothing else: its "
+        "meta/handover.json validates, it holds only the files LeRobot and the export write, and "
+        "not DATASET; any other folder is refused and nothing is deleted",
     )
     p.set_defaults(func=cmd_export_lerobot)
 

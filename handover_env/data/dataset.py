@@ -30,6 +30,11 @@ from handover_env.paths import new_file_mode
 
 FORMAT_VERSION = 1
 DEFAULT_RATE_HZ = 30.0
+#: Plausible sampling rates of a recorded or simulated trajectory, Hz. Cameras and motion capture
+#: run at about 10 .. 500 Hz (the public data: 30 Hz); outside 1 .. 1000 Hz a rate is a corrupt or
+#: crafted value (1e-300 Hz makes every time step 1e300 s), not a recording.
+MIN_RATE_HZ = 1.0
+MAX_RATE_HZ = 1000.0
 
 _ARRAY_FIELDS: dict[str, int] = {
     "receiver_xy": 2,
@@ -43,6 +48,19 @@ _POSITION_FIELDS = ("receiver_xy", "receiver_hand_xyz", "giver_xyz")
 
 class DatasetError(ValueError):
     """A dataset file or episode is malformed; the message names the file or episode."""
+
+
+def rate_problem(rate_hz: object) -> str | None:
+    """None when ``rate_hz`` is a real number in [:data:`MIN_RATE_HZ`, :data:`MAX_RATE_HZ`] Hz,
+    else why not (a message naming the field ``rate_hz``)."""
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, (int, float, np.integer, np.floating)):
+        return f"rate_hz must be a number, got {type(rate_hz).__name__}"
+    if not (np.isfinite(rate_hz) and MIN_RATE_HZ <= rate_hz <= MAX_RATE_HZ):
+        return (
+            f"rate_hz is {float(rate_hz):g} Hz, outside the {MIN_RATE_HZ:g} .. {MAX_RATE_HZ:g} Hz "
+            "of a camera or motion-capture recording"
+        )
+    return None
 
 
 @dataclass(frozen=True)
@@ -68,7 +86,13 @@ class Episode:
     def __post_init__(self) -> None:
         lengths = set()
         for name, width in _ARRAY_FIELDS.items():
-            arr = np.asarray(getattr(self, name), dtype=np.float64)
+            raw = np.asarray(getattr(self, name))
+            if raw.dtype.kind not in "iuf":  # strings, objects, bools, complex: never coerced
+                raise DatasetError(
+                    f"episode {self.source_id!r}: {name} must be a real numeric array, got dtype "
+                    f"{raw.dtype}"
+                )
+            arr = raw.astype(np.float64, copy=False)
             if arr.ndim != 2 or arr.shape[1] != width:
                 raise DatasetError(
                     f"episode {self.source_id!r}: {name} must have shape (T, {width}), got "
@@ -123,7 +147,8 @@ class HandoverDataset:
 
     Args:
         episodes: the demonstrations.
-        rate_hz: sampling rate shared by every episode (30 Hz in the public dataset).
+        rate_hz: sampling rate shared by every episode (30 Hz in the public dataset), within
+            :data:`MIN_RATE_HZ` .. :data:`MAX_RATE_HZ`.
         name: free-text provenance, e.g. ``"public:/path/to/whole_motions"`` or
             ``"synthetic(seed=0)"``.
     """
@@ -134,8 +159,9 @@ class HandoverDataset:
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if not np.isfinite(self.rate_hz) or self.rate_hz <= 0:
-            raise DatasetError(f"rate_hz must be positive and finite, got {self.rate_hz}")
+        problem = rate_problem(self.rate_hz)
+        if problem:
+            raise DatasetError(problem)
         self.episodes = list(self.episodes)
         for ep in self.episodes:
             if not isinstance(ep, Episode):
@@ -281,7 +307,8 @@ class HandoverDataset:
 
         Only the members :meth:`save` writes are read, each bounded before it is decompressed
         (:mod:`handover_env.data.npz_io`); every scalar must have its exact dtype and shape
-        (``format_version`` an integer equal to :data:`FORMAT_VERSION`, ``rate_hz`` a float,
+        (``format_version`` an integer equal to :data:`FORMAT_VERSION`, ``rate_hz`` a float
+        within :data:`MIN_RATE_HZ` .. :data:`MAX_RATE_HZ` Hz,
         ``is_ood`` booleans, ``source_id`` strings), and every episode passes :class:`Episode`'s
         checks (finite, positions within +-:data:`~handover_env.data.limits.MAX_ABS_COORD_M` m,
         non-zero quaternions).
@@ -314,6 +341,9 @@ class HandoverDataset:
                 f"{path}: format version {int(version)}, this code reads {FORMAT_VERSION}"
             )
         rate = float(scalar("rate_hz", "iuf"))
+        problem = rate_problem(rate)
+        if problem:
+            raise DatasetError(f"{path}: {problem}")
         lengths = content["lengths"]
         if lengths.ndim != 1 or lengths.dtype.kind not in "iu":
             raise DatasetError(

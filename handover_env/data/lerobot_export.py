@@ -20,23 +20,42 @@ Reload it with ``LeRobotDataset(repo_id, root=root)`` (offline: the files are al
 
 The export is written to a hidden temporary sibling of ``root`` and renamed into place when it is
 complete (:func:`handover_env.paths.replace_dir`), so an interrupted export never leaves a half
-folder under ``root`` (the next run removes the temporary one). ``overwrite`` replaces only a folder
-that is an export of this project (:func:`is_export`); the paths of
-:func:`handover_env.paths.check_replaceable_root` are refused outright. The sidecar records the
-dataset's :meth:`~handover_env.data.dataset.HandoverDataset.fingerprint`, so a reuse can check that
-an export holds exactly the episodes it is about to train on (:func:`export_matches`).
+folder under ``root``. ``root`` is ``~``-expanded once
+(:func:`handover_env.paths.check_replaceable_root`) and that path is both checked and written;
+``""``, ``.``, ``/``, home and their parents are refused outright.
+
+``overwrite`` deletes ``root`` only when :func:`export_problem` finds nothing to lose in it:
+
+* its ``meta/handover.json`` parses and validates (:func:`read_sidecar`: format
+  :data:`EXPORT_FORMAT`, exactly the fields :func:`export_lerobot` writes, with their types and
+  ranges) and agrees with LeRobot's ``meta/info.json`` (robot type, fps, episodes, frames,
+  features);
+* it holds nothing but what LeRobot and this module write (:data:`EXPORT_FILES`,
+  :data:`EXPORT_DIRS`): no other file or folder, no symbolic link;
+* it does not hold the input the dataset is read from.
+
+Anything else is refused with a one-line error saying why, and nothing is deleted. The hidden
+siblings a killed export leaves (``.<root>.partial-<pid>-<hex>``, ``.<root>.old-<pid>-<hex>``) are
+deleted by the next run only when they pass the same check (a ``partial`` one need not have its
+sidecar yet); any other folder of that name is left in place with a warning.
+
+The sidecar records the dataset's :meth:`~handover_env.data.dataset.HandoverDataset.fingerprint`,
+so a reuse can check that an export holds exactly the episodes it is about to train on
+(:func:`export_matches`).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from handover_env.data.dataset import HandoverDataset
+from handover_env.data.dataset import HandoverDataset, rate_problem
 from handover_env.data.features import (
     ACTION,
     ACTION_DIM,
@@ -59,6 +78,25 @@ SIDECAR = "meta/handover.json"
 EXPORT_FORMAT = 2
 ROBOT_TYPE = "handover_giver"
 _MAX_SIDECAR_BYTES = 64 << 20
+#: The sidecar's fields and their JSON types, exactly what :func:`export_lerobot` writes.
+SIDECAR_FIELDS: dict[str, type] = {
+    "export_format": int, "history": int, "horizon": int, "rate_hz": float, "name": str,
+    "source_id": list, "is_ood": list, "n_frames": int, "fingerprint": str,
+}
+_FINGERPRINT = re.compile(r"[0-9a-f]{32}", re.ASCII)
+#: Every file an export holds, relative to its root: LeRobot 0.4's metadata, episode index and
+#: frame tables with ``use_videos=False`` and no image features (``lerobot.datasets.utils``:
+#: ``INFO_PATH``, ``STATS_PATH``, ``DEFAULT_TASKS_PATH``, ``DEFAULT_EPISODES_PATH``,
+#: ``DEFAULT_DATA_PATH``), and our :data:`SIDECAR`.
+EXPORT_FILES = re.compile(
+    r"meta/(info\.json|stats\.json|tasks\.parquet|handover\.json)"
+    r"|(meta/episodes|data)/chunk-[0-9]{3,}/file-[0-9]{3,}\.parquet",
+    re.ASCII,
+)
+#: Every folder an export holds, relative to its root.
+EXPORT_DIRS = re.compile(r"meta|data|meta/episodes|(meta/episodes|data)/chunk-[0-9]{3,}", re.ASCII)
+#: Entries looked at before a folder is called too big to be an export (a real one has ~10).
+_MAX_EXPORT_ENTRIES = 100_000
 
 
 def lerobot_features(history: int) -> dict[str, dict]:
@@ -86,9 +124,10 @@ def export_lerobot(
     horizon: int = 30,
     overwrite: bool = False,
     progress: bool = False,
+    inputs: Sequence[str | os.PathLike] = (),
 ) -> Path:
     """Write ``dataset`` as a LeRobotDataset under ``root`` (``use_videos=False``); returns
-    ``root``.
+    ``root`` (``~`` expanded).
 
     Args:
         dataset: the canonical dataset (its rate must be an integer number of Hz).
@@ -96,14 +135,18 @@ def export_lerobot(
         repo_id: the LeRobot repo id recorded in the metadata (nothing is uploaded).
         history: W, frames of receiver history per environment-state vector.
         horizon: H, the action chunk the export is meant for; checked against episode lengths.
-        overwrite: replace an existing ``root`` that holds an earlier export (only then).
+        overwrite: replace an existing ``root``, only if :func:`export_problem` finds it is an
+            earlier export with nothing else in it.
         progress: show a tqdm bar over episodes.
+        inputs: the files or folders ``dataset`` was read from; a ``root`` holding one is never
+            replaced.
 
     Raises:
         ValueError: empty dataset, non-integer rate, horizon longer than an episode; a ``root``
             that is ``""``, ``.``, ``/``, home or holds the current folder
             (:class:`~handover_env.paths.UnsafePathError`); ``overwrite`` of a folder that is
-            not an export of this project.
+            not an export of this project alone (checked before and again after the export is
+            written; nothing is deleted).
         FileExistsError: ``root`` exists and ``overwrite`` is False.
     """
     spec = FeatureSpec(history=history, horizon=horizon, rate_hz=dataset.rate_hz)
@@ -112,27 +155,146 @@ def export_lerobot(
     if abs(fps - dataset.rate_hz) > 1e-9:
         raise ValueError(f"LeRobot needs an integer fps; the dataset rate is {dataset.rate_hz} Hz")
     root = check_replaceable_root(root)
-    if root.exists() or root.is_symlink():
-        if not overwrite:
-            raise FileExistsError(
-                f"{root} already exists; pass overwrite=True (--overwrite) to replace it"
-            )
-        if not is_export(root):
-            raise ValueError(
-                f"refusing to overwrite {root}: it is not a handover LeRobot export (no {SIDECAR} "
-                "or "
-                f"LeRobot metadata of ours); delete it yourself or choose another folder"
-            )
+    inputs = list(inputs)
+    check_overwrite(root, overwrite, inputs)
     root.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_siblings(root)
+    remove_stale_siblings(
+        root, lambda entry, kind: export_problem(entry, inputs, complete=kind == "old")
+    )
     tmp = sibling(root, "partial")
     try:
         _write_export(dataset, tmp, repo_id, spec, fps, progress)
+        check_overwrite(root, overwrite, inputs)  # again: the export may have taken minutes
         replace_dir(tmp, root)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
     return root
+
+
+def check_overwrite(
+    root: str | os.PathLike, overwrite: bool, inputs: Sequence[str | os.PathLike] = ()
+) -> None:
+    """Raise unless writing an export to ``root`` (already ``~``-expanded) deletes nothing but an
+    earlier export.
+
+    Raises:
+        FileExistsError: ``root`` exists and ``overwrite`` is False.
+        ValueError: ``root`` exists and :func:`export_problem` says why it is not replaceable.
+    """
+    root = Path(root)
+    if not (root.exists() or root.is_symlink()):
+        return
+    if not overwrite:
+        raise FileExistsError(
+            f"{root} already exists; pass overwrite=True (--overwrite) to replace it"
+        )
+    why = export_problem(root, inputs)
+    if why is not None:
+        raise ValueError(
+            f"refusing to overwrite {root}: {why}; nothing was deleted (delete it yourself or "
+            "choose another folder)"
+        )
+
+
+def export_problem(
+    root: str | os.PathLike, inputs: Sequence[str | os.PathLike] = (), complete: bool = True
+) -> str | None:
+    """None when deleting ``root`` would delete an export of this project and nothing else; else
+    why not (a phrase: "it ...").
+
+    Args:
+        root: the folder.
+        inputs: paths that must survive (the dataset being exported): ``root`` must not hold one.
+        complete: require the sidecar (False for an export still being written, whose sidecar
+            comes last: then only a sidecar or LeRobot ``meta/info.json`` that exists is checked).
+    """
+    root = Path(root)
+    if root.is_symlink():
+        return "it is a symbolic link"
+    if not root.is_dir():
+        return "it is not a folder"
+    real = root.resolve()
+    for item in inputs:
+        path = Path(item).expanduser()
+        if path.resolve() == real or path.resolve().is_relative_to(real):
+            return f"it holds {item}, the dataset being exported"
+    why = f"no {SIDECAR}" if complete and not (root / SIDECAR).is_file() else _unknown_entry(root)
+    if why is None and (complete or (root / SIDECAR).exists()):
+        try:
+            meta = read_sidecar(root)
+        except (OSError, ValueError) as exc:
+            why = str(exc)
+        else:
+            why = _info_problem(root, meta)
+    elif why is None and (root / "meta" / "info.json").exists():
+        why = _info_problem(root, None)
+    return None if why is None else f"it is not a handover LeRobot export ({why})"
+
+
+def _unknown_entry(root: Path) -> str | None:
+    """The first entry under ``root`` that an export does not write (or a link), described."""
+    pending = [("", root)]
+    seen = 0
+    while pending:
+        prefix, folder = pending.pop()
+        try:
+            with os.scandir(folder) as it:
+                entries = sorted(it, key=lambda e: e.name)
+        except OSError as exc:
+            return f"{prefix or './'} cannot be listed: {exc.strerror or exc}"
+        for entry in entries:
+            seen += 1
+            if seen > _MAX_EXPORT_ENTRIES:
+                return f"it holds more than {_MAX_EXPORT_ENTRIES:,} entries"
+            rel = prefix + entry.name
+            if entry.is_symlink():
+                return f"{rel!r} is a symbolic link"
+            if entry.is_dir(follow_symlinks=False):
+                if not EXPORT_DIRS.fullmatch(rel):
+                    return f"it holds {rel + '/'!r}, which an export does not write"
+                pending.append((rel + "/", Path(entry.path)))
+            elif not entry.is_file(follow_symlinks=False):
+                return f"{rel!r} is not a regular file"
+            elif not EXPORT_FILES.fullmatch(rel):
+                return f"it holds {rel!r}, which an export does not write"
+    return None
+
+
+def _info_problem(root: Path, meta: dict | None) -> str | None:
+    """Why LeRobot's ``meta/info.json`` is not the one of the export ``meta`` describes (or, when
+    ``meta`` is None, not one of ours at all); None if it is."""
+    path = root / "meta" / "info.json"
+    try:
+        if path.stat().st_size > _MAX_SIDECAR_BYTES:
+            return f"{path}: larger than {_MAX_SIDECAR_BYTES:,} bytes"
+        info = json.loads(path.read_text())
+    except FileNotFoundError:
+        return f"no {path.relative_to(root)} (LeRobot metadata)"
+    except (OSError, ValueError) as exc:
+        return f"{path}: not readable JSON ({exc})"
+    if not isinstance(info, dict):
+        return f"{path}: expected a JSON object"
+    if info.get("robot_type") != ROBOT_TYPE:
+        return f"{path}: robot_type {info.get('robot_type')!r}, an export has {ROBOT_TYPE!r}"
+    if meta is None:
+        return None
+    wanted = {
+        "fps": int(round(meta["rate_hz"])),
+        "total_episodes": len(meta["source_id"]),
+        "total_frames": meta["n_frames"],
+    }
+    for key, value in wanted.items():
+        if info.get(key) != value or isinstance(info.get(key), bool):
+            return f"{path}: {key} {info.get(key)!r}, but {SIDECAR} says {value!r}"
+    features = info.get("features")
+    ours = lerobot_features(meta["history"])
+    if not isinstance(features, dict) or any(
+        not isinstance(features.get(k), dict) or features[k].get("shape") != list(v["shape"])
+        for k, v in ours.items()
+    ):
+        return f"{path}: its features are not those of a W={meta['history']} export"
+    return None
 
 
 def _write_export(
@@ -192,18 +354,9 @@ def _write_export(
 
 
 def is_export(root: str | os.PathLike) -> bool:
-    """True when ``root`` is a real folder holding an export of this project: our sidecar, or
-    (an export interrupted by older code) LeRobot metadata with our robot type."""
-    root = Path(root)
-    if root.is_symlink() or not root.is_dir():
-        return False
-    if (root / SIDECAR).is_file():
-        return True
-    info = root / "meta" / "info.json"
-    try:
-        return info.is_file() and json.loads(info.read_text()).get("robot_type") == ROBOT_TYPE
-    except (OSError, ValueError, AttributeError):
-        return False
+    """True when ``root`` is a complete export of this project and nothing else
+    (:func:`export_problem`)."""
+    return export_problem(root) is None
 
 
 def read_sidecar(root: str | os.PathLike) -> dict:
@@ -226,13 +379,22 @@ def read_sidecar(root: str | os.PathLike) -> dict:
         raise ValueError(
             f"{path}: export format {meta.get('export_format')}, this code reads {EXPORT_FORMAT}"
         )
-    types = {"history": int, "horizon": int, "rate_hz": float, "name": str, "source_id": list,
-             "is_ood": list, "n_frames": int, "fingerprint": str}
-    for key, kind in types.items():
-        value = meta.get(key)
+    if set(meta) != set(SIDECAR_FIELDS):
+        odd = sorted(set(meta) ^ set(SIDECAR_FIELDS))
+        raise ValueError(f"{path}: fields {odd} differ from those an export writes")
+    for key, kind in SIDECAR_FIELDS.items():
+        value = meta[key]
         accepted = (int, float) if kind is float else kind
         if not isinstance(value, accepted) or isinstance(value, bool):
             raise ValueError(f"{path}: {key} must be a {kind.__name__}, got {type(value).__name__}")
+    for key in ("history", "horizon", "n_frames"):
+        if meta[key] < (0 if key == "n_frames" else 1):
+            raise ValueError(f"{path}: {key} is {meta[key]}")
+    problem = rate_problem(meta["rate_hz"])
+    if problem:
+        raise ValueError(f"{path}: {problem}")
+    if not _FINGERPRINT.fullmatch(meta["fingerprint"]):
+        raise ValueError(f"{path}: fingerprint is not 32 hexadecimal digits")
     n = len(meta["source_id"])
     if len(meta["is_ood"]) != n or not all(isinstance(v, bool) for v in meta["is_ood"]) \
             or not all(isinstance(v, str) for v in meta["source_id"]):

@@ -3,16 +3,23 @@ allocated.
 
 A recording is a ``dict`` of numpy arrays. Rebuilding one needs a handful of opcodes and three
 calls (``numpy._core.multiarray._reconstruct``, ``numpy.dtype``, ``numpy.ndarray.__setstate__``),
-plus ``numpy._core.multiarray.scalar`` for numpy scalars. :func:`scan_pickle` walks the opcode
-stream with :func:`pickletools.genops` (which only parses) and simulates the unpickler's stack with
-placeholders, so that before :class:`~handover_env.data.public.SafeUnpickler` runs anything:
+or at protocol 5 two (``numpy.dtype`` and ``numpy._core.numeric._frombuffer`` on an in-band
+buffer), plus ``numpy._core.multiarray.scalar`` for numpy scalars. :func:`scan_pickle` walks the
+opcode stream with :func:`pickletools.genops` (which only parses) and simulates the unpickler's
+stack with placeholders, so that before :class:`~handover_env.data.public.SafeUnpickler` runs
+anything:
 
 * every global is one of numpy's array-rebuilding functions, and it is called only the way numpy
   calls it (``_reconstruct(ndarray, (0,), b"b")``, ``dtype(code, False, True)`` with a plain
-  numeric or string type code, ``scalar(dtype, bytes)``); ``ndarray`` itself is never called;
-* ``BUILD`` sets an array's state only to a shape whose size matches bytes that are really in the
-  file (at most :data:`~handover_env.data.limits.MAX_ARRAY_BYTES`), and a dtype's state only to a
-  plain one (no fields, no names, no sub-array);
+  numeric or string type code, ``scalar(dtype, bytes)``, ``_frombuffer(bytes, dtype, shape,
+  "C" or "F")``); ``ndarray`` itself is never called. ``dtype(code, False, False)`` (copy=False)
+  is refused: it returns numpy's shared built-in dtype, whose byte order a later ``BUILD`` cannot
+  change, so big-endian bytes would be read as little-endian numbers without an error;
+* ``BUILD`` sets an array's state (and ``_frombuffer`` takes a shape) only to a shape whose size
+  matches bytes that are really in the file (at most
+  :data:`~handover_env.data.limits.MAX_ARRAY_BYTES`), and a dtype's state only to a plain one (no
+  fields, no names, no sub-array) with a byte order ``<``, ``>``, ``|`` or ``=``, which numpy
+  honours;
 * tuples, dicts and lists nest at most :data:`~handover_env.data.limits.MAX_PICKLE_DEPTH` deep (a
   tuple nested 200,000 deep crashes CPython when it is hashed as a dict key), dicts and lists are
   never nested in anything (so their depth cannot grow after it was checked), and dict keys are
@@ -22,8 +29,10 @@ placeholders, so that before :class:`~handover_env.data.public.SafeUnpickler` ru
   asked it for 1.2 GB), and the stream has at most
   :data:`~handover_env.data.limits.MAX_PICKLE_OPCODES` opcodes.
 
-Any other opcode (lists of objects, sets, ``NEWOBJ``, persistent ids, out-of-band buffers, ...) is
-refused: numpy's array pickles at protocols 3-5 never use one.
+Protocols 3 to 5 are read (numpy's protocol-2 array pickles call ``_codecs.encode``, which is not
+allowed). Any other opcode (sets, ``NEWOBJ``, persistent ids, protocol 5's out-of-band buffers
+``NEXT_BUFFER``/``READONLY_BUFFER``, ...) is refused: numpy's in-band array pickles at protocols
+3-5 never use one.
 """
 
 from __future__ import annotations
@@ -56,9 +65,12 @@ RECONSTRUCT = {
     ("numpy._core.multiarray", "_reconstruct"),
 }
 SCALAR = {("numpy.core.multiarray", "scalar"), ("numpy._core.multiarray", "scalar")}
+#: Protocol 5: ``ndarray.__reduce_ex__(5)`` pickles a contiguous array as
+#: ``_frombuffer(PickleBuffer, dtype, shape, order)``; in band, the buffer is a bytearray or bytes.
+FROMBUFFER = {("numpy.core.numeric", "_frombuffer"), ("numpy._core.numeric", "_frombuffer")}
 NDARRAY = {("numpy", "ndarray")}
 DTYPE = {("numpy", "dtype")}
-ALLOWED_NAMES = RECONSTRUCT | SCALAR | NDARRAY | DTYPE
+ALLOWED_NAMES = RECONSTRUCT | SCALAR | FROMBUFFER | NDARRAY | DTYPE
 
 #: dtype codes a recording may use: booleans, integers, floats, and fixed-width strings (which the
 #: record validation then refuses with its own message). No objects, voids or structured types.
@@ -71,7 +83,8 @@ _MAX_LEAF_CHARS = 4096  # longer strings/bytes are kept by length only (they can
 _CONSTANTS = {"NONE": None, "NEWTRUE": True, "NEWFALSE": False}
 _INTS = {"BININT", "BININT1", "BININT2", "LONG1"}
 _STRS = {"SHORT_BINUNICODE", "BINUNICODE", "BINUNICODE8"}
-_BYTES = {"SHORT_BINBYTES", "BINBYTES", "BINBYTES8", "SHORT_BINSTRING", "BINSTRING"}
+_BYTES = {"SHORT_BINBYTES", "BINBYTES", "BINBYTES8", "SHORT_BINSTRING", "BINSTRING", "BYTEARRAY8"}
+_OUT_OF_BAND = {"NEXT_BUFFER", "READONLY_BUFFER"}
 _PUTS = {"PUT", "BINPUT", "LONG_BINPUT"}
 _GETS = {"GET", "BINGET", "LONG_BINGET"}
 
@@ -194,10 +207,14 @@ class _Scanner:
 
     def step(self, name: str, arg: Any) -> None:
         if name == "PROTO":
-            if not 2 <= int(arg) <= 5:
-                raise _Refused(f"pickle protocol {arg} (recordings use 3 to 5)")
+            if not 3 <= int(arg) <= 5:
+                raise _Refused(f"pickle protocol {arg} (this loader reads 3 to 5)")
         elif name == "FRAME":
             pass
+        elif name in _OUT_OF_BAND:
+            raise _Refused(
+                f"an out-of-band buffer ({name}); a file must hold its arrays' bytes in band"
+            )
         elif name == "STOP":
             if len(self.stack) != 1 or self.marks:
                 raise _Refused("the stream does not end with exactly one object")
@@ -344,7 +361,21 @@ class _Scanner:
                     and isinstance(a[2].value, bool)):
                 code = a[0].value if a and a[0].kind == "str" else "?"
                 raise _Refused(f"dtype({code!r}, ...): only plain numeric and string dtypes")
+            if a[1].value is not False or a[2].value is not True:
+                raise _Refused(
+                    f"dtype({a[0].value!r}, align={a[1].value}, copy={a[2].value}): numpy pickles "
+                    "dtype(code, False, True); with copy=False the byte order in the dtype's "
+                    "state is ignored and the array's bytes would be misread"
+                )
             return _Item("dtype", a[0].value, itemsize=np.dtype(a[0].value).itemsize)
+        if key in FROMBUFFER:
+            if not (len(a) == 4 and a[0].kind == "bytes" and a[1].kind == "dtype" and a[1].built
+                    and a[2].kind == "tuple" and a[3].kind == "str" and a[3].value in ("C", "F")):
+                raise _Refused(
+                    "_frombuffer called other than as _frombuffer(bytes, dtype, shape, 'C' or 'F')"
+                )
+            self._check_shape(a[2], a[1].itemsize, a[0].size)
+            return _Item("array", built=True)
         if key in SCALAR:
             if not (len(a) == 2 and a[0].kind == "dtype" and a[1].kind == "bytes"
                     and a[1].size == a[0].itemsize and a[0].itemsize <= 64):
@@ -387,17 +418,22 @@ class _Scanner:
                 and s[2].kind == "dtype" and s[3].kind == "const" and isinstance(s[3].value, bool)
                 and s[4].kind == "bytes"):
             raise _Refused("an array state other than (1, shape, dtype, fortran, bytes)")
-        dims = s[1].value
+        self._check_shape(s[1], s[2].itemsize, s[4].size)
+
+    @staticmethod
+    def _check_shape(shape_item: _Item, itemsize: int, held: int) -> None:
+        """Refuse a shape that is not a few sizes >= 0 whose bytes are exactly the ``held``."""
+        dims = shape_item.value
         if len(dims) > _MAX_SHAPE_DIMS or any(d.kind != "int" or d.value < 0 for d in dims):
             raise _Refused(f"an array shape that is not {_MAX_SHAPE_DIMS} or fewer sizes >= 0")
         shape = tuple(d.value for d in dims)
-        declared = math.prod(shape) * s[2].itemsize
+        declared = math.prod(shape) * itemsize
         if declared > MAX_ARRAY_BYTES:
             raise _Refused(
                 f"an array of shape {shape} ({declared:,} bytes; at most {MAX_ARRAY_BYTES:,})"
             )
-        if declared != s[4].size:
+        if declared != held:
             raise _Refused(
                 f"an array of shape {shape} declares {declared:,} bytes but the file holds "
-                f"{s[4].size:,} for it"
+                f"{held:,} for it"
             )

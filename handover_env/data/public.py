@@ -16,7 +16,8 @@ key                shape       meaning
 =================  ==========  ==========================================================
 
 A pickle can run arbitrary code when it is loaded, so :class:`SafeUnpickler` resolves only the
-globals numpy needs to rebuild arrays (``_reconstruct``, ``ndarray``, ``dtype``, ``scalar``) and
+globals numpy needs to rebuild arrays (``_reconstruct``, ``ndarray``, ``dtype``, ``scalar``, and
+at protocol 5 ``_frombuffer``) and
 refuses every other one *before* anything is called, with an error naming the file and the global.
 A pickle can also crash or exhaust the loader without naming any global (a deeply nested key, a
 declared 2 GiB array, a huge memo index), so before unpickling, a file is read only if it is a
@@ -58,8 +59,10 @@ from handover_env.data.pickle_scan import UnsafePickleError, scan_pickle
 
 try:  # numpy >= 2
     from numpy._core import multiarray as _multiarray
+    from numpy._core import numeric as _numeric
 except ImportError:  # pragma: no cover - numpy 1.x
     from numpy.core import multiarray as _multiarray  # type: ignore[no-redef]
+    from numpy.core import numeric as _numeric  # type: ignore[no-redef]
 
 #: The only globals a public-dataset pickle may reference: numpy's array-rebuilding machinery.
 #: Both module spellings map to the same objects, so files written with numpy 1.x (``numpy.core``)
@@ -69,6 +72,8 @@ ALLOWED_GLOBALS: dict[tuple[str, str], Any] = {
     ("numpy._core.multiarray", "_reconstruct"): _multiarray._reconstruct,
     ("numpy.core.multiarray", "scalar"): _multiarray.scalar,
     ("numpy._core.multiarray", "scalar"): _multiarray.scalar,
+    ("numpy.core.numeric", "_frombuffer"): _numeric._frombuffer,
+    ("numpy._core.numeric", "_frombuffer"): _numeric._frombuffer,
     ("numpy", "ndarray"): np.ndarray,
     ("numpy", "dtype"): np.dtype,
 }

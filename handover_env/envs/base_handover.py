@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -63,7 +64,8 @@ from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.observation import ObsLayout
 from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
 from handover_env.envs.tasks.dynamic import DynamicHandover
-from handover_env.receiver import CAMERA_RATE, Receiver, ReceiverConfig
+from handover_env.receiver import CAMERA_RATE, Receiver, person_config
+from handover_env.receiver_motion import check_overrides
 from handover_env.scene import (
     SceneConfig,
     build_model,
@@ -223,14 +225,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.ids = scene_ids(self.model)
         self.layout = ObsLayout(history=int(history))
         self.controller = ImpedanceController(self.model, self.ids, self.params, ControllerConfig())
-        overrides = dict(person or {})
-        unknown = sorted(set(overrides) - set(ReceiverConfig.__dataclass_fields__))
-        if unknown:
-            raise ValueError(
-                f"unknown person setting(s) {unknown}; see handover_env.receiver.ReceiverConfig"
-            )
-        overrides.setdefault("give_up_behind", self.miss_distance)
-        self.receiver = Receiver(self.model, self.ids, ReceiverConfig(**overrides))
+        self.receiver = Receiver(
+            self.model, self.ids, person_config(person, miss_distance=self.miss_distance)
+        )
         self.dt = self.model.opt.timestep * FRAME_SKIP
         self._ticks = self.controller.config.ticks
         # Fractions of an env step at which ticks fall, by the global step phase at its start.
@@ -364,7 +361,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         self._ready = False  # a reset that fails leaves an env that must be reset again
         super().reset(seed=seed)
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"reset options must be a dict, got {type(options).__name__}")
         options = dict(options or {})
+        if options.get("walker") is not None:
+            # Field by field, before a task merges in its own (the static stop line).
+            options["walker"] = check_overrides(options["walker"])
         unknown = sorted(set(options) - set(RESET_OPTIONS))
         if unknown:
             gym.logger.warn(

@@ -1,29 +1,122 @@
-"""Argument types and flags shared by the command lines of :mod:`handover_eval.cli`."""
+"""Argument types, checks and flags shared by the command lines of :mod:`handover_eval.cli`
+(``train.py``, ``evaluate.py``).
+
+* :class:`IntRange` (made by :func:`int_in_range`) bounds every integer count flag (iterations,
+  participants, walks, episodes, workers, seeds, epochs, steps, ...) by a stated minimum and
+  maximum: as an argparse ``type`` it gives argparse's error naming the flag; :func:`check_counts`
+  applies the same bounds after parsing for the commands whose bad values are one-line errors of
+  the command itself (``evaluate.py``'s open- and closed-loop commands).
+* :func:`positive_float`, :func:`fraction`, :func:`theta_grid`: the other numeric option types.
+* :func:`add_backend_arguments`, :func:`backend_from_args`: ``--backend`` / ``--ray-address``.
+* :data:`SEEDS`, :data:`WORKERS`, :data:`FOLDS`, ...: the bounds shared by several commands.
+
+Output folders are checked by :func:`handover_env.paths.output_folder` and locked by
+:class:`handover_eval.output_lock.OutputLock`.
+"""
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+import math
+from collections.abc import Mapping
 
 from handover_eval.backend import BACKENDS, Backend, import_ray
 
 
-def int_at_least(low: int) -> Callable[[str], int]:
-    """An argparse ``type``: a whole number >= ``low``, else a one-line usage error."""
-    def parse(text: str) -> int:
+class IntRange:
+    """argparse type: a whole number in ``[low, high]``; the error states both bounds."""
+
+    def __init__(self, low: int, high: int) -> None:
+        if not low <= high:
+            raise ValueError(f"empty range [{low}, {high}]")
+        self.low, self.high = low, high
+        self.__name__ = f"integer in [{low}, {high}]"
+
+    def problem(self, value: int) -> str | None:
+        """Why ``value`` is out of range (None if it is in range)."""
+        if self.low <= value <= self.high:
+            return None
+        return f"must be an integer in [{self.low}, {self.high}], got {value}"
+
+    def __call__(self, text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low}, got {value}")
+        problem = self.problem(value)
+        if problem:
+            raise argparse.ArgumentTypeError(problem)
         return value
-    parse.__name__ = f"integer >= {low}"
-    return parse
+
+    def check(self, flag: str, value: int | list[int] | None) -> None:
+        """Raise ValueError naming ``flag`` unless ``value`` (or each of a list; None = unset) is
+        in range."""
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            problem = None if v is None else self.problem(v)
+            if problem:
+                raise ValueError(f"{flag} {problem}")
+
+    def __repr__(self) -> str:
+        return f"int_in_range({self.low}, {self.high})"
 
 
-def grid_points(text: str) -> tuple[int, int, int, int]:
-    """An argparse ``type``: CoSpar grid points per Θ parameter, ``NK,NB,NT,NF`` (each >= 2)."""
+def int_in_range(low: int, high: int) -> IntRange:
+    """argparse type: an integer in ``[low, high]`` (e.g. ``int_in_range(1, 10_000)``)."""
+    return IntRange(low, high)
+
+
+#: Seeds: what numpy's and torch's generators both take.
+SEEDS = int_in_range(0, 2**32 - 1)
+#: Worker processes (one core each).
+WORKERS = int_in_range(1, 256)
+#: k of a stratified k-fold split.
+FOLDS = int_in_range(2, 100)
+#: Training budgets and frame counts (train.py, evaluate.py).
+EPOCHS = int_in_range(1, 100_000)
+STEPS = int_in_range(1, 10_000_000)
+FRAMES = int_in_range(1, 10_000)
+#: Simulated participants, CoSpar iterations, walks per proposed Θ (train.py preference and
+#: preference-check, evaluate.py user-study).
+PARTICIPANTS = int_in_range(1, 1000)
+ITERATIONS = int_in_range(1, 10_000)
+WALKS = int_in_range(1, 1000)
+
+
+def check_counts(args: argparse.Namespace, counts: Mapping[str, IntRange]) -> None:
+    """Apply ``counts`` (flag -> bounds) to the parsed ``args``; ValueError naming the first flag
+    out of range. Flags a sub-command does not have are skipped."""
+    for flag, bounds in counts.items():
+        bounds.check(flag, getattr(args, flag.lstrip("-").replace("-", "_"), None))
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite float > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a float, got {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"must be a positive float, got {text}")
+    return value
+
+
+positive_float.__name__ = "positive float"
+
+
+def fraction(text: str) -> float:
+    """argparse type: a float in (0, 1)."""
+    value = positive_float(text)
+    if not value < 1:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
+    return value
+
+
+#: Grid points per Θ parameter of CoSpar (CoSparConfig also caps their product).
+GRID_POINTS = int_in_range(2, 5000)
+
+
+def theta_grid(text: str) -> tuple[int, int, int, int]:
+    """argparse type: CoSpar's grid points per parameter, ``NK,NB,NT,NF`` (or ``NKxNBxNTxNF``)."""
     parts = text.replace("x", ",").split(",")
     try:
         values = tuple(int(p) for p in parts)
@@ -31,8 +124,11 @@ def grid_points(text: str) -> tuple[int, int, int, int]:
         raise argparse.ArgumentTypeError(
             f"expected 4 whole numbers like 7,6,6,7, got {text!r}"
         ) from None
-    if len(values) != 4 or min(values) < 2:
-        raise argparse.ArgumentTypeError(f"expected 4 numbers >= 2 (K, B, t_f, f_r), got {text!r}")
+    if len(values) != 4 or any(GRID_POINTS.problem(v) for v in values):
+        raise argparse.ArgumentTypeError(
+            f"expected 4 numbers in [{GRID_POINTS.low}, {GRID_POINTS.high}] (K, B, t_f, f_r), "
+            f"got {text!r}"
+        )
     return values  # type: ignore[return-value]
 
 

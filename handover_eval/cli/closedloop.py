@@ -16,23 +16,49 @@ from collections.abc import Callable
 from pathlib import Path
 
 from handover_env.config import THETA_RANGES, HandoverParams
+from handover_env.paths import output_folder
 from handover_eval.backend import (
     JobError,
     session,
 )
-from handover_eval.cli.args import add_backend_arguments, backend_from_args
+from handover_eval.cli.args import (
+    EPOCHS,
+    FOLDS,
+    SEEDS,
+    STEPS,
+    WORKERS,
+    add_backend_arguments,
+    backend_from_args,
+    check_counts,
+    int_in_range,
+)
 from handover_eval.closedloop.output import write_closed_loop, write_theta_sweep
 from handover_eval.closedloop.receivers import SETS
 from handover_eval.closedloop.roster import AGENTS
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, run_closed_loop
 from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers
+from handover_eval.output_lock import OutputLock
 
 COMMANDS = ("closed-loop", "theta-sweep")
 QUICK_WALKERS = 2
 QUICK_REPLAYS = 3
 QUICK_FOLDS = 3
 THETA_HAT = HandoverParams()
+#: Bounds of the integer options, checked after parsing (a one-line ``evaluate.py: error:``
+#: naming the option, status 2); a sub-command without an option skips it.
+COUNTS = {
+    "--walkers": int_in_range(1, 10_000),
+    "--values": int_in_range(2, 101),
+    "--replay-folds": int_in_range(0, FOLDS.high - 1),
+    "--replays-per-fold": int_in_range(0, 100_000),
+    "--folds": FOLDS,
+    "--seed": SEEDS,
+    "--act-steps": STEPS,
+    "--bc-epochs": EPOCHS,
+    "--bootstrap": int_in_range(1, 1_000_000),
+    "--workers": WORKERS,
+}
 CLOSED_LOOP_DESCRIPTION = (
     "Closed-loop handovers of every agent with the same scripted ID/OOD walkers and replayed "
     "held-out recordings (the simulated person): success with Wilson CIs, outcomes, handover time, "
@@ -241,8 +267,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             bc_epochs=args.bc_epochs,
             workers=workers,
         )
-        if args.bootstrap < 1:
-            raise ValueError(f"--bootstrap must be >= 1, got {args.bootstrap}")
+        check_counts(args, COUNTS)
         quick = args.quick
         replay_folds = tuple(args.replay_folds) if args.replay_folds else ((0,) if quick else None)
         per_fold = (
@@ -277,20 +302,30 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
                 receivers=receivers,
             )
         out = (
-            Path(args.out)
-            if args.out
+            output_folder(args.out, "--out")
+            if args.out is not None
             else Path("results") / (args.command + ("-quick" if quick else ""))
         )
-        if out.exists() and not out.is_dir():
-            raise ValueError(f"--out {out}: exists and is not a folder")
-        cache = (
-            Path(args.checkpoints)
-            if args.checkpoints
+        cache = (  # shared with table1 and written one model at a time: checked, not locked
+            output_folder(args.checkpoints, "--checkpoints")
+            if args.checkpoints is not None
             else Path("results") / ("table1-quick" if quick else "table1") / "checkpoints"
         )
         backend = backend_from_args(args)
-        dataset = load_dataset(args.data, quick, args.seed)
-        out.mkdir(parents=True, exist_ok=True)
+        lock = OutputLock(out).acquire()  # held until the last file is written
+    except (ValueError, OSError, RuntimeError) as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return _run(args, load_dataset, receivers, sweep, options, backend, out, cache)
+    finally:
+        lock.release()
+
+
+def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cache: Path) -> int:
+    """The closed-loop run or Θ sweep into the locked folder ``out``; the exit status."""
+    try:
+        dataset = load_dataset(args.data, args.quick, args.seed)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
@@ -298,11 +333,11 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
     start = time.perf_counter()
     print(
         f"{args.command}: {dataset.name} ({len(dataset)} episodes), "
-        f"Θ = {receivers.params.as_array()}, {workers} worker(s), {os.cpu_count()} cores",
+        f"Θ = {receivers.params.as_array()}, {receivers.workers} worker(s), {os.cpu_count()} cores",
         flush=True,
     )
     try:
-        with session(backend, workers) as sess:
+        with session(backend, receivers.workers) as sess:
             if sweep is None:
                 run = run_closed_loop(receivers, dataset, args.data, options, cache, progress)
                 write_closed_loop(

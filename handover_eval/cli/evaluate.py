@@ -14,6 +14,7 @@ PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonic
 omitted for the embedded synthetic default. Every method is scored by the same open-loop protocol
 (``handover_eval/openloop/protocol.py``, summarised in the README). Results go to ``--out``
 (default ``results/<command>/``): Markdown and CSV tables, per-fold and per-episode CSVs, PNG plots.
+A running command locks its ``--out`` (``handover_eval.output_lock``): a second run is refused.
 Trained BC-MLP / ACT checkpoints are kept under ``<out>/checkpoints`` and reused when the method
 configuration and the training set match (``--no-reuse`` retrains); closed-loop and theta-sweep
 reuse Table I's (``--checkpoints``, default ``results/table1/checkpoints``).
@@ -28,12 +29,24 @@ import time
 from pathlib import Path
 
 from handover_env.offline import hub_offline
+from handover_env.paths import output_folder
 from handover_eval.backend import (
     JobError,
     session,
 )
 from handover_eval.cli import closedloop, user_study
-from handover_eval.cli.args import add_backend_arguments, backend_from_args
+from handover_eval.cli.args import (
+    EPOCHS,
+    FOLDS,
+    FRAMES,
+    SEEDS,
+    STEPS,
+    WORKERS,
+    add_backend_arguments,
+    backend_from_args,
+    check_counts,
+    int_in_range,
+)
 from handover_eval.methods import (
     ACT_EVAL_STEPS,
     METHODS,
@@ -42,9 +55,23 @@ from handover_eval.methods import (
     check_methods,
     default_workers,
 )
+from handover_eval.output_lock import OutputLock
 from handover_eval.reporting import METHOD_LABELS, markdown_table, mean_std
 
 QUICK_EPISODES = 30
+#: Bounds of the integer options of table1, sample-efficiency and tradeoff, checked after parsing
+#: (a one-line ``evaluate.py: error:`` naming the option, status 2).
+COUNTS = {
+    "--folds": FOLDS,
+    "--seed": SEEDS,
+    "--horizon": FRAMES,
+    "--stride": FRAMES,
+    "--first-query": int_in_range(0, FRAMES.high),
+    "--act-steps": STEPS,
+    "--bc-epochs": EPOCHS,
+    "--workers": WORKERS,
+    "--timing-episodes": int_in_range(1, 100_000),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -217,7 +244,6 @@ def main(argv: list[str] | None = None) -> int:
         return closedloop.main(args, load_dataset)
     if args.command == "user-study":
         return user_study.run(args)
-    from handover_eval.openloop import experiments
     from handover_eval.openloop.protocol import OpenLoopProtocol
 
     try:
@@ -240,16 +266,29 @@ def main(argv: list[str] | None = None) -> int:
             giver_state=args.giver_state,
             workers=default_workers() if args.workers is None else args.workers,
         )
+        check_counts(args, COUNTS)
         out = (
-            Path(args.out)
-            if args.out
+            output_folder(args.out, "--out")
+            if args.out is not None
             else Path("results") / (args.command + ("-quick" if args.quick else ""))
         )
-        if out.exists() and not out.is_dir():
-            raise ValueError(f"--out {out}: exists and is not a folder")
         backend = backend_from_args(args)
+        lock = OutputLock(out).acquire()  # held until the last file is written
+    except (ValueError, OSError, RuntimeError) as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return _run_open_loop(args, methods, folds, protocol, options, out, backend)
+    finally:
+        lock.release()
+
+
+def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) -> int:
+    """table1, sample-efficiency or tradeoff into the locked folder ``out``; the exit status."""
+    from handover_eval.openloop import experiments
+
+    try:
         dataset = load_dataset(args.data, args.quick, args.seed)
-        out.mkdir(parents=True, exist_ok=True)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2

@@ -11,13 +11,21 @@ import os
 import sys
 from pathlib import Path
 
+from handover_env.paths import output_folder
 from handover_eval.backend import (
     JobError,
     session,
 )
-from handover_eval.cli.args import add_backend_arguments, backend_from_args
-from handover_eval.cli.args import grid_points as _grid
-from handover_eval.cli.args import int_at_least as _int_at_least
+from handover_eval.cli.args import (
+    ITERATIONS,
+    PARTICIPANTS,
+    SEEDS,
+    WALKS,
+    add_backend_arguments,
+    backend_from_args,
+    theta_grid,
+)
+from handover_eval.output_lock import OutputLock
 
 PREFERENCE_HELP = """CoSpar (paper Sec. IV-B, V-B-1) tunes Theta = {K, B, t_f, f_r} over the paper's
 ranges from a simulated participant (agents/participants.py) who walks past the robot in the env
@@ -38,14 +46,14 @@ def add_preference_arguments(p: argparse.ArgumentParser) -> None:
     who = p.add_mutually_exclusive_group()
     who.add_argument(
         "--participant",
-        type=_int_at_least(0),
+        type=SEEDS,
         default=None,
         metavar="SEED",
         help="the simulated participant (agents/participants.py) drawn with this seed (default 0)",
     )
     who.add_argument(
         "--participants",
-        type=_int_at_least(1),
+        type=PARTICIPANTS,
         default=None,
         metavar="N",
         help="pool N participants (population seed --population-seed, 75%% male as in the "
@@ -53,14 +61,14 @@ def add_preference_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--population-seed",
-        type=_int_at_least(0),
+        type=SEEDS,
         default=0,
         help="seed of the population for --participants (participant i has seed 1000*S+i)",
     )
     p.add_argument(
-        "--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (paper: 20)"
+        "--iterations", type=ITERATIONS, default=20, help="CoSpar iterations (paper: 20)"
     )
-    p.add_argument("--walks", type=_int_at_least(1), default=3,
+    p.add_argument("--walks", type=WALKS, default=3,
                    help="episodes (walks of the participant) per proposed Theta (default 3)")
     p.add_argument(
         "--agent",
@@ -74,12 +82,12 @@ def add_preference_arguments(p: argparse.ArgumentParser) -> None:
                         "demonstrations nearest their speed, at their height (default id)")
     p.add_argument(
         "--grid",
-        type=_grid,
+        type=theta_grid,
         default=(7, 6, 6, 7),
         metavar="NK,NB,NT,NF",
         help="CoSpar grid points per parameter over the paper's ranges (default 7,6,6,7)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of CoSpar's Thompson samples")
+    p.add_argument("--seed", type=SEEDS, default=0, help="seed of CoSpar's Thompson samples")
     p.add_argument(
         "--out",
         default=None,
@@ -93,17 +101,17 @@ def add_preference_arguments(p: argparse.ArgumentParser) -> None:
 def add_check_arguments(p: argparse.ArgumentParser) -> None:
     """Options of ``train.py preference-check``."""
     p.add_argument(
-        "--participants", type=_int_at_least(1), default=4, help="participants checked (default 4)"
+        "--participants", type=PARTICIPANTS, default=4, help="participants checked (default 4)"
     )
-    p.add_argument("--population-seed", type=_int_at_least(0), default=1,
+    p.add_argument("--population-seed", type=SEEDS, default=1,
                    help="their population seed (default 1: not the study's population 0)")
-    p.add_argument("--grid", type=_grid, default=(3, 3, 3, 3), metavar="NK,NB,NT,NF",
+    p.add_argument("--grid", type=theta_grid, default=(3, 3, 3, 3), metavar="NK,NB,NT,NF",
                    help="the brute-forced grid, also CoSpar's (default 3,3,3,3 = 81 Theta)")
-    p.add_argument("--walks", type=_int_at_least(1), default=3, help="walks per Theta (default 3)")
+    p.add_argument("--walks", type=WALKS, default=3, help="walks per Theta (default 3)")
     p.add_argument(
-        "--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (default 20)"
+        "--iterations", type=ITERATIONS, default=20, help="CoSpar iterations (default 20)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of CoSpar's Thompson samples")
+    p.add_argument("--seed", type=SEEDS, default=0, help="seed of CoSpar's Thompson samples")
     p.add_argument(
         "--out", default="results/preference/check", help="output folder (episode cache, tables)"
     )
@@ -124,9 +132,7 @@ def run_preference_command(args: argparse.Namespace) -> None:
         seed = 0 if args.participant is None else args.participant
         participants = [sample_participant(seed)]
         default_out = Path("results/preference") / f"participant-{seed}"
-    out = Path(args.out) if args.out else default_out
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out}: exists and is not a folder")
+    out = output_folder(args.out, "--out") if args.out is not None else default_out
     try:
         backend = backend_from_args(args)
     except RuntimeError as exc:  # Ray missing: train.py's one-line error
@@ -139,21 +145,22 @@ def run_preference_command(args: argparse.Namespace) -> None:
         cospar=CoSparConfig(points_per_dim=args.grid),
         seed=args.seed,
     )
-    for p in participants:
-        b = p.body
-        print(
-            f"participant {p.pid}: {b.sex}, {b.height:.2f} m, walks {b.speed:.2f} m/s, passes at "
-            f"y = {b.pass_y:.2f} m"
-        )
-    try:  # on Ray, each turn's new walks run as parallel tasks (handover_eval.preference.batch)
-        with session(backend, max(1, min(2, os.cpu_count() or 1))) as sess:
-            result = run_preference(participants, config, progress=not args.no_progress)
-    except (JobError, ConnectionError) as exc:
-        print(f"train.py: error: {exc}", file=sys.stderr)
-        raise SystemExit(1) from None
-    if sess.started_here:
-        print(f"Ray start-up {sess.startup_s:.1f} s (not in the wall time below)")
-    paths = save_run(result, participants, config, out)
+    with OutputLock(out):  # held from before the run until its files are written
+        for p in participants:
+            b = p.body
+            print(
+                f"participant {p.pid}: {b.sex}, {b.height:.2f} m, walks {b.speed:.2f} m/s, "
+                f"passes at y = {b.pass_y:.2f} m"
+            )
+        try:  # on Ray, each turn's new walks run as parallel tasks (handover_eval.preference.batch)
+            with session(backend, max(1, min(2, os.cpu_count() or 1))) as sess:
+                result = run_preference(participants, config, progress=not args.no_progress)
+        except (JobError, ConnectionError) as exc:
+            print(f"train.py: error: {exc}", file=sys.stderr)
+            raise SystemExit(1) from None
+        if sess.started_here:
+            print(f"Ray start-up {sess.startup_s:.1f} s (not in the wall time below)")
+        paths = save_run(result, participants, config, out)
     print(
         f"Θ̂ (argmax of the posterior mean over the tried actions): {theta_line(result.theta_hat)}"
     )
@@ -191,4 +198,6 @@ def run_check_command(args: argparse.Namespace) -> None:
         iterations=args.iterations,
         seed=args.seed,
     )
-    run_check(config, Path(args.out), progress=not args.no_progress)
+    out = output_folder(args.out, "--out")
+    with OutputLock(out):
+        run_check(config, out, progress=not args.no_progress)

@@ -13,8 +13,9 @@ public dataset's pickles, or omitted for the embedded synthetic default. The che
 (``--out``) holds safetensors weights plus JSON config and is loaded by ``BCMLPAgent.load(dir)`` /
 ``ACTAgent.load(dir)``; ``--resume`` continues an interrupted or finished run from it (with more
 ``--epochs`` / ``--steps`` to extend it). A folder that already holds a run is never silently
-overwritten: pass ``--resume`` or ``--overwrite``; a folder of other files is refused. Bad input
-gives a one-line error naming the file or option (exit status 2). ``--test-fold K``
+overwritten: pass ``--resume`` or ``--overwrite``; a folder of other files is refused. A running
+command locks its ``--out`` (``handover_eval.output_lock``): a second run on it is refused. Bad
+input gives a one-line error naming the file or option (exit status 2). ``--test-fold K``
 holds out fold K of a stratified ``--folds``-fold split (by ID/OOD) from training and reports the
 open-loop RMS on it at the end. Features: see ``handover_env/data/features.py``.
 """
@@ -30,11 +31,27 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from handover_env.offline import hub_offline
+from handover_env.paths import output_folder
+from handover_eval.cli_args import (
+    EPOCHS,
+    FOLDS,
+    FRAMES,
+    SEEDS,
+    STEPS,
+    fraction,
+    int_in_range,
+    positive_float,
+)
+from handover_eval.output_lock import OutputLock
 
 if TYPE_CHECKING:  # heavy imports happen after argument parsing, so --help is instant
     from handover_env.data.dataset import HandoverDataset
 
 SMOKE_EPISODES = 24
+#: Bounds of the integer options (argparse errors name the option and state the range).
+THREADS = int_in_range(1, 256)
+WIDTH = int_in_range(1, 65_536)  # --hidden, --dim-model, --dim-feedforward
+LAYERS = int_in_range(1, 128)
 
 
 # ---------------------------------------------------------------------------- data
@@ -129,15 +146,17 @@ def train_bc_mlp(args: argparse.Namespace) -> None:
         val_fraction=args.val_fraction, seed=args.seed, device=args.device,
         use_giver_state=args.giver_state,
     )
-    check_out_dir(args.out, "bc_mlp", args.resume, args.overwrite)
-    data = load_data(args.data, args.smoke, args.seed)
-    train, test = split_test(data, args.folds, args.test_fold, args.seed)
-    print(f"[bc-mlp] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
-    t0 = time.perf_counter()
-    agent = BCMLPAgent(cfg).fit(
-        train, out_dir=args.out, resume=args.resume, progress=not args.no_progress, log=print
-    )
-    report("bc-mlp", agent, test, Path(args.out), t0, agent.train_log["best_val"])
+    out = output_folder(args.out, "--out")
+    with OutputLock(out):
+        check_out_dir(out, "bc_mlp", args.resume, args.overwrite)
+        data = load_data(args.data, args.smoke, args.seed)
+        train, test = split_test(data, args.folds, args.test_fold, args.seed)
+        print(f"[bc-mlp] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
+        t0 = time.perf_counter()
+        agent = BCMLPAgent(cfg).fit(
+            train, out_dir=out, resume=args.resume, progress=not args.no_progress, log=print
+        )
+        report("bc-mlp", agent, test, out, t0, agent.train_log["best_val"])
 
 
 def train_act(args: argparse.Namespace) -> None:
@@ -164,42 +183,29 @@ def train_act(args: argparse.Namespace) -> None:
         val_fraction=args.val_fraction, seed=args.seed, device=args.device,
         use_giver_state=args.giver_state,
     )
-    check_out_dir(args.out, "act", args.resume, args.overwrite)
-    data = load_data(args.data, args.smoke, args.seed)
-    train, test = split_test(data, args.folds, args.test_fold, args.seed)
-    print(f"[act] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
-    t0 = time.perf_counter()
-    export_root = Path(args.export_root) if args.export_root else Path(args.out) / "lerobot_dataset"
-    agent = ACTAgent(cfg).fit(train, out_dir=args.out, export_root=export_root, resume=args.resume,
-                              progress=not args.no_progress, log=print,
-                              rebuild_export=args.overwrite or args.export_root is None)
-    report("act", agent, test, Path(args.out), t0, agent.train_log["best_val"])
-
-
-def _positive(kind):
-    """argparse type: a ``kind`` (int or float) > 0, with the option's value in the error."""
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a {kind.__name__}, got {text!r}") from None
-        if not value > 0 or (kind is float and value == float("inf")):
-            raise argparse.ArgumentTypeError(f"must be a positive {kind.__name__}, got {text}")
-        return value
-    parse.__name__ = f"positive {kind.__name__}"
-    return parse
-
-
-def _fraction(text: str) -> float:
-    value = _positive(float)(text)
-    if not value < 1:
-        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
-    return value
+    out = output_folder(args.out, "--out")
+    export_root = (
+        output_folder(args.export_root, "--export-root")
+        if args.export_root is not None
+        else out / "lerobot_dataset"
+    )
+    with OutputLock(out):
+        check_out_dir(out, "act", args.resume, args.overwrite)
+        data = load_data(args.data, args.smoke, args.seed)
+        train, test = split_test(data, args.folds, args.test_fold, args.seed)
+        print(f"[act] {len(train)} training episodes ({train.n_frames} frames), config {cfg}")
+        t0 = time.perf_counter()
+        agent = ACTAgent(cfg).fit(
+            train, out_dir=out, export_root=export_root, resume=args.resume,
+            progress=not args.no_progress, log=print,
+            rebuild_export=args.overwrite or args.export_root is None,
+        )
+        report("act", agent, test, out, t0, agent.train_log["best_val"])
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="train.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = p.add_subparsers(
         dest="method", required=True, metavar="{bc-mlp,act,preference,preference-check}"
@@ -231,36 +237,36 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--smoke", action="store_true", help=f"tiny fast configuration for tests: "
                         f"{SMOKE_EPISODES} episodes, a few epochs/steps, a small network")
         sp.add_argument(
-            "--seed", type=int, default=0, help="seed of initialisation, sampling and splits"
+            "--seed", type=SEEDS, default=0, help="seed of initialisation, sampling and splits"
         )
         sp.add_argument("--device", default="cpu", help="torch device (default cpu)")
         sp.add_argument(
             "--threads",
-            type=_positive(int),
+            type=THREADS,
             default=1,
             help="torch CPU threads (default 1: on a "
             "shared 2-core machine 2 threads oversubscribe and run ~10x slower; ACT always trains "
             "on one, so that a seed gives the same weights)",
         )
-        sp.add_argument("--batch-size", type=_positive(int), default=None, help="samples per step "
-                        "(default 256 for bc-mlp, 64 for act)")
-        sp.add_argument("--lr", type=_positive(float), default=None,
+        sp.add_argument("--batch-size", type=int_in_range(1, 1_000_000), default=None,
+                        help="samples per step (default 256 for bc-mlp, 64 for act)")
+        sp.add_argument("--lr", type=positive_float, default=None,
                         help="learning rate (default 1e-3 bc-mlp, 1e-4 act)")
-        sp.add_argument("--history", type=_positive(int), default=10,
+        sp.add_argument("--history", type=FRAMES, default=10,
                         help="W, frames of receiver xy history (default 10)")
-        sp.add_argument("--horizon", type=_positive(int), default=30,
+        sp.add_argument("--horizon", type=FRAMES, default=30,
                         help="H, frames of predicted giver xyz (default 30)")
-        sp.add_argument("--val-fraction", type=_fraction, default=0.1,
+        sp.add_argument("--val-fraction", type=fraction, default=0.1,
                         help="fraction of training episodes held out for validation (default 0.1)")
         sp.add_argument(
             "--folds",
-            type=_positive(int),
+            type=FOLDS,
             default=10,
             help="number of stratified folds for --test-fold",
         )
         sp.add_argument(
             "--test-fold",
-            type=int,
+            type=int_in_range(0, FOLDS.high - 1),
             default=None,
             help="hold out this fold entirely and report "
             "the open-loop RMS (mm) on it after training (default: train on all episodes)",
@@ -275,17 +281,17 @@ def build_parser() -> argparse.ArgumentParser:
     common(bc)
     bc.add_argument(
         "--epochs",
-        type=_positive(int),
+        type=EPOCHS,
         default=None,
         help="maximum epochs (default 50; 3 with --smoke)",
     )
     bc.add_argument(
         "--patience",
-        type=_positive(int),
+        type=EPOCHS,
         default=5,
         help="early-stopping patience in epochs (default 5)",
     )
-    bc.add_argument("--hidden", type=_positive(int), nargs="+", default=None,
+    bc.add_argument("--hidden", type=WIDTH, nargs="+", default=None,
                     help="hidden widths (default 256 256 256; 64 64 with --smoke)")
     bc.add_argument(
         "--giver-state",
@@ -302,9 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train LeRobot's ACTPolicy on a LeRobotDataset export of the data.",
     )
     common(act)
-    act.add_argument("--steps", type=_positive(int), default=None,
+    act.add_argument("--steps", type=STEPS, default=None,
                      help="optimisation steps (default 8000; 20 with --smoke)")
-    act.add_argument("--eval-every", type=_positive(int), default=None,
+    act.add_argument("--eval-every", type=STEPS, default=None,
                      help="steps between validation/checkpoints (default 1000; 10 with --smoke)")
     act.add_argument(
         "--paper-scale",
@@ -321,22 +327,22 @@ def build_parser() -> argparse.ArgumentParser:
         "current giver/robot xyz); off by default: the receiver history alone, as in evaluate.py",
     )
     act.add_argument(
-        "--dim-model", type=_positive(int), default=None, help="override the transformer width"
+        "--dim-model", type=WIDTH, default=None, help="override the transformer width"
     )
     act.add_argument(
-        "--n-heads", type=_positive(int), default=None, help="override the attention heads"
+        "--n-heads", type=int_in_range(1, 1024), default=None, help="override the attention heads"
     )
     act.add_argument(
         "--dim-feedforward",
-        type=_positive(int),
+        type=WIDTH,
         default=None,
         help="override the feed-forward width",
     )
     act.add_argument(
-        "--n-encoder-layers", type=_positive(int), default=None, help="override the encoder depth"
+        "--n-encoder-layers", type=LAYERS, default=None, help="override the encoder depth"
     )
     act.add_argument(
-        "--n-decoder-layers", type=_positive(int), default=None, help="override the decoder depth"
+        "--n-decoder-layers", type=LAYERS, default=None, help="override the decoder depth"
     )
     act.add_argument(
         "--export-root",

@@ -6,13 +6,23 @@ import argparse
 import sys
 from pathlib import Path
 
+from handover_env.paths import output_folder
 from handover_eval.backend import (
     JobError,
     session,
 )
-from handover_eval.cli.args import add_backend_arguments, backend_from_args
-from handover_eval.cli.args import grid_points as _grid
-from handover_eval.cli.args import int_at_least as _int_at_least
+from handover_eval.cli.args import (
+    ITERATIONS,
+    PARTICIPANTS,
+    SEEDS,
+    WALKS,
+    WORKERS,
+    add_backend_arguments,
+    backend_from_args,
+    int_in_range,
+    theta_grid,
+)
+from handover_eval.output_lock import OutputLock
 
 #: --quick: a seconds-long run for ``make test``; never for reported numbers.
 QUICK = {"participants": 2, "trials": 2, "iterations": 2, "walks": 1, "grid": (3, 3, 3, 3)}
@@ -29,21 +39,24 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
-        "--participants", type=_int_at_least(2), default=8, help="simulated participants (paper: 8)"
+        "--participants",
+        type=int_in_range(2, PARTICIPANTS.high),
+        default=8,
+        help="simulated participants (paper: 8)",
     )
-    p.add_argument("--trials", type=_int_at_least(1), default=5,
+    p.add_argument("--trials", type=int_in_range(1, 1000), default=5,
                    help="handovers per condition and A/B tests per participant (paper: 5)")
     p.add_argument(
-        "--iterations", type=_int_at_least(1), default=20, help="CoSpar iterations (paper: 20)"
+        "--iterations", type=ITERATIONS, default=20, help="CoSpar iterations (paper: 20)"
     )
     p.add_argument(
-        "--walks", type=_int_at_least(1), default=3, help="tuning walks per proposed Θ (default 3)"
+        "--walks", type=WALKS, default=3, help="tuning walks per proposed Θ (default 3)"
     )
-    p.add_argument("--grid", type=_grid, default=(7, 6, 6, 7), metavar="NK,NB,NT,NF",
+    p.add_argument("--grid", type=theta_grid, default=(7, 6, 6, 7), metavar="NK,NB,NT,NF",
                    help="CoSpar grid points per parameter (default 7,6,6,7)")
     p.add_argument(
         "--seed",
-        type=_int_at_least(0),
+        type=SEEDS,
         default=0,
         help="population, CoSpar and H3 seed (default 0)",
     )
@@ -67,7 +80,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.add_argument(
         "--workers",
-        type=_int_at_least(1),
+        type=WORKERS,
         default=1,
         metavar="N",
         help="processes running the per-participant CoSpar in parallel (default 1: in this "
@@ -101,13 +114,12 @@ def run(args: argparse.Namespace) -> int:
         )
         backend = backend_from_args(args)
         out = (
-            Path(args.out)
-            if args.out
+            output_folder(args.out, "--out")
+            if args.out is not None
             else Path("results") / ("user-study-quick" if args.quick else "user-study")
         )
-        if out.exists() and not out.is_dir():
-            raise ValueError(f"--out {out}: exists and is not a folder")
-    except (ValueError, RuntimeError) as exc:
+        lock = OutputLock(out).acquire()
+    except (ValueError, RuntimeError, OSError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
     try:
@@ -117,6 +129,8 @@ def run(args: argparse.Namespace) -> int:
     except (JobError, ConnectionError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 1
+    finally:
+        lock.release()
     startup = f" (Ray start-up {sess.startup_s:.1f} s)" if sess.started_here else ""
     print(f"wrote {out}/ in {result.timings['total_s']:.0f} s{startup}")
     return 0
