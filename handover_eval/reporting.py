@@ -1,4 +1,7 @@
-"""Writing result tables (Markdown + CSV) and reading them back, for evaluate.py."""
+"""The one writer of each result format (CSV, text/Markdown, PNG), each atomic, and the CSV reader.
+
+Every file is written to a temporary name beside it and renamed over ``path``, so a killed run
+leaves the previous file or the new one, never half of one."""
 
 from __future__ import annotations
 
@@ -7,6 +10,7 @@ import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 # The paper's Table I (RMS error in mm, mean +- std over a stratified 10-fold split, full public
 # set).
@@ -71,6 +75,21 @@ def write_text(text: str, path: str | os.PathLike) -> Path:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, path)
+    return path
+
+
+def write_png(fig: Any, path: str | os.PathLike, dpi: float | None = None) -> Path:
+    """Save the matplotlib figure ``fig`` as a PNG at ``path`` atomically, then close it."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        fig.savefig(tmp, format="png", **({} if dpi is None else {"dpi": dpi}))
+        os.replace(tmp, path)
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -182,7 +182,7 @@ def test_sample_efficiency_pretrains_every_fold_and_ratio(tmp_path):
     protocol = OpenLoopProtocol(stride=5)
     rows = run_sample_efficiency(
         data, ["act"], [0.5, 1.0], 2, 0, OPTIONS, protocol, tmp_path, progress=False, workers=2
-    )
+    ).rows
     assert [(r["method"], r["ratio"]) for r in rows] == [("act", 0.5), ("act", 1.0)]
     assert all(np.isfinite(r["all_rms_3d_mm"]) for r in rows)
     ckpt = tmp_path / "checkpoints"

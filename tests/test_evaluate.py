@@ -84,7 +84,7 @@ def test_sample_efficiency_quick(tmp_path: Path, capsys: pytest.CaptureFixture) 
     half = [r for r in rows if r["method"] == "ours" and float(r["ratio"]) == 0.5][0]
     full = [r for r in rows if r["method"] == "ours" and float(r["ratio"]) == 1.0][0]
     assert float(half["n_train_mean"]) < float(full["n_train_mean"])
-    from handover_eval.openloop.experiments import degradation_pct
+    from handover_eval.openloop.report import degradation_pct
 
     typed = [{k: (v if k == "method" else float(v)) for k, v in r.items()} for r in rows]
     pct = degradation_pct(typed)

@@ -56,7 +56,6 @@ from handover_eval.methods import (
     default_workers,
 )
 from handover_eval.output_lock import OutputLock
-from handover_eval.reporting import METHOD_LABELS, markdown_table, mean_std
 
 QUICK_EPISODES = 30
 #: Bounds of the integer options of table1, sample-efficiency and tradeoff, checked after parsing
@@ -285,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) -> int:
     """table1, sample-efficiency or tradeoff into the locked folder ``out``; the exit status."""
-    from handover_eval.openloop import experiments
+    from handover_eval.openloop import experiments, output, report
 
     try:
         dataset = load_dataset(args.data, args.quick, args.seed)
@@ -304,7 +303,7 @@ def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) 
     try:
         with session(backend, options.workers) as sess:
             if args.command == "table1":
-                rows = experiments.run_table1(
+                run = experiments.run_table1(
                     dataset,
                     methods,
                     folds,
@@ -315,34 +314,12 @@ def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) 
                     reuse=not args.no_reuse,
                     progress=progress,
                 )
-                print(
-                    "\n"
-                    + markdown_table(
-                        [
-                            "method",
-                            "ID 3D (mm)",
-                            "OOD 3D (mm)",
-                            "ID current frame",
-                            "OOD current frame",
-                            "ID paper",
-                            "OOD paper",
-                        ],
-                        [
-                            [
-                                METHOD_LABELS[r["method"]],
-                                mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
-                                mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
-                                mean_std(r["id_now_axis_mm"], r["id_now_axis_std_mm"]),
-                                mean_std(r["ood_now_axis_mm"], r["ood_now_axis_std_mm"]),
-                                mean_std(r["paper_id_mm"], r["paper_id_std_mm"]),
-                                mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"]),
-                            ]
-                            for r in rows
-                        ],
-                    )
+                output.write_table1(
+                    run, dataset, folds, args.seed, protocol, options.giver_state, out
                 )
+                print("\n" + report.table1_summary(run.rows))
             elif args.command == "sample-efficiency":
-                rows = experiments.run_sample_efficiency(
+                run = experiments.run_sample_efficiency(
                     dataset,
                     methods,
                     args.ratios,
@@ -354,47 +331,14 @@ def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) 
                     reuse=not args.no_reuse,
                     progress=progress,
                 )
-                print(
-                    "\n"
-                    + markdown_table(
-                        [
-                            "method",
-                            "ratio",
-                            "all 3D (mm)",
-                            "ID 3D (mm)",
-                            "OOD 3D (mm)",
-                            "all current frame (mm)",
-                        ],
-                        [
-                            [
-                                METHOD_LABELS[r["method"]],
-                                f"{r['ratio']:g}",
-                                mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
-                                mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
-                                mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
-                                mean_std(r["all_now_axis_mm"], r["all_now_axis_std_mm"]),
-                            ]
-                            for r in rows
-                        ],
-                    )
-                )
-                horizon, now = (
-                    experiments.degradation_pct(rows),
-                    experiments.degradation_pct(rows, "all_now_axis_mm"),
-                )
-                if horizon:
-                    lo, hi = min(args.ratios), max(args.ratios)
-                    print(
-                        f"RMS at ratio {lo:g} vs {hi:g} (all episodes, 1 s horizon 3D / current "
-                        "frame): "
-                        + ", ".join(
-                            f"{METHOD_LABELS[m]} {horizon[m]:+.1f}% / {now[m]:+.1f}%"
-                            for m in horizon
-                        )
-                    )
+                output.write_sample_efficiency(run, methods, out)
+                print("\n" + report.sample_efficiency_summary(run.rows))
+                line = report.degradation_line(run.rows, args.ratios)
+                if line:
+                    print(line)
             else:
                 rates = args.rates if "ours" in methods else []
-                rows = experiments.run_tradeoff(
+                run = experiments.run_tradeoff(
                     dataset,
                     rates,
                     folds,
@@ -406,32 +350,8 @@ def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) 
                     include_iaal="iaal" in methods,
                     progress=progress,
                 )
-                print(
-                    "\n"
-                    + markdown_table(
-                        [
-                            "method",
-                            "rate",
-                            "median ms/frame",
-                            "p99 ms/frame",
-                            "all 3D (mm)",
-                            "x faster than IAAL",
-                            "RMS vs IAAL",
-                        ],
-                        [
-                            [
-                                METHOD_LABELS[r["method"]],
-                                "" if r["inducing_rate"] is None else f"{r['inducing_rate']:g}",
-                                f"{r['frame_ms_median']:.3f}",
-                                f"{r['frame_ms_p99']:.3f}",
-                                mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
-                                f"{r.get('speedup_vs_iaal', float('nan')):.2f}",
-                                f"{r.get('rms_cost_vs_iaal_pct', float('nan')):+.2f}%",
-                            ]
-                            for r in rows
-                        ],
-                    )
-                )
+                output.write_tradeoff(run, out)
+                print("\n" + report.tradeoff_summary(run.rows))
                 print(f"timed on 1 core of {os.cpu_count()}")
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 
 from handover_env.offline import hub_offline
 from handover_env.paths import output_folder
-from handover_eval.cli_args import (
+from handover_eval.cli.args import (
     EPOCHS,
     FOLDS,
     FRAMES,

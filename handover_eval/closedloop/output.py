@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from handover_eval.closedloop.receivers import SETS
 from handover_eval.closedloop.roster import LABELS, ModelRecord
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, ClosedLoopRun
-from handover_eval.reporting import markdown_table, write_csv, write_text
+from handover_eval.reporting import markdown_table, write_csv, write_png, write_text
 
 if TYPE_CHECKING:
     from handover_eval.closedloop.theta_sweep import SweepConfig, SweepRun
@@ -90,7 +90,7 @@ def write_closed_loop(
     """
     from handover_eval.closedloop import markdown as md
     from handover_eval.closedloop import report as rep
-    from handover_eval.closedloop.plot import plot_closed_loop
+    from handover_eval.closedloop.plot import closed_loop_figure
 
     agg = rep.aggregate(run.rows)
     pairs = (
@@ -126,11 +126,13 @@ def write_closed_loop(
         ),
         out / "closed_loop.md",
     )
-    plot_closed_loop(
-        run.rows,
-        agg,
+    write_png(
+        closed_loop_figure(
+            run.rows,
+            agg,
+            f"Closed loop with the simulated person ({n_rec}); Θ = {cfg.params.as_array()}",
+        ),
         out / "closed_loop.png",
-        f"Closed loop with the simulated person ({n_rec}); Θ = {cfg.params.as_array()}",
     )
     print(
         "\n"
@@ -201,8 +203,9 @@ def write_theta_sweep(
     write_csv(per_value, out / "theta_sweep.csv")
     write_csv(extremes, out / "theta_sweep_extremes.csv")
     write_text(ts.markdown(per_value, extremes, header, footer), out / "theta_sweep.md")
-    ts.plot_sweep(
-        per_value, out / "theta_sweep.png", f"Θ sweep, {sweep.agent}, {n_rec} (simulated person)"
+    write_png(
+        ts.sweep_figure(per_value, f"Θ sweep, {sweep.agent}, {n_rec} (simulated person)"),
+        out / "theta_sweep.png",
     )
     print(
         "\n"

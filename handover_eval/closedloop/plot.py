@@ -4,7 +4,7 @@ per agent and receiver set (the simulated person)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +27,7 @@ def _values(rows: Sequence[dict], agent: str, rset: str, col: str) -> np.ndarray
     return v[np.isfinite(v)]
 
 
-def plot_closed_loop(rows: Sequence[dict], agg: Sequence[dict], path: Path, title: str) -> Path:
+def closed_loop_figure(rows: Sequence[dict], agg: Sequence[dict], title: str) -> Any:
     """Six panels: success rate (Wilson 95 % CI) and five per-episode distributions (box plots)."""
     import matplotlib
 
@@ -86,7 +86,4 @@ def plot_closed_loop(rows: Sequence[dict], agg: Sequence[dict], path: Path, titl
         ax.set_xlim(-0.6, len(agents) - 0.4)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig

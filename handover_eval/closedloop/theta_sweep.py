@@ -19,6 +19,7 @@ import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -281,7 +282,7 @@ def markdown(per_value: list[dict], extremes: list[dict], header: str, footer: s
     )
 
 
-def plot_sweep(per_value: list[dict], path: Path, title: str) -> Path:
+def sweep_figure(per_value: list[dict], title: str) -> Any:
     """One row of panels per parameter; each panel one outcome against the value, with its CI."""
     import matplotlib
 
@@ -318,7 +319,4 @@ def plot_sweep(per_value: list[dict], path: Path, title: str) -> Path:
                 ax.set_ylabel(SYMBOLS[param], fontsize=8)
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig

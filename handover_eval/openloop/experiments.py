@@ -1,6 +1,8 @@
 """The runs of the paper's simulation experiments (Sec. V-A): Table I, the sample-efficiency sweep
 and the RMS / inference-time trade-off. Every run scores with the one open-loop protocol of
-:mod:`.protocol`; the tables and figures it writes are made by :mod:`.report`.
+:mod:`.protocol` and returns an :class:`OpenLoopRun` of rows; the tables and figures are made by
+:mod:`.report` and the files written by :mod:`.output`. ``out_dir`` is only the checkpoint cache
+(``<out_dir>/checkpoints``) the learned baselines are fitted into and reused from.
 """
 
 from __future__ import annotations
@@ -20,13 +22,27 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval.backend import map_folds
 from handover_eval.methods import MethodOptions, build_agent, check_methods, fit_agent
 from handover_eval.openloop.protocol import OpenLoopProtocol, evaluate_openloop, summarise
-from handover_eval.openloop.report import plot_sample_efficiency, plot_tradeoff, table1_markdown
-from handover_eval.reporting import PAPER_TABLE1, write_csv, write_text
+from handover_eval.reporting import PAPER_TABLE1
 
 if TYPE_CHECKING:
     from handover_eval.act_folds import ACTRun
 
 SQRT3 = math.sqrt(3.0)
+
+
+@dataclass(frozen=True)
+class OpenLoopRun:
+    """What an open-loop run returns.
+
+    Attributes:
+        rows: one summary row per method (and ratio or inducing rate): mean ± std over folds.
+        per_fold: one row per (method, fold[, ratio]).
+        episodes: one row per (method, test episode) (Table I only; empty otherwise).
+    """
+
+    rows: list[dict]
+    per_fold: list[dict]
+    episodes: list[dict]
 
 
 def _fold_stats(values: list[float]) -> tuple[float, float]:
@@ -153,8 +169,8 @@ def run_table1(
     reuse: bool = True,
     progress: bool = True,
     workers: int | None = None,
-) -> list[dict]:
-    """Stratified k-fold open-loop RMS of every method (paper Table I); writes md/csv; returns rows.
+) -> OpenLoopRun:
+    """Stratified k-fold open-loop RMS of every method (paper Table I).
 
     ACT's fold models are trained first, all from one LeRobot export of ``dataset`` and in
     ``workers`` processes (default ``options.workers``), into the checkpoint cache the fold loop
@@ -222,14 +238,7 @@ def run_table1(
                 "fit_seconds_mean": float(np.mean([r["fit_seconds"] for r in mine])),
             }
         )
-    write_csv(rows, out_dir / "table1.csv")
-    write_csv(fold_rows, out_dir / "table1_folds.csv")
-    write_csv(episode_rows, out_dir / "table1_episodes.csv")
-    write_text(
-        table1_markdown(rows, dataset, folds, seed, protocol, options.giver_state),
-        out_dir / "table1.md",
-    )
-    return rows
+    return OpenLoopRun(rows, fold_rows, episode_rows)
 
 
 # ------------------------------------------------------------------------------ sample efficiency
@@ -271,8 +280,8 @@ def run_sample_efficiency(
     reuse: bool = True,
     progress: bool = True,
     workers: int | None = None,
-) -> list[dict]:
-    """RMS vs training-data ratio (paper Fig. "Sample efficiency"); writes CSV and PNG.
+) -> OpenLoopRun:
+    """RMS vs training-data ratio (paper Fig. "Sample efficiency").
 
     ACT's (fold, ratio) models are trained first, in parallel, as in :func:`run_table1`.
     """
@@ -325,26 +334,7 @@ def run_sample_efficiency(
                 m, s = _fold_stats([r[f"{k}_now_axis_mm"] for r in mine])
                 row[f"{k}_now_axis_mm"], row[f"{k}_now_axis_std_mm"] = m, s
             rows.append(row)
-    write_csv(rows, out_dir / "sample_efficiency.csv")
-    write_csv(per_fold, out_dir / "sample_efficiency_folds.csv")
-    plot_sample_efficiency(
-        rows, [m for m in methods if m != "bc_mlp"] or methods, out_dir / "sample_efficiency.png"
-    )
-    return rows
-
-
-def degradation_pct(rows: list[dict], key: str = "all_rms_3d_mm") -> dict[str, float]:
-    """Per method, how much worse (%) ``key`` is at the smallest training ratio than at the largest.
-
-    The paper's sample-efficiency claim in one number: the nonparametric methods should degrade
-    less than ACT as the data shrinks.
-    """
-    out = {}
-    for name in dict.fromkeys(r["method"] for r in rows):
-        mine = sorted((r for r in rows if r["method"] == name), key=lambda r: r["ratio"])
-        if len(mine) >= 2:
-            out[name] = 100.0 * (mine[0][key] / mine[-1][key] - 1.0)
-    return out
+    return OpenLoopRun(rows, per_fold, [])
 
 
 # ---------------------------------------------------------------------------------------- trade-off
@@ -416,8 +406,8 @@ def run_tradeoff(
     timing_episodes: int = 20,
     include_iaal: bool = True,
     progress: bool = True,
-) -> list[dict]:
-    """RMS vs per-frame inference time for ours at several inducing rates and IAAL; CSV + PNG.
+) -> OpenLoopRun:
+    """RMS vs per-frame inference time for ours at several inducing rates and IAAL.
 
     The (variant, fold) fits run as backend jobs (:func:`map_folds`); each variant's fold-0 model
     is then timed here, one variant after another, pinned to one core, with no job running.
@@ -465,6 +455,4 @@ def run_tradeoff(
         if iaal is not None:
             r["speedup_vs_iaal"] = iaal["frame_ms_median"] / r["frame_ms_median"]
             r["rms_cost_vs_iaal_pct"] = 100.0 * (r["all_rms_3d_mm"] / iaal["all_rms_3d_mm"] - 1.0)
-    write_csv(rows, out_dir / "tradeoff.csv")
-    plot_tradeoff(rows, out_dir / "tradeoff.png")
-    return rows
+    return OpenLoopRun(rows, [], [])

@@ -1,11 +1,12 @@
 """Tables and figures of the open-loop experiments (:mod:`.experiments`): Table I in the paper's
-layout beside the paper's numbers, the sample-efficiency plot and the RMS / inference-time plot."""
+layout beside the paper's numbers, the console summaries, the sample-efficiency figure and the
+RMS / inference-time figure. Nothing here writes a file (:mod:`.output` does)."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from pathlib import Path
+from typing import Any
 
 from handover_env.data.dataset import HandoverDataset
 from handover_eval.openloop.protocol import OpenLoopProtocol
@@ -74,7 +75,7 @@ def table1_markdown(
     )
 
 
-def plot_sample_efficiency(rows: list[dict], methods: Sequence[str], path: Path) -> Path:
+def sample_efficiency_figure(rows: list[dict], methods: Sequence[str]) -> Any:
     """Mean ± std markers per method and ratio, values written beside the markers (paper style).
 
     Two panels, all test episodes: the 1 s horizon RMS (3D) and the current-frame per-axis RMS
@@ -120,13 +121,10 @@ def plot_sample_efficiency(rows: list[dict], methods: Sequence[str], path: Path)
     axes[0].legend()
     fig.suptitle("Sample efficiency (all test episodes; mean ± std over folds)")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig
 
 
-def plot_tradeoff(rows: list[dict], path: Path) -> Path:
+def tradeoff_figure(rows: list[dict]) -> Any:
     """RMS (mean ± std over folds) against median per-frame time, one marker per inducing rate."""
     import matplotlib
 
@@ -159,7 +157,83 @@ def plot_tradeoff(rows: list[dict], path: Path) -> Path:
     ax.grid(alpha=0.3, which="both")
     ax.legend()
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return fig
+
+
+def table1_summary(rows: list[dict]) -> str:
+    """Table I for the console: both metrics beside the paper's numbers."""
+    header = ["method", "ID 3D (mm)", "OOD 3D (mm)", "ID current frame", "OOD current frame",
+              "ID paper", "OOD paper"]
+    return markdown_table(header, [
+        [
+            METHOD_LABELS[r["method"]],
+            mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
+            mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+            mean_std(r["id_now_axis_mm"], r["id_now_axis_std_mm"]),
+            mean_std(r["ood_now_axis_mm"], r["ood_now_axis_std_mm"]),
+            mean_std(r["paper_id_mm"], r["paper_id_std_mm"]),
+            mean_std(r["paper_ood_mm"], r["paper_ood_std_mm"]),
+        ]
+        for r in rows
+    ])
+
+
+def sample_efficiency_summary(rows: list[dict]) -> str:
+    """The sample-efficiency rows for the console."""
+    header = ["method", "ratio", "all 3D (mm)", "ID 3D (mm)", "OOD 3D (mm)",
+              "all current frame (mm)"]
+    return markdown_table(header, [
+        [
+            METHOD_LABELS[r["method"]],
+            f"{r['ratio']:g}",
+            mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
+            mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
+            mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
+            mean_std(r["all_now_axis_mm"], r["all_now_axis_std_mm"]),
+        ]
+        for r in rows
+    ])
+
+
+def degradation_pct(rows: list[dict], key: str = "all_rms_3d_mm") -> dict[str, float]:
+    """Per method, how much worse (%) ``key`` is at the smallest training ratio than at the largest.
+
+    The paper's sample-efficiency claim in one number: the nonparametric methods should degrade
+    less than ACT as the data shrinks.
+    """
+    out = {}
+    for name in dict.fromkeys(r["method"] for r in rows):
+        mine = sorted((r for r in rows if r["method"] == name), key=lambda r: r["ratio"])
+        if len(mine) >= 2:
+            out[name] = 100.0 * (mine[0][key] / mine[-1][key] - 1.0)
+    return out
+
+
+def degradation_line(rows: list[dict], ratios: Sequence[float]) -> str | None:
+    """'RMS at ratio 0.1 vs 1 ...: ACT +12.3% / +4.5%, ...', or None with fewer than two ratios."""
+    horizon, now = degradation_pct(rows), degradation_pct(rows, "all_now_axis_mm")
+    if not horizon:
+        return None
+    lo, hi = min(ratios), max(ratios)
+    return (
+        f"RMS at ratio {lo:g} vs {hi:g} (all episodes, 1 s horizon 3D / current frame): "
+        + ", ".join(f"{METHOD_LABELS[m]} {horizon[m]:+.1f}% / {now[m]:+.1f}%" for m in horizon)
+    )
+
+
+def tradeoff_summary(rows: list[dict]) -> str:
+    """The RMS / inference-time rows for the console."""
+    header = ["method", "rate", "median ms/frame", "p99 ms/frame", "all 3D (mm)",
+              "x faster than IAAL", "RMS vs IAAL"]
+    return markdown_table(header, [
+        [
+            METHOD_LABELS[r["method"]],
+            "" if r["inducing_rate"] is None else f"{r['inducing_rate']:g}",
+            f"{r['frame_ms_median']:.3f}",
+            f"{r['frame_ms_p99']:.3f}",
+            mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
+            f"{r.get('speedup_vs_iaal', float('nan')):.2f}",
+            f"{r.get('rms_cost_vs_iaal_pct', float('nan')):+.2f}%",
+        ]
+        for r in rows
+    ])

@@ -14,7 +14,7 @@ from handover_env.config import HandoverParams
 from handover_eval.preference.study import PAPER, StudyResult
 from handover_eval.preference.tuning import PAPER_THETA
 from handover_eval.preference.tuning_report import save_run, theta_line
-from handover_eval.reporting import write_csv, write_text
+from handover_eval.reporting import write_csv, write_png, write_text
 
 SOURCE = (
     "**Simulated participants** (`agents/participants.py`: a documented model of how people judge "
@@ -197,7 +197,8 @@ def _corr(a: np.ndarray, b: np.ndarray) -> str:
     return f"r = {float(np.corrcoef(a, b)[0, 1]):+.2f}"
 
 
-def _figure(result: StudyResult, path: Path) -> None:
+def study_figure(result: StudyResult) -> Any:
+    """Comfort and time, dynamic vs static; H3 choices; personalised gain against height."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -249,8 +250,7 @@ def _figure(result: StudyResult, path: Path) -> None:
         fig.colorbar(sc, ax=ax, label="walking speed (m/s)")
     fig.suptitle("User study with simulated participants (not people)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
 
 
 def write_report(result: StudyResult, out: Path) -> list[Path]:
@@ -277,6 +277,6 @@ def write_report(result: StudyResult, out: Path) -> list[Path]:
         "timings": result.timings,
     }
     write_text(json.dumps(summary, indent=1, default=float), out / "summary.json")
-    _figure(result, out / "user_study.png")
+    write_png(study_figure(result), out / "user_study.png", dpi=110)
     print(text)
     return [out / "user_study.md", out / "user_study.png"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -13,7 +14,7 @@ from agents.cospar import THETA_NAMES, CoSpar
 from agents.participants import Participant
 from handover_env.config import HandoverParams
 from handover_eval.preference.tuning import PAPER_THETA, PreferenceConfig, PreferenceResult
-from handover_eval.reporting import write_csv, write_text
+from handover_eval.reporting import write_csv, write_png, write_text
 
 
 def posterior_marginals(learner: CoSpar) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -28,8 +29,8 @@ def posterior_marginals(learner: CoSpar) -> list[tuple[np.ndarray, np.ndarray, n
     return out
 
 
-def plot_marginals(learner: CoSpar, theta_hat: HandoverParams, path: Path, title: str) -> None:
-    """PNG: the posterior mean of the utility, averaged over the other three parameters, per
+def marginals_figure(learner: CoSpar, theta_hat: HandoverParams, title: str) -> Any:
+    """The posterior mean of the utility, averaged over the other three parameters, per
     parameter."""
     import matplotlib
 
@@ -48,9 +49,7 @@ def plot_marginals(learner: CoSpar, theta_hat: HandoverParams, path: Path, title
     axes[0].legend(fontsize=7, loc="lower left")
     fig.suptitle(title + " (simulated participants)", fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
 
 
 def theta_line(theta: HandoverParams) -> str:
@@ -100,10 +99,11 @@ def save_run(
         if len(participants) == 1
         else f"{len(participants)} participants pooled"
     )
-    plot_marginals(
-        result.learner,
-        result.theta_hat,
+    write_png(
+        marginals_figure(
+            result.learner, result.theta_hat, f"CoSpar posterior after {iters} iterations, {who}"
+        ),
         paths[4],
-        f"CoSpar posterior after {iters} iterations, {who}",
+        dpi=110,
     )
     return paths
