@@ -1,11 +1,10 @@
 """BC-MLP: behaviour cloning with a multi-layer perceptron (the paper's Table I baseline).
 
-A torch MLP maps the shared baseline features of one frame (:mod:`handover_env.data.features`: the
-W-frame
-receiver base-xy history and the current giver xyz) to the giver xyz chunk of the next H = 30
-frames. Inputs and outputs are standardised with mean/std statistics of the training frames, kept
-as buffers of the module so they are saved with the weights (``model.safetensors``). Training uses
-a masked MSE on the standardised chunk (rows past an episode end are masked), Adam, and early
+A torch MLP maps the shared baseline features of one frame (:mod:`handover_env.data.features`:
+the W-frame receiver base-xy history and the current giver xyz) to the giver xyz chunk of the next
+H = 30 frames. Inputs and outputs are standardised with mean/std statistics of the training frames,
+kept as buffers of the module so they are saved with the weights (``model.safetensors``). Training
+uses a masked MSE on the standardised chunk (rows past an episode end are masked), Adam, and early
 stopping on a validation split of whole episodes (stratified by ID/OOD). Everything is seeded and
 deterministic on CPU.
 
@@ -15,16 +14,16 @@ Checkpoint folder (``save``/``load``):
 * ``model.safetensors``  -- best weights and the normalisation statistics
 * ``training_state/``    -- last weights, optimizer state (LeRobot's safetensors format) and
   ``state.json`` (epoch, best validation loss, patience counter, loss curves, split) for resuming
-
 * ``train_log.jsonl``   -- one JSON line per epoch (losses, best so far, wall time)
 
-Training state, checkpoints, resume and progress are the shared :mod:`baselines.trainer`'s: every
-checkpoint is written as one unit, and :meth:`BCMLPAgent.load` / ``--resume`` validate every file
-before using it: all config fields present and of their JSON type, weights of the model's shapes
-and dtypes, finite, normalisation statistics within what the data can produce
-(:mod:`baselines.norm_bounds`), a ``state.json`` consistent with its loss curves. Loading writes
-nothing (an interrupted commit is refused, never finished: ``--resume`` finishes it). Plain torch:
-no LeRobot import.
+The training loop is the shared :func:`baselines.trainer.run` (epochs, early stopping, best
+weights, checkpoints, resume, progress); this module gives it one epoch's batches and the
+validation loss. Every checkpoint is written as one unit, and :meth:`BCMLPAgent.load` /
+``--resume`` validate every file before using it: all config fields present and of their JSON
+type, weights of the model's shapes and dtypes, finite, normalisation statistics within what the
+data can produce (:mod:`baselines.norm_bounds`), a ``state.json`` consistent with its loss curves.
+Loading writes nothing (an interrupted commit is refused, never finished: ``--resume`` finishes
+it). Plain torch: no LeRobot import.
 
 In an env (``reset``/``act``) it is a :class:`agents.predictive.PredictiveAgent`, exactly like the
 planner: one chunk per new camera frame, ACT-style temporal ensembling, the target at t_f of Theta,
