@@ -1,11 +1,10 @@
 """BC-MLP: behaviour cloning with a multi-layer perceptron (the paper's Table I baseline).
 
-A torch MLP maps the shared baseline features of one frame (:mod:`handover_env.data.features`: the
-W-frame
-receiver base-xy history and the current giver xyz) to the giver xyz chunk of the next H = 30
-frames. Inputs and outputs are standardised with mean/std statistics of the training frames, kept
-as buffers of the module so they are saved with the weights (``model.safetensors``). Training uses
-a masked MSE on the standardised chunk (rows past an episode end are masked), Adam, and early
+A torch MLP maps the shared baseline features of one frame (:mod:`handover_env.data.features`:
+the W-frame receiver base-xy history and the current giver xyz) to the giver xyz chunk of the next
+H = 30 frames. Inputs and outputs are standardised with mean/std statistics of the training frames,
+kept as buffers of the module so they are saved with the weights (``model.safetensors``). Training
+uses a masked MSE on the standardised chunk (rows past an episode end are masked), Adam, and early
 stopping on a validation split of whole episodes (stratified by ID/OOD). Everything is seeded and
 deterministic on CPU.
 
@@ -15,16 +14,16 @@ Checkpoint folder (``save``/``load``):
 * ``model.safetensors``  -- best weights and the normalisation statistics
 * ``training_state/``    -- last weights, optimizer state (LeRobot's safetensors format) and
   ``state.json`` (epoch, best validation loss, patience counter, loss curves, split) for resuming
-
 * ``train_log.jsonl``   -- one JSON line per epoch (losses, best so far, wall time)
 
-Training state, checkpoints, resume and progress are the shared :mod:`baselines.trainer`'s: every
-checkpoint is written as one unit, and :meth:`BCMLPAgent.load` / ``--resume`` validate every file
-before using it: all config fields present and of their JSON type, weights of the model's shapes
-and dtypes, finite, normalisation statistics within what the data can produce
-(:mod:`baselines.norm_bounds`), a ``state.json`` consistent with its loss curves. Loading writes
-nothing (an interrupted commit is refused, never finished: ``--resume`` finishes it). Plain torch:
-no LeRobot import.
+The training loop is the shared :func:`baselines.trainer.run` (epochs, early stopping, best
+weights, checkpoints, resume, progress); this module gives it one epoch's batches and the
+validation loss. Every checkpoint is written as one unit, and :meth:`BCMLPAgent.load` /
+``--resume`` validate every file before using it: all config fields present and of their JSON
+type, weights of the model's shapes and dtypes, finite, normalisation statistics within what the
+data can produce (:mod:`baselines.norm_bounds`), a ``state.json`` consistent with its loss curves.
+Loading writes nothing (an interrupted commit is refused, never finished: ``--resume`` finishes
+it). Plain torch: no LeRobot import.
 
 In an env (``reset``/``act``) it is a :class:`agents.predictive.PredictiveAgent`, exactly like the
 planner: one chunk per new camera frame, ACT-style temporal ensembling, the target at t_f of Theta,
@@ -35,7 +34,6 @@ from __future__ import annotations
 
 import math
 import os
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -54,7 +52,6 @@ except ModuleNotFoundError as _exc:
 from agents.predictive import ClosedLoopConfig
 from baselines import trainer
 from baselines.checkpoint_io import (
-    CheckpointError,
     check_loadable,
     config_from_dict,
     expected_of,
@@ -298,88 +295,54 @@ class BCMLPAgent(GiverConditionedAgent):
             "train": [dataset[i].source_id for i in train_idx],
             "val": [dataset[i].source_id for i in val_idx],
         }
-        state = trainer.new_state("epoch", split, bad_epochs=0, stopped_early=False)
-        best = trainer.clone_weights(self.net)
-        out = trainer.out_path(out_dir)
-        if resume:
-            if out is None:
-                raise CheckpointError("resume needs the checkpoint folder (out_dir)")
-            state, best = trainer.load_training_state(
-                out,
-                self.net,
-                opt,
-                split=split,
+        tr = _tensors(train, cfg.device)
+        va = _tensors(val, cfg.device)
+        n = len(train)
+        batches_per_epoch = max(1, math.ceil(n / cfg.batch_size))
+
+        def one_epoch(epoch: int) -> float:
+            """One pass over the training frames, shuffled by (seed, epoch): resumable."""
+            self.net.train()
+            gen = torch.Generator().manual_seed(cfg.seed * 100_003 + epoch)
+            perm = torch.randperm(n, generator=gen)
+            running = 0.0
+            for i in range(0, n, cfg.batch_size):
+                idx = perm[i : i + cfg.batch_size]
+                loss = self.net.loss({k: v[idx] for k, v in tr.items()})
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                running += loss.item()
+            return running / batches_per_epoch
+
+        state, best = trainer.run(
+            self.net,
+            opt,
+            one_epoch,
+            lambda: _eval_loss(self.net, va),
+            counter="epoch",
+            total=max_epochs,
+            split=split,
+            describe=lambda s: (
+                f"epoch {s['epoch']:3d}  train {s['train_loss'][-1]:.5f}  "
+                f"val {s['val_loss'][-1]:.5f}  best {s['best_val']:.5f} @ {s['best_epoch']}"
+            ),
+            write_model=self._write_model,
+            checks=trainer.ResumeChecks(
                 config=self._config_dict(),
                 saved_config=lambda o: _read_config(o)["config"],
                 resumable=RESUMABLE_CHANGES,
                 check_state=_check_state,
                 check_best=lambda tensors, source: _check_stats(tensors, source, cfg),
-            )
-
-        tr = _tensors(train, cfg.device)
-        va = _tensors(val, cfg.device)
-        n = len(train)
-        batches_per_epoch = max(1, math.ceil(n / cfg.batch_size))
-        report = trainer.TrainingProgress(
-            "bc-mlp",
-            max_epochs,
-            state["epoch"],
-            "epoch",
-            progress,
-            log,
-            trainer.previous_log(out) if resume and out is not None else "",
+            ),
+            out_dir=out_dir,
+            resume=resume,
+            patience=cfg.patience,
+            diverged="BC-MLP",
+            desc="bc-mlp",
+            progress=progress,
+            log=log,
         )
-        t_start = time.perf_counter() - state["wall_time_s"]
-        try:
-            while state["epoch"] < max_epochs and state["bad_epochs"] < cfg.patience:
-                epoch = state["epoch"]
-                self.net.train()
-                gen = torch.Generator().manual_seed(
-                    cfg.seed * 100_003 + epoch
-                )  # resumable shuffling
-                perm = torch.randperm(n, generator=gen)
-                running = 0.0
-                for i in range(0, n, cfg.batch_size):
-                    idx = perm[i : i + cfg.batch_size]
-                    loss = self.net.loss({k: v[idx] for k, v in tr.items()})
-                    opt.zero_grad(set_to_none=True)
-                    loss.backward()
-                    opt.step()
-                    running += loss.item()
-                train_loss = running / batches_per_epoch
-                val_loss = _eval_loss(self.net, va)
-                if not (math.isfinite(train_loss) and math.isfinite(val_loss)):
-                    raise FloatingPointError(
-                        f"BC-MLP training diverged at epoch {epoch + 1} (train loss {train_loss}, "
-                        "validation "
-                        f"loss {val_loss}); check the data's coordinates and the learning rate"
-                    )
-                state["epoch"] = epoch + 1
-                if trainer.record_validation(state, "epoch", train_loss, val_loss):
-                    state["bad_epochs"] = 0
-                    best = trainer.clone_weights(self.net)
-                else:
-                    state["bad_epochs"] += 1
-                state["stopped_early"] = state["bad_epochs"] >= cfg.patience
-                state["wall_time_s"] = time.perf_counter() - t_start
-                report.advance(1, train_loss)
-                report.validation(
-                    state,
-                    f"epoch {epoch + 1:3d}  train {train_loss:.5f}  val {val_loss:.5f}  "
-                    f"best {state['best_val']:.5f} @ {state['best_epoch']}",
-                )
-                if out is not None:
-                    trainer.save_checkpoint(
-                        out,
-                        lambda stage, best=best, state=state: self._write_model(stage, best, state),
-                        self.net,
-                        opt,
-                        state,
-                        report,
-                    )
-        finally:
-            report.close()
-
         self.net.load_state_dict(best)
         self.net.eval()
         self.fitted = True

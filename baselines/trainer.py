@@ -1,13 +1,16 @@
-"""The training machinery BC-MLP and ACT share: state, best validation, checkpoints, resume,
-progress.
+"""The training machinery BC-MLP and ACT share: the optimisation loop, state, best validation,
+checkpoints, resume, progress.
 
-Each baseline keeps its own optimisation loop (BC-MLP runs epochs with early stopping, ACT runs
-steps through LeRobot's ``ACTPolicy.forward``); everything around the loop is here:
-
-* **Training state** (:func:`new_state`): a JSON-able dict with a progress counter (``"epoch"``
-  or ``"step"``), the loss curves, the best validation loss and when it was reached, the wall
-  time and the train/validation split (episode ids). :func:`record_validation` appends one
-  validation pass and says whether it is the new best.
+* **Loop** (:func:`run`): drives the progress counter (``"epoch"`` for BC-MLP, ``"step"`` for ACT),
+  calls the baseline's ``step`` (one epoch's batches, or one optimisation step) and, every
+  ``every`` units and at the end, its ``validate``; keeps the best weights, counts the passes
+  without improvement against ``patience`` (early stopping, where configured), writes a
+  checkpoint after every validation pass and resumes from one. A baseline keeps only its step and
+  validation functions.
+* **Training state** (:func:`new_state`): a JSON-able dict with a progress counter, the loss
+  curves, the best validation loss and when it was reached, the wall time and the train/validation
+  split (episode ids). :func:`record_validation` appends one validation pass and says whether it
+  is the new best.
 * **Checkpoint** (:func:`save_checkpoint`): written as one unit by
   :func:`~baselines.checkpoint_io.staged_write`: the model files (the caller's ``write_model``:
   best weights and configs), ``training_state/`` (last weights, optimizer in LeRobot's format,
@@ -32,8 +35,9 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -210,17 +214,32 @@ def save_checkpoint(
             )
 
 
+@dataclass(frozen=True)
+class ResumeChecks:
+    """What a resumed run's checkpoint is validated against (see :func:`load_training_state`).
+
+    Args:
+        config: this run's config as JSON.
+        saved_config: reads the checkpoint's config (validated).
+        resumable: config fields a resumed run may change.
+        check_state: validates ``state.json``.
+        check_best: further checks of the best weights (e.g. positive normalisation scales).
+    """
+
+    config: dict
+    saved_config: Callable[[Path], dict]
+    resumable: frozenset[str]
+    check_state: Callable[[Any, Path], dict]
+    check_best: Callable[[dict[str, torch.Tensor], Path], None] | None = None
+
+
 def load_training_state(
     out: Path,
     module: torch.nn.Module,
     opt: torch.optim.Optimizer,
     *,
     split: dict,
-    config: dict,
-    saved_config: Callable[[Path], dict],
-    resumable: frozenset[str],
-    check_state: Callable[[Any, Path], dict],
-    check_best: Callable[[dict[str, torch.Tensor], Path], None] | None = None,
+    checks: ResumeChecks,
     rng: bool = False,
 ) -> tuple[dict, dict[str, torch.Tensor]]:
     """Validated (state, best weights) of the checkpoint in ``out``; restores ``module``, ``opt``
@@ -228,12 +247,10 @@ def load_training_state(
 
     Args:
         out: the checkpoint folder.
-        module, opt: built from ``config``; they receive the last weights and the optimizer state.
+        module, opt: built from ``checks.config``; they receive the last weights and the optimizer
+            state.
         split: the train/validation split of this run (must equal the checkpoint's).
-        config: this run's config as JSON; saved_config: reads the checkpoint's (validated).
-        resumable: config fields a resumed run may change.
-        check_state: validates ``state.json``.
-        check_best: further checks of the best weights (e.g. positive normalisation scales).
+        checks: what the checkpoint is validated against.
         rng: restore the torch RNG saved by :func:`save_checkpoint`.
     """
     recover(out)  # --resume is the command that wrote it: finish its interrupted commit (checked)
@@ -244,11 +261,11 @@ def load_training_state(
                    "training")
     if not (ts / "state.json").is_file() or not (ts / "last.safetensors").is_file():
         raise CheckpointError(f"cannot resume: no training state in {ts}")
-    theirs = saved_config(out)
-    diff = sorted(k for k in config if k not in resumable and theirs.get(k) != config[k])
+    theirs, config = checks.saved_config(out), checks.config
+    diff = sorted(k for k in config if k not in checks.resumable and theirs.get(k) != config[k])
     if diff:
         raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
-    state = check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
+    state = checks.check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
     if state["split"] != split:
         raise CheckpointError(
             f"cannot resume from {out}: it was trained on a different dataset/split"
@@ -256,8 +273,8 @@ def load_training_state(
     expected = expected_of(module.state_dict())
     module.load_state_dict(load_tensors(ts / "last.safetensors", expected))
     best = load_tensors(out / "model.safetensors", expected)
-    if check_best is not None:
-        check_best(best, out / "model.safetensors")
+    if checks.check_best is not None:
+        checks.check_best(best, out / "model.safetensors")
     load_optimizer(opt, ts)
     if rng:
         saved = load_tensors(ts / "rng.safetensors",
@@ -271,43 +288,131 @@ def load_training_state(
     return state, best
 
 
+# ---------------------------------------------------------------------- the loop
+def run(
+    module: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    step: Callable[[int], float],
+    validate: Callable[[], float],
+    *,
+    counter: str,
+    total: int,
+    split: dict[str, list[str]],
+    describe: Callable[[dict], str],
+    write_model: Callable[[Path, dict[str, torch.Tensor], dict], None],
+    checks: ResumeChecks,
+    out_dir: str | os.PathLike | None = None,
+    resume: bool = False,
+    every: int = 1,
+    patience: int | None = None,
+    diverged: str | None = None,
+    rng: bool = False,
+    desc: str = "train",
+    progress: bool = False,
+    log: Callable[[str], None] | None = None,
+    loss_every: int = 1,
+) -> tuple[dict, dict[str, torch.Tensor]]:
+    """Train ``module`` from ``state[counter]`` to ``total``; returns (state, best weights).
+
+    Each unit calls ``step(n)`` (``n`` = the counter before it; returns its training loss); after
+    every ``every`` units and after the last, ``validate()`` gives the validation loss, the pass is
+    recorded (the train loss is the mean of the units since the previous pass), the best weights
+    kept, the log written and, with ``out_dir``, a checkpoint saved. The caller loads the best
+    weights into ``module`` once it returns.
+
+    Args:
+        module, opt: the model being trained and its optimizer.
+        step: one unit of training (one epoch's batches, or one optimisation step).
+        validate: the validation loss of ``module``'s current weights.
+        counter: ``"epoch"`` or ``"step"``; total: its final value.
+        split: the train/validation split (episode ids), kept in the state.
+        describe: the log line of the validation pass just recorded in the state.
+        write_model: writes the model files (best weights, state) into a staging folder.
+        checks: what a resumed checkpoint is validated against.
+        out_dir: checkpoint folder, rewritten after every validation pass.
+        resume: continue from the training state in ``out_dir``.
+        every: units between validation passes.
+        patience: stop after this many passes without a better validation loss (the state then
+            holds ``bad_epochs`` and ``stopped_early``); None trains to ``total``.
+        diverged: the baseline's name; a train or validation loss that is not finite then raises
+            FloatingPointError at the validation pass.
+        rng: checkpoints hold the torch RNG, restored on resume.
+        desc, progress, log: the tqdm bar's label, whether it shows, the per-pass log callback.
+        loss_every: units between loss updates beside the bar.
+    """
+    early = {"bad_epochs": 0, "stopped_early": False} if patience is not None else {}
+    state = new_state(counter, split, **early)
+    best = clone_weights(module)
+    out = None if out_dir is None else Path(out_dir)
+    if resume:
+        if out is None:
+            raise CheckpointError("resume needs the checkpoint folder (out_dir)")
+        state, best = load_training_state(out, module, opt, split=split, checks=checks, rng=rng)
+    report = TrainingProgress(desc, total, state[counter], counter, progress, log,
+                              previous_log(out) if resume and out is not None else "")
+    t_start = time.perf_counter() - state["wall_time_s"]
+    running, count = 0.0, 0
+    try:
+        while state[counter] < total and (patience is None or state["bad_epochs"] < patience):
+            n = state[counter]
+            running += step(n)
+            count += 1
+            state[counter] = n + 1
+            report.advance(1, running / count if count % loss_every == 0 else None)
+            if state[counter] % every and state[counter] != total:
+                continue
+            train_loss, val_loss = running / max(count, 1), validate()
+            if diverged is not None and not (math.isfinite(train_loss) and math.isfinite(val_loss)):
+                raise FloatingPointError(
+                    f"{diverged} training diverged at {counter} {n + 1} (train loss {train_loss}, "
+                    f"validation loss {val_loss}); check the data's coordinates and the learning "
+                    "rate"
+                )
+            running, count = 0.0, 0
+            improved = record_validation(state, counter, train_loss, val_loss)
+            if improved:
+                best = clone_weights(module)
+            if patience is not None:
+                state["bad_epochs"] = 0 if improved else state["bad_epochs"] + 1
+                state["stopped_early"] = state["bad_epochs"] >= patience
+            state["wall_time_s"] = time.perf_counter() - t_start
+            report.validation(state, describe(state))
+            if out is not None:
+                save_checkpoint(out, lambda stage, best=best: write_model(stage, best, state),
+                                module, opt, state, report, rng=rng)
+    finally:
+        report.close()
+    return state, best
+
+
+# ---------------------------------------------------------------------- state.json
 def check_state(
     state: Any, source: Path, counter: str, extra: dict[str, type] | None = None
 ) -> dict:
-    """A ``state.json`` of :func:`new_state`'s fields (plus ``extra``), consistent with itself."""
-    return check_training_state(state, source, counter, f"best_{counter}", extra or {})
-
-
-def check_training_state(
-    state: Any, source: Path, counter: str, best: str, extra: dict[str, type]
-) -> dict:
-    """A training ``state.json`` whose fields have their JSON types and agree with each other.
+    """A ``state.json`` of :func:`new_state`'s fields (plus ``extra``: further fields and their
+    types), of their JSON types and consistent with each other.
 
     Args:
         state: the parsed JSON.
         source: the file, for messages.
         counter: the progress field (``"epoch"``: one validation pass each; ``"step"``: at most
-            one).
-        best: the field holding the counter value of the best validation pass.
-        extra: further fields and their types.
+            one); ``best_<counter>`` holds its value at the best validation pass.
 
     Raises:
         CheckpointError: a field is missing, unknown or mistyped, the counter is negative, the loss
             curves are not finite or do not fit the counter, or the best pass disagrees with them.
     """
+    best = f"best_{counter}"
     keys = {counter: int, "best_val": float, best: int, "train_loss": list, "val_loss": list,
-            "wall_time_s": float, "split": dict, **extra}
+            "wall_time_s": float, "split": dict, **(extra or {})}
     if not isinstance(state, dict) or set(state) != set(keys):
         got = sorted(state) if isinstance(state, dict) else type(state).__name__
         raise CheckpointError(f"{source}: expected the fields {sorted(keys)}, got {got}")
     for key, kind in keys.items():
         value = state[key]
         if kind is float:  # best_val is inf until the first validation pass
-            ok = (
-                isinstance(value, (int, float))
-                and not isinstance(value, bool)
-                and not math.isnan(value)
-            )
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and not (
+                math.isnan(value))
         else:
             ok = isinstance(value, kind) if kind in (list, dict) else json_type_ok(value, kind)
         if not ok:
@@ -390,7 +495,3 @@ def read_checkpoint_json(
         raise CheckpointError(f"{f}: training must be a JSON object")
     return saved
 
-
-def out_path(out_dir: str | os.PathLike | None) -> Path | None:
-    """``out_dir`` as a Path (None stays None)."""
-    return None if out_dir is None else Path(out_dir)

@@ -87,7 +87,7 @@ def test_the_baselines_share_the_trainer_and_act_wraps_lerobots_config():
 
     redeclared = {f.name for f in fields(ACTAgentConfig)} & {f.name for f in fields(ACTConfig)}
     assert redeclared == {"device"}  # the agent owns the device; every model field is ACTConfig's
-    for module in ("baselines.act", "baselines.bc_mlp"):
+    for module in ("baselines.act.agent", "baselines.bc_mlp"):
         source = Path(importlib.util.find_spec(module).origin).read_text(encoding="utf-8")
         assert "trainer." in source
         for own in (

@@ -18,8 +18,10 @@ checkpoint is read here first, and LeRobot never parses its JSON at all:
   shapes, within what the data can produce (:mod:`baselines.norm_bounds`: means, extrema and
   quantiles within the features' ±100 m / ±200 m, standard deviations positive and at most that).
 
-:meth:`baselines.act.ACTAgent.load` then builds the policy and the processors from our validated
-config (``ACTPolicy(config)``, ``make_act_pre_post_processors``) and loads only tensors into them.
+:func:`validated_stats` runs these checks and returns the statistics;
+:meth:`baselines.act.agent.ACTAgent.load` then builds the policy and the processors from our
+validated config (``ACTPolicy(config)``, ``make_act_pre_post_processors``) and loads only tensors
+into them.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import json
 import re
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -39,8 +41,12 @@ try:
 except ModuleNotFoundError as _exc:
     raise missing_extra("baselines", _exc, __name__) from None
 
-from baselines.checkpoint_io import CheckpointError, load_tensors, read_json
-from baselines.norm_bounds import check_stat
+from baselines.checkpoint_io import CheckpointError, check_loadable, load_tensors, read_json
+from baselines.norm_bounds import check_stat, feature_limits
+from handover_env.data.features import ACTION, ACTION_DIM, OBS_ENV_STATE, OBS_STATE, STATE_DIM
+
+if TYPE_CHECKING:
+    from baselines.act.config import ACTAgentConfig
 
 PREPROCESSOR_JSON = "policy_preprocessor.json"
 POSTPROCESSOR_JSON = "policy_postprocessor.json"
@@ -180,3 +186,33 @@ def validate_config_json(folder: Path, policy_config) -> None:
     if diff:
         details = "; ".join(f"{k}: {saved.get(k)!r} vs {expected.get(k)!r}" for k in diff[:3])
         raise CheckpointError(f"{path} disagrees with handover_act.json in {diff} ({details})")
+
+
+def validated_stats(
+    folder: Path, trained: ACTAgentConfig
+) -> tuple[dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+    """(normaliser statistics, unnormaliser statistics) of the ACT checkpoint in ``folder``,
+    trained with the config ``trained``, after every LeRobot file of it was validated.
+
+    Raises:
+        CheckpointError: a file is missing, ``config.json`` or a processor JSON differs from what
+            ``trained`` writes, or a statistic is malformed or out of bounds.
+    """
+    from lerobot.policies.act.processor_act import make_act_pre_post_processors
+
+    for name in ("config.json", "model.safetensors", PREPROCESSOR_JSON, POSTPROCESSOR_JSON):
+        if not (folder / name).is_file():
+            raise CheckpointError(f"{folder}: missing {name} (incomplete ACT checkpoint)")
+    validate_config_json(folder, trained.policy_config())
+    saved_pre, saved_post = make_act_pre_post_processors(trained.policy_config(), None)
+    pre_state = validate_processor_json(folder, PREPROCESSOR_JSON, saved_pre, PREPROCESSOR_STEPS)
+    post_state = validate_processor_json(
+        folder, POSTPROCESSOR_JSON, saved_post, POSTPROCESSOR_STEPS
+    )
+    env_dim = trained.spec.env_dim
+    shapes = {OBS_ENV_STATE: (env_dim,), OBS_STATE: (STATE_DIM,), ACTION: (ACTION_DIM,)}
+    state_files = {**pre_state, **post_state}
+    check_loadable(folder, [f.name for f in state_files.values()], "ACT")
+    limits = feature_limits(env_dim)
+    stats = {i: load_stats(f, shapes, limits) for i, f in state_files.items()}
+    return stats[3], stats[0]  # the normaliser and unnormaliser steps
