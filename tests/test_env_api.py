@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip(
-    "handover_env.receiver_motion", reason="the shared receiver motion model is not in the tree yet"
+    "handover_env.person.motion", reason="the shared receiver motion model is not in the tree yet"
 )
 
 import handover_env  # noqa: E402,F401  (registers the ids)

@@ -14,19 +14,19 @@ import numpy as np
 import pytest
 
 import handover_env  # noqa: F401
-from handover_env import receiver_motion as rm
 from handover_env.data.dataset import DatasetError, Episode
 from handover_env.data.limits import MIN_BONE_M
 from handover_env.data.recording import Recording, load_recording
-from handover_env.gait import walking_pose
-from handover_env.person import replay_input
-from handover_env.receiver import (
+from handover_env.person import motion as rm
+from handover_env.person.gait import walking_pose
+from handover_env.person.person import replay_input
+from handover_env.person.receiver import (
     LONGEST_EPISODE,
     SETTING_RANGES,
     ReceiverConfig,
     person_config,
 )
-from handover_env.skeleton import BodyDims, joints_of, shortest_bone
+from handover_env.person.skeleton import BodyDims, joints_of, shortest_bone
 
 ENV_ID = "handover_env/DynamicHandover-v0"
 REPO = Path(__file__).resolve().parents[1]

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from agents.giver_replay import GiverReplayAgent
-from handover_env import receiver_motion as rm
-from handover_env.person import RATE, recorded_motion, resample, scripted_motion, stopped
+from handover_env.person import motion as rm
+from handover_env.person.person import RATE, recorded_motion, resample, scripted_motion, stopped
 
 
 def _track(frames=120, speed=0.9, y=-0.9):

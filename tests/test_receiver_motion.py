@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from handover_env import receiver_motion as rm
+from handover_env.person import motion as rm
 
 
 def _speeds(traj: rm.BaseTrajectory) -> np.ndarray:

@@ -9,9 +9,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from handover_env import receiver_motion as rm
-from handover_env.gait import arm_pose, walking_pose
-from handover_env.skeleton import (
+from handover_env.person import motion as rm
+from handover_env.person.gait import arm_pose, walking_pose
+from handover_env.person.skeleton import (
     N_SEGMENTS,
     SEG,
     SEGMENTS,

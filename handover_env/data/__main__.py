@@ -187,7 +187,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def cmd_transfer_stats(args: argparse.Namespace) -> int:
-    from handover_env.data.transfer_report import run_transfer_stats
+    from handover_env.data.transfer.report import run_transfer_stats
 
     start = time.perf_counter()
     summary, written = run_transfer_stats(

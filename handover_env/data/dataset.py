@@ -300,7 +300,7 @@ class HandoverDataset:
         """Read a file written by :meth:`save`, validating every array.
 
         Only the members :meth:`save` writes are read, each bounded before it is decompressed
-        (:mod:`handover_env.data.npz_io`); every scalar must have its exact dtype and shape
+        (:mod:`handover_env.data.npz`); every scalar must have its exact dtype and shape
         (``format_version`` an integer equal to :data:`FORMAT_VERSION`, ``rate_hz`` a float
         within :data:`MIN_RATE_HZ` .. :data:`MAX_RATE_HZ` Hz,
         ``is_ood`` booleans, ``source_id`` strings), and every episode passes :class:`Episode`'s
@@ -312,7 +312,7 @@ class HandoverDataset:
             DatasetError: the file is not a valid dataset; the message names the file and the
                 problem.
         """
-        from handover_env.data.npz_io import read_npz_members
+        from handover_env.data.npz import read_npz_members
 
         path = Path(path)
         if not path.exists():

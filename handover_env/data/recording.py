@@ -23,14 +23,14 @@ from handover_env.data.public import (
     episode_from_record,
     safe_load_pickle,
 )
-from handover_env.skeleton import N_JOINTS, shortest_bone
+from handover_env.person.skeleton import N_JOINTS, shortest_bone
 
 
 def position_array(value: Any, what: str, tail: tuple[int, ...]) -> np.ndarray:
     """A recorded position array, checked as :class:`Episode` checks its own, as float64.
 
     The one check of every replayed track and skeleton (:class:`Recording`, and
-    :func:`handover_env.person.recorded_motion` for every replay input form).
+    :func:`handover_env.person.person.recorded_motion` for every replay input form).
 
     Args:
         value: the array (or nested lists).

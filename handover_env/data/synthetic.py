@@ -3,8 +3,8 @@
 Each episode is a receiver walking past a giver who hands over an object (paper Sec. IV-A,
 "Data Collection", and Sec. V-A), sampled at 30 Hz like the public recordings:
 
-1. **Receiver walk.** A walker from :func:`handover_env.receiver_motion.sample_walker` (ID, or OOD
-   wandering/pausing) and its :func:`~handover_env.receiver_motion.base_trajectory`: gait sway,
+1. **Receiver walk.** A walker from :func:`handover_env.person.motion.sample_walker` (ID, or OOD
+   wandering/pausing) and its :func:`~handover_env.person.motion.base_trajectory`: gait sway,
    speed ripple and drift. This is the same model the env's scripted receivers use.
 2. **Giver reach.** The giver stands near the origin holding the object at a rest point in front
    of them. When the receiver comes within a trigger distance (after a reaction time) the giver
@@ -13,7 +13,7 @@ Each episode is a receiver walking past a giver who hands over an object (paper 
    lifts a little and comes down to the handover height as the moment approaches, and then moves
    along with the receiver (velocity matching, the "dynamic" handover).
 3. **Receiver reach and pull.** The receiver's right hand
-   (:func:`~handover_env.receiver_motion.hand_position`) reaches for the object over a reach
+   (:func:`~handover_env.person.motion.hand_position`) reaches for the object over a reach
    time and meets it when the pelvis passes a sampled take point; this is the transfer (the hand
    is nearest the object there, the definition used by :mod:`handover_env.data.stats`). Then the
    receiver holds the object, pulls it toward the body and carries it on.
@@ -39,8 +39,8 @@ import numpy as np
 from scipy.signal import lfilter
 from tqdm.auto import tqdm
 
-from handover_env import receiver_motion as rm
 from handover_env.data.dataset import DEFAULT_RATE_HZ, Episode, HandoverDataset
+from handover_env.person import motion as rm
 
 _P = (0.0, 0.01, 0.05, 0.25, 0.50, 0.75, 0.95, 0.99, 1.0)
 #: Receiver pelvis x at the transfer (m), ID and OOD recordings.

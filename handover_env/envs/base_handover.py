@@ -33,7 +33,7 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 * ``dropped``: nobody holds the object (gripper weld off, receiver not holding) and it has fallen
   0.15 m below where it was last held, or touches the floor.
 * ``unsafe_force``: the person's pull on an object the robot still holds (the grip force,
-  :mod:`handover_env.grip`) exceeded ``safety_force`` (default 140 N: ISO/TS 15066, Annex A,
+  :mod:`handover_env.person.grip`) exceeded ``safety_force`` (default 140 N: ISO/TS 15066, Annex A,
   maximum permissible quasi-static force for the hand and fingers: a tug of war), or a
   robot/object contact on a body segment exceeded its body region's ISO/TS 15066 limit
   (:mod:`handover_env.envs.contacts`). The wrist sensor's peak is reported but not held to a
@@ -41,7 +41,7 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 * ``unstable``: MuJoCo reported a diverging position, velocity or acceleration (and reset its
   state); the episode is void and says so instead of going on from a reset simulation.
 * ``missed``: the person walked past without taking the object (gave up on an object left
-  behind them, see :class:`handover_env.receiver.ReceiverConfig`), or their walk ended (+1 s)
+  behind them, see :class:`handover_env.person.receiver.ReceiverConfig`), or their walk ended (+1 s)
   without it. The static receiver waits; there only the TimeLimit ends an episode.
 """
 
@@ -59,14 +59,14 @@ from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
 from handover_env.config import HandoverParams
-from handover_env.controller import ControllerConfig, ImpedanceController, inverse_kinematics
 from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.observation import ObsLayout
 from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
 from handover_env.envs.tasks.dynamic import DynamicHandover
-from handover_env.receiver import CAMERA_RATE, Receiver, person_config
-from handover_env.receiver_motion import check_overrides
-from handover_env.scene import (
+from handover_env.person.motion import check_overrides
+from handover_env.person.receiver import CAMERA_RATE, Receiver, person_config
+from handover_env.robot.controller import ControllerConfig, ImpedanceController, inverse_kinematics
+from handover_env.robot.scene import (
     SceneConfig,
     build_model,
     place_object_in_gripper,

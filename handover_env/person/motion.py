@@ -4,7 +4,7 @@ The paper's receiver (Sec. IV-A, "Data Collection"; Sec. V-A) walks toward the g
 their side and takes the object on the move. The same functions here drive
 
 * the synthetic dataset (:mod:`handover_env.data.synthetic`), and
-* the env's scripted ID/OOD receivers (:mod:`handover_env.receiver`),
+* the env's scripted ID/OOD receivers (:mod:`handover_env.person.receiver`),
 
 so the simulated people and the demonstrations cannot drift apart.
 
@@ -105,7 +105,7 @@ MAX_WALK_TIME = 120.0
 #: Walking speeds, m/s: a shuffle to a brisk walk (people start to run at about 2 m/s; the
 #: recordings' per-recording medians are 0.57 .. 1.13). The env's ``speed`` option uses it too.
 SPEED_RANGE = (0.1, 2.5)
-#: Human body heights, m (as :meth:`handover_env.skeleton.BodyDims.from_height`).
+#: Human body heights, m (as :meth:`handover_env.person.skeleton.BodyDims.from_height`).
 HEIGHT_RANGE = (1.0, 2.3)
 #: (low, high, unit, where the range comes from) of every numeric WalkerParams field.
 FIELD_RANGES: dict[str, tuple[float, float, str, str]] = {

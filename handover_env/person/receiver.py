@@ -1,12 +1,12 @@
 """The simulated person: walks, reaches, grasps and pulls, and moves the body's targets in MuJoCo.
 
-The body (:mod:`handover_env.body_model`) follows per-segment targets through soft welds. This
-module decides where those targets are, at the env's 30 Hz and, interpolated, at every 200 Hz
+The body (:mod:`handover_env.person.body_model`) follows per-segment targets through soft welds.
+This module decides where those targets are, at the env's 30 Hz and, interpolated, at every 200 Hz
 controller tick:
 
-* **Walking.** The nominal motion (:class:`handover_env.person.PersonMotion`: a recorded person or
-  the scripted walker) is played back at a speed factor rho (1 = as recorded). A person waiting
-  for an object they cannot reach yet slows down (rho falls at ``slow_rate`` per second, not
+* **Walking.** The nominal motion (:class:`handover_env.person.person.PersonMotion`: a recorded
+  person or the scripted walker) is played back at a speed factor rho (1 = as recorded). A person
+  waiting for an object they cannot reach yet slows down (rho falls at ``slow_rate`` per second, not
   below ``min_speed_factor``) and speeds up again once it is within reach; the camera sees the
   pelvis of this played-back walk.
 * **Reaching** (``hand_mode="reach"``, the modelled hand): the person reaches when the object
@@ -14,7 +14,7 @@ controller tick:
   within ``comfort_reach`` of the right shoulder when it is ``meet_forward`` ahead of it, in at
   most ``reach_lead_time``. The hand then moves on a minimum-jerk path re-planned every step
   toward the moving grasp point (Hoff & Arbib 1993), with a nominal duration ``reach_duration``.
-  The arm follows by two-link inverse kinematics (:func:`handover_env.gait.arm_pose`). If the
+  The arm follows by two-link inverse kinematics (:func:`handover_env.person.gait.arm_pose`). If the
   object falls behind the shoulder by ``give_up_behind`` unheld, the person walks on (a miss).
 * **Recorded hand** (``hand_mode="recorded"``): the right arm is the recorded one; when the
   recorded grip point comes within ``close_radius`` of the object's grasp point, the hand closes
@@ -26,7 +26,7 @@ controller tick:
   force. Then the hand draws the object toward the carry pose while the person walks on, which
   is the pull that the wrist sensor measures.
 * **Static handover** (``present_after_walk``): the person stops (see
-  :func:`handover_env.person.stopped`), raises the right hand to ``PRESENT_OFFSET`` from the
+  :func:`handover_env.person.person.stopped`), raises the right hand to ``PRESENT_OFFSET`` from the
   shoulder in ``present_time`` and waits until the robot brings the object within
   ``present_reach``; then takes it.
 
@@ -45,14 +45,14 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from handover_env import receiver_motion as rm
-from handover_env.body_model import apply_dims, weld_lag_times
-from handover_env.gait import arm_pose
-from handover_env.grip import ArmGrip
-from handover_env.min_jerk import min_jerk_step
-from handover_env.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
-from handover_env.scene import SceneIds
-from handover_env.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, mat_to_quat
+from handover_env.person import motion as rm
+from handover_env.person.body_model import apply_dims, weld_lag_times
+from handover_env.person.gait import arm_pose
+from handover_env.person.grip import ArmGrip
+from handover_env.person.min_jerk import min_jerk_step
+from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
+from handover_env.person.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, mat_to_quat
+from handover_env.robot.scene import SceneIds
 
 CAMERA_RATE = RATE
 STATES = ("walking", "reaching", "holding", "presenting", "presented", "passed")
@@ -158,7 +158,7 @@ class ReceiverConfig:
             then down to the carry pose.
         grasp_radius: the hand grasps when its grip point is this close to the grasp point, m,
         grasp_speed: and moves relative to it slower than this, m/s (a hand closes on an object
-            it has caught up with; the grip is then :mod:`handover_env.grip`'s spring).
+            it has caught up with; the grip is then :mod:`handover_env.person.grip`'s spring).
         grasp_offset: the grasp point's offset from the object's centre along its axis, m: the
             top of the bottle, above the gripper's pads (a modelled reach, which lifts the hand
             above the object), or its bottom, below the pads (a recorded hand that closes in
@@ -248,7 +248,7 @@ def person_config(person: object, miss_distance: float) -> ReceiverConfig:
     unknown = sorted(repr(k) for k in person if not isinstance(k, str) or k not in known)
     if unknown:
         raise ValueError(
-            f"unknown person setting(s) {unknown}; see handover_env.receiver.ReceiverConfig"
+            f"unknown person setting(s) {unknown}; see handover_env.person.receiver.ReceiverConfig"
         )
     overrides = dict(person)
     if "give_up_behind" not in overrides:

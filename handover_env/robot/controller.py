@@ -44,7 +44,7 @@ import mujoco
 import numpy as np
 
 from handover_env.config import HandoverParams
-from handover_env.scene import TORQUE_LIMITS, SceneIds
+from handover_env.robot.scene import TORQUE_LIMITS, SceneIds
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
@@ -181,7 +181,7 @@ class ImpedanceController:
 
     Args:
         model: the compiled scene.
-        ids: index lookup from :func:`handover_env.scene.scene_ids`.
+        ids: index lookup from :func:`handover_env.robot.scene.scene_ids`.
         params: Θ (K and B are used here).
         config: fixed controller settings.
         rest_qpos: the posture the null-space term pulls toward (6,).

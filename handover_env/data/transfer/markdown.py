@@ -1,5 +1,5 @@
 """Markdown rendering of the receiver calibration summary
-(:mod:`handover_env.data.transfer_report`)."""
+(:mod:`handover_env.data.transfer.report`)."""
 
 from __future__ import annotations
 

@@ -1,0 +1,10 @@
+"""The simulated person who takes the object: body, motion and behaviour.
+
+* :mod:`.skeleton`: the BODY_34 skeleton, body dimensions and segment poses;
+* :mod:`.body_model`: the articulated, compliant body in MuJoCo;
+* :mod:`.motion`: scripted walkers and their pelvis tracks, and the body proportions;
+* :mod:`.gait`: the walking pose of the whole body, and the arm's inverse kinematics;
+* :mod:`.person`: a person's nominal motion, scripted or recorded;
+* :mod:`.receiver`: the person during an episode (walk on, reach, grasp, hold, pull);
+* :mod:`.grip`, :mod:`.min_jerk`: the hand's grip on the object and its minimum-jerk paths.
+"""
