@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 import handover_env  # noqa: F401
-from handover_env.data.dataset import DatasetError, Episode
+from handover_env.data.dataset import Episode
+from handover_env.data.errors import DatasetError
 from handover_env.data.limits import MIN_BONE_M
 from handover_env.data.recording import Recording, load_recording
 from handover_env.person import motion as rm

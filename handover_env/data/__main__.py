@@ -25,7 +25,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from handover_env.data.dataset import DatasetError, HandoverDataset
+from handover_env.data.dataset import HandoverDataset
+from handover_env.data.errors import DatasetError
 from handover_env.offline import hub_offline
 
 DEFAULT_KEYWORD = "synthetic"

@@ -31,12 +31,13 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from handover_env.data import filtering
-from handover_env.data.dataset import DatasetError, stratified_fold_ids
+from handover_env.data.dataset import stratified_fold_ids
+from handover_env.data.errors import DatasetError
 from handover_env.data.public import (
     OOD_PREFIX,
-    _validate_record,
     list_public_files,
     safe_load_pickle,
+    validate_record,
 )
 from handover_env.data.transfer import detect
 from handover_env.data.transfer.measures import (
@@ -88,7 +89,7 @@ def analyse_file(path: str | os.PathLike, rate_hz: float = detect.RATE_HZ) -> Re
         DatasetError: the file cannot be loaded or validated, or is too short to analyse.
     """
     path = Path(path)
-    record = _validate_record(safe_load_pickle(path), str(path))
+    record = validate_record(safe_load_pickle(path), str(path))
     receiver = record["pose_receiver"]
     try:
         analysis = analyse_recording(receiver, record["pose_object"], record["pose_giver"], rate_hz)
