@@ -634,7 +634,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
         del hist[0]
 
     def _after_step(self) -> None:
-        self.task.before_outcome(self)
+        if math.isinf(self.t_enabled):  # the task tells when the robot may move, once it knows
+            self.t_detect = self.task.detection_time(self)
+            self.t_enabled = self.task.enabled_time(self)
         warning = self.data.warning
         if any(warning[w].number for w in _DIVERGED):
             # MuJoCo found a diverging acceleration and reset the simulation: the episode is void.
