@@ -21,7 +21,7 @@ from handover_env.data.recording import Recording, load_recording
 from handover_env.person import motion as rm
 from handover_env.person.gait import walking_pose
 from handover_env.person.person import replay_input
-from handover_env.person.receiver import (
+from handover_env.person.settings import (
     LONGEST_EPISODE,
     SETTING_RANGES,
     ReceiverConfig,

@@ -41,7 +41,7 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 * ``unstable``: MuJoCo reported a diverging position, velocity or acceleration (and reset its
   state); the episode is void and says so instead of going on from a reset simulation.
 * ``missed``: the person walked past without taking the object (gave up on an object left
-  behind them, see :class:`handover_env.person.receiver.ReceiverConfig`), or their walk ended (+1 s)
+  behind them, see :class:`handover_env.person.settings.ReceiverConfig`), or their walk ended (+1 s)
   without it. The static receiver waits; there only the TimeLimit ends an episode.
 """
 
@@ -64,7 +64,8 @@ from handover_env.envs.observation import ObsLayout
 from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
 from handover_env.envs.tasks.dynamic import DynamicHandover
 from handover_env.person.motion import check_overrides
-from handover_env.person.receiver import CAMERA_RATE, Receiver, person_config
+from handover_env.person.receiver import CAMERA_RATE, Receiver
+from handover_env.person.settings import person_config
 from handover_env.robot.controller import ControllerConfig, ImpedanceController, inverse_kinematics
 from handover_env.robot.scene import (
     SceneConfig,
@@ -449,11 +450,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
                                 gripper_pos=self._tcp_pos_v.copy(),
                                 gripper_axis=(self._tcp_xmat_v.reshape(3, 3)[:, 2].copy()
                                               if self._gripper_holds else None))
-        self.receiver.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
+        self.receiver.targets.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
 
         # The controller ticks on the global step clock: the schedule of (tick?, physics steps)
         # segments depends only on the clock's phase at the start of the env step.
-        apply_tick, tick, mj_step = self.receiver.apply_tick, self._tick, mujoco.mj_step
+        apply_tick, tick = self.receiver.targets.apply_tick, self._tick
+        mj_step = mujoco.mj_step
         contacts = self.contacts
         for is_tick, n in self._segments[self._global_step % self._ticks]:
             if is_tick:
@@ -464,7 +466,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
                     break
             mj_step(m, d, n)  # positional: pybind keyword parsing costs ~0.5 us a call
         self._global_step += FRAME_SKIP
-        self.receiver.apply(d, 1.0)
+        self.receiver.targets.apply(d, 1.0)
         self.receiver.end_step(d)
         self._step_count += 1
         self._record_camera_frame()

@@ -103,7 +103,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | default_receiver | "id" | receiver when reset() gets no option |
     | object_mass | 0.4 | kg |
     | miss_distance | 0.35 | m behind the shoulder at which an unheld bottle is walked past |
-    | person | None | dict of :class:`handover_env.person.receiver.ReceiverConfig` overrides |
+    | person | None | dict of :class:`handover_env.person.settings.ReceiverConfig` overrides |
     | task | None | a :class:`~handover_env.envs.tasks.base.HandoverTask` instead of ``DynamicHandover`` |
     | reward | None | :class:`~handover_env.envs.tasks.base.HandoverReward` weights (or a dict of them) |
     | render_mode, width, height, camera | None, 640, 480, "overview" | rendering |

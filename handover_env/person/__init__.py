@@ -5,6 +5,10 @@
 * :mod:`.motion`: scripted walkers and their pelvis tracks, and the body proportions;
 * :mod:`.gait`: the walking pose of the whole body, and the arm's inverse kinematics;
 * :mod:`.person`: a person's nominal motion, scripted or recorded;
+* :mod:`.settings`: how the person reaches, grasps, holds and pulls (``ReceiverConfig``);
 * :mod:`.receiver`: the person during an episode (walk on, reach, grasp, hold, pull);
+* :mod:`.pose`: the body at a playback position, the arm posed toward the hand's target;
+* :mod:`.targets`: the MuJoCo targets that move the body, at every controller tick;
+* :mod:`.effort`: what the handover costs the person (reach, arm-out time, path deviation);
 * :mod:`.grip`, :mod:`.min_jerk`: the hand's grip on the object and its minimum-jerk paths.
 """
