@@ -13,7 +13,7 @@ import handover_env  # noqa: F401
 from agents.giver_replay import GiverReplayAgent
 from agents.null import DelayedAgent, NullAgent
 from agents.reactive import ReactiveAgent
-from handover_env.person import motion as rm
+from handover_env.person import trajectory
 from handover_env.person.gait import walking_pose
 from handover_env.person.person import RATE
 from handover_env.person.skeleton import BodyDims, joints_of
@@ -59,7 +59,7 @@ def _straight_walk(y: float, speed: float = 0.9, start_x: float = 2.2, frames: i
     if skeleton:
         heading = np.full(frames, math.pi)
         phase = np.mod(2 * math.pi * speed * t / (2 * 0.28 * 1.725), 2 * math.pi)
-        traj = rm.BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=phase)
+        traj = trajectory.BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=phase)
         dims = BodyDims.from_height(1.725)
         episode["receiver_pose"] = joints_of(walking_pose(traj, dims), dims)
     return episode

@@ -2,7 +2,8 @@
 
 * :mod:`.skeleton`: the BODY_34 skeleton, body dimensions and segment poses;
 * :mod:`.body_model`: the articulated, compliant body in MuJoCo;
-* :mod:`.motion`: scripted walkers and their pelvis tracks, and the body proportions;
+* :mod:`.motion`: scripted walkers (calibrated distributions, field ranges, body proportions);
+* :mod:`.trajectory`: a walker's pelvis track, and the shoulder and hand along it;
 * :mod:`.gait`: the walking pose of the whole body, and the arm's inverse kinematics;
 * :mod:`.person`: a person's nominal motion, scripted or recorded;
 * :mod:`.settings`: how the person reaches, grasps, holds and pulls (``ReceiverConfig``);

@@ -37,6 +37,7 @@ from handover_env.data.filtering import smooth_track
 from handover_env.data.limits import MAX_ID_CHARS
 from handover_env.data.recording import Recording, position_array, skeleton_array
 from handover_env.person import motion as rm
+from handover_env.person import trajectory
 from handover_env.person.gait import walking_pose
 from handover_env.person.skeleton import (
     RIGHT_ARM,
@@ -143,13 +144,15 @@ def _heading(xy: np.ndarray) -> np.ndarray:
     return np.unwrap(heading)
 
 
-def _gait_track(xy: np.ndarray, heading: np.ndarray, height: float) -> rm.BaseTrajectory:
+def _gait_track(xy: np.ndarray, heading: np.ndarray, height: float) -> trajectory.BaseTrajectory:
     """A BaseTrajectory along a given pelvis track, stride phase from the distance walked."""
     step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     dist = np.concatenate([[0.0], np.cumsum(step)])
     phase = 2 * math.pi * dist / (2 * 0.28 * height)
     t = np.arange(len(xy)) / RATE
-    return rm.BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=np.mod(phase, 2 * math.pi))
+    return trajectory.BaseTrajectory(
+        t=t, xy=xy, heading=heading, gait_phase=np.mod(phase, 2 * math.pi)
+    )
 
 
 def _arm_swing(pose: BodyPose) -> np.ndarray:
@@ -180,7 +183,7 @@ def scripted_motion(rng: np.random.Generator, kind: str = "id", height: float | 
     if speed is not None:
         fixed["speed"] = float(speed)
     walker = rm.sample_walker(rng, kind, **fixed)
-    traj = rm.base_trajectory(walker, rate_hz=RATE)
+    traj = trajectory.base_trajectory(walker, rate_hz=RATE)
     dims = BodyDims.from_height(walker.height)
     pose = walking_pose(traj, dims)
     heading = np.unwrap(np.asarray(traj.heading, dtype=np.float64))
