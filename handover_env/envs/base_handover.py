@@ -9,18 +9,9 @@ Timing: physics dt = 1/600 s; the impedance controller runs every 3 physics step
 global step counter, so its rate holds across env steps; one env step = 1/30 s = 20 physics steps
 (6 or 7 controller ticks). The receiver's mocap bodies are moved at every tick.
 
-Wrist force: the ``force``/``torque`` sensors on the gripper mounting plate measure what the
-gripper, plus anything it holds, exerts on the flange. The static load is subtracted with the
-payload's known mass and the ``accelerometer`` at the same site (which reads a - g), plus the
-rigid payload's rotational inertia terms: ``F_ext = R (m acc - F_sensor) + m (α × c + ω × (ω × c))``
-with ω, α the gripper's angular velocity and acceleration and c the payload's centre of mass
-relative to the site (world frame): the force the world applies to gripper and object. Without
-the rotational terms the estimate is off by up to ~5 N while the arm swings the object toward the
-receiver, close to f_r; with them, by ~0.2 N. The torque (observation only) is the quasi-static
-estimate with the payload's centre of mass.
-The force estimate is low-pass filtered (first order, ``force_filter_tau``) at every tick, like
-a real F/T signal; the torque is estimated at the env rate for the observation.
-When its magnitude exceeds f_r the gripper opens (paper Sec. IV-C).
+Wrist force: the external wrench at the wrist F/T sensor, static load removed and low-pass
+filtered at every tick (:mod:`handover_env.envs.wrist`). When its magnitude exceeds f_r the
+gripper opens (paper Sec. IV-C).
 
 Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 
@@ -63,6 +54,7 @@ from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.observation import ObsLayout
 from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
 from handover_env.envs.tasks.dynamic import DynamicHandover
+from handover_env.envs.wrist import WristSensor
 from handover_env.person.motion import check_overrides
 from handover_env.person.receiver import CAMERA_RATE, Receiver
 from handover_env.person.settings import person_config
@@ -244,9 +236,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._segments.append(
                 [(lo in starts, hi - lo) for lo, hi in zip(bounds[:-1], bounds[1:])]
             )
-        self._filter_alpha = (self._ticks * self.model.opt.timestep) / (
-            force_filter_tau + self._ticks * self.model.opt.timestep
-        )
+        self.wrist = WristSensor(self.model, self.data, self.ids, self._ticks, force_filter_tau)
 
         low, high = self.layout.bounds()
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -289,13 +279,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
         valid; they save the attribute lookups and index arithmetic in the hot loop.
         """
         d, ids = self.data, self.ids
-        adrs = (ids.ft_force_adr, ids.ft_torque_adr, ids.ft_acc_adr)
-        lo = min(adrs)
-        self._ft_v = d.sensordata[lo:max(adrs) + 3]  # force, torque and accelerometer readings
-        self._ft_force_i, self._ft_torque_i, self._ft_acc_i = (a - lo for a in adrs)
-        self._ft_xmat_v = d.site_xmat[ids.ft_site]
-        self._grip_w_v = d.cvel[ids.gripper_root_body, 0:3]
-        self._grip_alpha_v = d.cacc[ids.gripper_root_body, 0:3]
         self._qpos_v = d.qpos
         self._eq_active_v = d.eq_active
         self._object_pos_v = d.xpos[ids.object_body]
@@ -341,9 +324,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.pull_force = 0.0
         self.released_while_held = False
         self.transfer_object_pos: np.ndarray | None = None
-        self.f_ext = np.zeros(3)
-        self._f_ext_f = (0.0, 0.0, 0.0)
-        self.tau_ext = np.zeros(3)
+        self.wrist.reset()
         self._gripper_holds = True
         self._last_held_z = float(READY_POS[2])
         self.t_enabled = 0.0
@@ -390,7 +371,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._last_held_z = float(d.xpos[ids.object_body, 2])
         self.controller.reset(d, rest_qpos=self._ready_q)
         self.controller.payload_mass = float(m.body_mass[ids.object_body])
-        self._update_payload()
+        self.wrist.update_payload(self._gripper_holds)
         # Camera noise is drawn once per frame from np_random (frames are made as the person
         # walks: a person who slows down is seen slowing down).
         n_noise = (
@@ -509,8 +490,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
 
     def wrist_force_magnitude(self) -> float:
         """N, the filtered external wrist force (what the release compares with f_r)."""
-        fx, fy, fz = self._f_ext_f
-        return math.sqrt(fx * fx + fy * fy + fz * fz)
+        return self.wrist.magnitude()
+
+    @property
+    def f_ext(self) -> np.ndarray:
+        """(3,) N, the filtered external wrist force (world frame)."""
+        return self.wrist.f_ext
 
     def clear_of_gripper(self, ox: float, oy: float, oz: float) -> bool:
         """Whether the object centre is more than ``clear_distance`` from the TCP."""
@@ -518,56 +503,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
         dx, dy, dz = ox - px, oy - py, oz - pz
         return math.sqrt(dx * dx + dy * dy + dz * dz) > self.clear_distance
 
-    def _update_payload(self) -> None:
-        """Mass and centre of mass (in the F/T site frame) of what hangs below the sensor."""
-        m, d, ids = self.model, self.data, self.ids
-        mass = float(m.body_subtreemass[ids.gripper_root_body])
-        com = d.subtree_com[ids.gripper_root_body] * mass
-        if self._gripper_holds:
-            mo = float(m.body_mass[ids.object_body])
-            com = com + d.xipos[ids.object_body] * mo
-            mass += mo
-        com = com / mass
-        rot = d.site_xmat[ids.ft_site].reshape(3, 3)
-        self._payload_mass = mass
-        self._payload_com = rot.T @ (com - d.site_xpos[ids.ft_site])
-        self._payload_com_f = tuple(self._payload_com.tolist())
-
     def _tick(self) -> None:
-        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques.
-
-        The wrist-force estimate is done in plain floats (3-vectors are cheaper that way than as
-        numpy arrays); see the module docstring for the formula.
-        """
+        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques."""
         d = self.data
-        ft = self._ft_v.tolist()
-        m_p = self._payload_mass
-        i = self._ft_acc_i
-        a0, a1, a2 = ft[i], ft[i + 1], ft[i + 2]
-        i = self._ft_force_i
-        s0, s1, s2 = ft[i], ft[i + 1], ft[i + 2]
-        l0, l1, l2 = m_p * a0 - s0, m_p * a1 - s1, m_p * a2 - s2  # site frame
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
-        c0, c1, c2 = self._payload_com_f
-        cx = r00 * c0 + r01 * c1 + r02 * c2
-        cy = r10 * c0 + r11 * c1 + r12 * c2
-        cz = r20 * c0 + r21 * c1 + r22 * c2
-        # Rigid-payload inertia beyond the site's linear acceleration: m (α × c + ω × (ω × c)),
-        # with ω, α of the gripper (world frame, from cvel/cacc) and c its centre of mass.
-        wx, wy, wz = self._grip_w_v.tolist()
-        ax, ay, az = self._grip_alpha_v.tolist()
-        vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx  # ω × c
-        gx = r00 * l0 + r01 * l1 + r02 * l2 + m_p * (ay * cz - az * cy + wy * vz - wz * vy)
-        gy = r10 * l0 + r11 * l1 + r12 * l2 + m_p * (az * cx - ax * cz + wz * vx - wx * vz)
-        gz = r20 * l0 + r21 * l1 + r22 * l2 + m_p * (ax * cy - ay * cx + wx * vy - wy * vx)
-        k = self._filter_alpha
-        fx, fy, fz = self._f_ext_f
-        fx += k * (gx - fx)
-        fy += k * (gy - fy)
-        fz += k * (gz - fz)
-        self._f_ext_f = (fx, fy, fz)
-        self.f_ext[0], self.f_ext[1], self.f_ext[2] = fx, fy, fz
-        f_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
+        f_mag = self.wrist.tick()
         self.peak_wrist_force = max(self.peak_wrist_force, f_mag)
         rec = self.receiver
         holds = rec.grip.active
@@ -591,7 +530,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
             d.eq_active[self.ids.eq_gripper] = 0
             self._gripper_holds = False
             self.controller.payload_mass = 0.0
-            self._update_payload()
+            self.wrist.update_payload(self._gripper_holds)
         if rec.state == "reaching" and rec.try_grasp(self.model, d):
             self.transfer_object_pos = self._object_pos_v.copy()
         rec.grip.apply(d)
@@ -603,22 +542,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._arm_ctrl_v[...] = self.controller.compute(d)
         else:
             d.ctrl[self._arm_act] = self.controller.compute(d)
-
-    def _wrist_torque(self) -> np.ndarray:
-        """External torque at the wrist sensor (world frame), static load removed (per env step)."""
-        ft = self._ft_v.tolist()
-        m_p = self._payload_mass
-        i = self._ft_acc_i
-        l0, l1, l2 = m_p * ft[i], m_p * ft[i + 1], m_p * ft[i + 2]
-        i = self._ft_torque_i
-        c0, c1, c2 = self._payload_com_f
-        t0 = (c1 * l2 - c2 * l1) - ft[i]
-        t1 = (c2 * l0 - c0 * l2) - ft[i + 1]
-        t2 = (c0 * l1 - c1 * l0) - ft[i + 2]
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
-        self.tau_ext = np.array([r00 * t0 + r01 * t1 + r02 * t2, r10 * t0 + r11 * t1 + r12 * t2,
-                                 r20 * t0 + r21 * t1 + r22 * t2])
-        return self.tau_ext
 
     def _track_jerk(self) -> None:
         """Robot TCP jerk from the third difference of its 30 Hz positions (RMS and peak)."""
@@ -666,8 +589,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         v["ee_angvel"][...] = vel[:3]
         v["object_pos"][...] = self._object_pos_v
         v["object_held"][0] = 1.0 if self._gripper_holds else 0.0
-        v["wrist_force"][...] = self.f_ext
-        v["wrist_torque"][...] = self._wrist_torque()
+        v["wrist_force"][...] = self.wrist.f_ext
+        v["wrist_torque"][...] = self.wrist.torque()
         v["gripper_open"][0] = 1.0 if self.released else 0.0
         v["time"][0] = t
         k = max(0, len(self._hand_frames) - 1 - self.obs_latency)
