@@ -13,6 +13,12 @@ Wrist force: the external wrench at the wrist F/T sensor, static load removed an
 filtered at every tick (:mod:`handover_env.envs.wrist`). When its magnitude exceeds f_r the
 gripper opens (paper Sec. IV-C).
 
+This module is over 500 lines because the env's physics loop is one class: reset, step, the
+200 Hz tick, the observation and the info all work on the same views of ``MjData`` bound once
+(``_bind_data``) for the hot loop. What stands on its own is in its own module: the tasks
+(:mod:`handover_env.envs.tasks`), the wrist sensor (:mod:`.wrist`), the body contacts
+(:mod:`.contacts`) and the observation layout (:mod:`.observation`).
+
 Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 
 * ``success``: the robot released the object while the receiver held it, the fingers have let go
@@ -445,7 +451,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 if contacts.unsafe_segment >= 0:
                     # the episode ends at the unsafe contact, not pressed on to the step's end
                     break
-            mj_step(m, d, n)  # positional: pybind keyword parsing costs ~0.5 us a call
+            mj_step(m, d, n)  # positional arguments: the binding parses keywords per call
         self._global_step += FRAME_SKIP
         self.receiver.targets.apply(d, 1.0)
         self.receiver.end_step(d)

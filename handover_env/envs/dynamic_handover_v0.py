@@ -107,4 +107,14 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | task | None | a :class:`~handover_env.envs.tasks.base.HandoverTask` instead of ``DynamicHandover`` |
     | reward | None | :class:`~handover_env.envs.tasks.base.HandoverReward` weights (or a dict of them) |
     | render_mode, width, height, camera | None, 640, 480, "overview" | rendering |
+
+    ## Version History
+    * v0: the UR5e with the Robotiq 2F-85 (MuJoCo Menagerie models) holding a 0.4 kg bottle,
+      driven by the Cartesian impedance controller (Eq. 1, Θ-hat) at 200 Hz toward the agent's
+      30 Hz Cartesian target. The receiver is an articulated, compliant person (rigid segments
+      following their motion through soft welds, ISO/TS 15066 stiffness and force limits): a
+      scripted ID or OOD walker, or a replayed recording with a modelled or the recorded hand,
+      who reaches, grasps and pulls. The gripper opens when the filtered wrist force exceeds
+      f_r. Outcomes success, premature_release, dropped, unsafe_force, missed and unstable;
+      TimeLimit 450 steps (15 s).
     """

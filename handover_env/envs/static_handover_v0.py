@@ -42,6 +42,11 @@ class StaticHandoverEnv(HandoverEnvBase):
 
     ## Arguments
     As the dynamic env, plus ``stabilisation_delay`` (s, default 2.0).
+
+    ## Version History
+    * v0: the dynamic env's robot, person, spaces and outcomes; the receiver stops at
+      ``STOP_XY`` and raises the right hand, the robot may move ``stabilisation_delay`` after the
+      hand is detected, no ``missed``; TimeLimit 600 steps (20 s).
     """
 
     def default_task(self, reward: HandoverReward) -> HandoverTask:

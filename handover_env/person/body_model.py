@@ -35,6 +35,11 @@ Masses: de Leva (1996) segment fractions of a body of mass 23 kg/m² x height² 
 Geometry is built for the template body (1.725 m) and resized in place for each episode's body
 (:func:`apply_dims`): segment offsets, capsule end points and radii, and the bounding volumes
 MuJoCo's collision detection uses.
+
+This module is over 500 lines because building the body (:func:`add_receiver`), finding it in a
+compiled model (:func:`body_ids`), resizing it per person (:func:`apply_dims`) and calibrating
+its weld gains (:func:`calibrate_weld_gains`) share one geometry table (``_GEOMS``) and one set
+of stiffness constants; they change together.
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ Sources:
   body from :func:`handover_env.person.gait.walking_pose`;
 * :func:`recorded_motion`: a public recording. With the receiver's BODY_34 skeleton
   (:class:`handover_env.data.recording.Recording`, or a dict with ``receiver_pose``), the body
-  is the recorded person, filtered once (:func:`handover_env.data.smoothing.smooth_track`) and
+  is the recorded person, filtered once (:func:`handover_env.data.filtering.smooth_track`) and
   retargeted onto the rigid segments (:func:`handover_env.person.skeleton.retarget`). With the
   pelvis track only (an :class:`~handover_env.data.dataset.Episode`, e.g. synthetic data), the
   scripted gait walks along the filtered track. The camera always sees the *raw* recorded pelvis
