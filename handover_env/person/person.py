@@ -176,7 +176,8 @@ def _from_pose(pose: BodyPose, dims: BodyDims, camera_xy: np.ndarray, heading: n
 
 def scripted_motion(rng: np.random.Generator, kind: str = "id", height: float | None = None,
                     speed: float | None = None, overrides: dict | None = None) -> PersonMotion:
-    """A scripted ID/OOD walker drawn from ``rng`` (see :func:`receiver_motion.sample_walker`)."""
+    """A scripted ID/OOD walker drawn from ``rng`` (see
+    :func:`handover_env.person.motion.sample_walker`)."""
     fixed = rm.check_overrides(overrides) if overrides is not None else {}
     if height is not None:
         fixed["height"] = float(height)

@@ -223,7 +223,7 @@ def grasp_radius(group: list[RecordingResult]) -> dict[str, list[float]]:
     """How often a replayed recorded hand (joint 15, smoothed) would close on the object.
 
     For each radius of :data:`GRASP_RADII`: the fraction of the group's recordings whose hand
-    comes within it of the object in the window :data:`~.transfer_measures.GRASP_WINDOW` around the
+    comes within it of the object in the window :data:`~.measures.GRASP_WINDOW` around the
     transfer (recordings without a transfer count as misses), and anywhere in the recording.
     Also the 50/80/90/95/99 % quantiles of the joint-15 distance at the transfer and its minimum
     over that window, over recordings with a transfer.
