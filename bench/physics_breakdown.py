@@ -7,7 +7,7 @@ variants take turns snapshot by snapshot, so they see the same machine load. Pri
 ``mj_step`` and their ratios, MuJoCo's own timers (``mjData.timer``) per step, constraint rows
 and contacts per step.
 
-Variants (all from :func:`handover_env.scene.build_spec`):
+Variants (all from :func:`handover_env.robot.scene.build_spec`):
 
 * ``robot``: the scene without the receiver (the spec with the receiver's bodies, welds and
   excludes deleted); the robot and object states are copied by joint name.
@@ -41,9 +41,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import handover_env  # noqa: E402, F401
 from agents.reactive import ReactiveAgent  # noqa: E402
-from handover_env.body_model import PREFIX  # noqa: E402
 from handover_env.envs.base_handover import FRAME_SKIP  # noqa: E402
-from handover_env.scene import build_spec  # noqa: E402
+from handover_env.person.body_model import PREFIX  # noqa: E402
+from handover_env.robot.scene import build_spec  # noqa: E402
 
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 TIMERS = ("STEP", "FORWARD", "POSITION", "POS_KINEMATICS", "POS_INERTIA", "POS_COLLISION",

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from handover_env.body_model import (
+from handover_env.person.body_model import (
     ARM_POSTURE_STIFFNESS,
     ARM_REGIONS,
     CONTACT_MASS,
@@ -22,7 +22,7 @@ from handover_env.body_model import (
     target_stiffness,
     weld_lag_times,
 )
-from handover_env.skeleton import SEG, SEGMENTS, BodyDims, J
+from handover_env.person.skeleton import SEG, SEGMENTS, BodyDims, J
 
 
 def _body_only() -> tuple[mujoco.MjModel, mujoco.MjData]:

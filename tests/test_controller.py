@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from handover_env.config import HandoverParams
-from handover_env.controller import (
+from handover_env.robot.controller import (
     ControllerConfig,
     ImpedanceController,
     inverse_kinematics,
     target_rotation,
 )
-from handover_env.menagerie import MenagerieNotFoundError, model_path
-from handover_env.scene import (
+from handover_env.robot.menagerie import MenagerieNotFoundError, model_path
+from handover_env.robot.scene import (
     TORQUE_LIMITS,
     SceneConfig,
     build_model,

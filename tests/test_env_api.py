@@ -11,11 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-pytest.importorskip(
-    "handover_env.receiver_motion", reason="the shared receiver motion model is not in the tree yet"
-)
-
-import handover_env  # noqa: E402,F401  (registers the ids)
+import handover_env  # noqa: F401  (registers the ids)
 
 IDS = ["handover_env/DynamicHandover-v0", "handover_env/StaticHandover-v0"]
 

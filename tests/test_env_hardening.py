@@ -14,19 +14,21 @@ import numpy as np
 import pytest
 
 import handover_env  # noqa: F401
-from handover_env import receiver_motion as rm
-from handover_env.data.dataset import DatasetError, Episode
+from handover_env.data.dataset import Episode
+from handover_env.data.errors import DatasetError
 from handover_env.data.limits import MIN_BONE_M
 from handover_env.data.recording import Recording, load_recording
-from handover_env.gait import walking_pose
-from handover_env.person import replay_input
-from handover_env.receiver import (
+from handover_env.person import motion as rm
+from handover_env.person import trajectory
+from handover_env.person.gait import walking_pose
+from handover_env.person.person import replay_input
+from handover_env.person.settings import (
     LONGEST_EPISODE,
     SETTING_RANGES,
     ReceiverConfig,
     person_config,
 )
-from handover_env.skeleton import BodyDims, joints_of, shortest_bone
+from handover_env.person.skeleton import BodyDims, joints_of, shortest_bone
 
 ENV_ID = "handover_env/DynamicHandover-v0"
 REPO = Path(__file__).resolve().parents[1]
@@ -254,7 +256,7 @@ def _skeleton_walk(frames: int = 120):
     t = np.arange(frames) / 30.0
     xy = np.stack([2.2 - 0.9 * t, np.full_like(t, -0.9)], axis=1)
     phase = np.mod(2 * np.pi * 0.9 * t / (2 * 0.28 * 1.725), 2 * np.pi)
-    traj = rm.BaseTrajectory(t=t, xy=xy, heading=np.full(frames, np.pi), gait_phase=phase)
+    traj = trajectory.BaseTrajectory(t=t, xy=xy, heading=np.full(frames, np.pi), gait_phase=phase)
     dims = BodyDims.from_height(1.725)
     return xy, joints_of(walking_pose(traj, dims), dims)
 

@@ -6,8 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from handover_env.grip import ArmGrip, GripConfig
-from handover_env.min_jerk import min_jerk_coefficients, min_jerk_step
+from handover_env.person.grip import ArmGrip, GripConfig
+from handover_env.person.min_jerk import min_jerk_coefficients, min_jerk_step
 
 
 def test_min_jerk_meets_its_boundary_conditions():

@@ -13,10 +13,10 @@ import handover_env  # noqa: F401
 from agents.giver_replay import GiverReplayAgent
 from agents.null import DelayedAgent, NullAgent
 from agents.reactive import ReactiveAgent
-from handover_env import receiver_motion as rm
-from handover_env.gait import walking_pose
-from handover_env.person import RATE
-from handover_env.skeleton import BodyDims, joints_of
+from handover_env.person import trajectory
+from handover_env.person.gait import walking_pose
+from handover_env.person.person import RATE
+from handover_env.person.skeleton import BodyDims, joints_of
 
 ENV_ID = "handover_env/DynamicHandover-v0"
 DATA = (
@@ -59,7 +59,7 @@ def _straight_walk(y: float, speed: float = 0.9, start_x: float = 2.2, frames: i
     if skeleton:
         heading = np.full(frames, math.pi)
         phase = np.mod(2 * math.pi * speed * t / (2 * 0.28 * 1.725), 2 * math.pi)
-        traj = rm.BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=phase)
+        traj = trajectory.BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=phase)
         dims = BodyDims.from_height(1.725)
         episode["receiver_pose"] = joints_of(walking_pose(traj, dims), dims)
     return episode
@@ -182,7 +182,7 @@ def test_giver_replay_takes_the_object_where_the_recorded_person_did(env):
     from handover_env.data.filtering import smooth_track
     from handover_env.data.public import list_public_files
     from handover_env.data.recording import load_recording
-    from handover_env.data.transfer import detect_transfer
+    from handover_env.data.transfer.detect import detect_transfer
 
     files = list_public_files(DATA)
     folds = stratified_fold_ids(

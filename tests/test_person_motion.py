@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from agents.giver_replay import GiverReplayAgent
-from handover_env import receiver_motion as rm
-from handover_env.person import RATE, recorded_motion, resample, scripted_motion, stopped
+from handover_env.person import motion as rm
+from handover_env.person import trajectory
+from handover_env.person.person import RATE, recorded_motion, resample, scripted_motion, stopped
 
 
 def _track(frames=120, speed=0.9, y=-0.9):
@@ -22,7 +23,7 @@ def test_scripted_motion_is_the_shared_walker_model():
     b = scripted_motion(np.random.default_rng(4), "ood", height=1.8)
     np.testing.assert_array_equal(a.origin, b.origin)
     walker = rm.sample_walker(np.random.default_rng(4), "ood", height=1.8)
-    traj = rm.base_trajectory(walker)
+    traj = trajectory.base_trajectory(walker)
     np.testing.assert_allclose(a.origin[:, 0, :2], traj.xy, atol=1e-12)
     np.testing.assert_allclose(a.camera_xy, traj.xy, atol=1e-12)
     assert a.walker == walker and a.dims.height == 1.8 and not a.has_skeleton

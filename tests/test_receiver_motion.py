@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from handover_env import receiver_motion as rm
+from handover_env.person import motion as rm
+from handover_env.person import trajectory
 
 
-def _speeds(traj: rm.BaseTrajectory) -> np.ndarray:
+def _speeds(traj: trajectory.BaseTrajectory) -> np.ndarray:
     return np.linalg.norm(np.diff(traj.xy, axis=0), axis=1) / np.diff(traj.t)
 
 
@@ -79,7 +80,7 @@ def test_base_trajectory_walks_from_start_to_end_at_speed() -> None:
     rng = np.random.default_rng(1)
     for _ in range(30):
         p = rm.sample_walker(rng, "id")
-        tr = rm.base_trajectory(p, rate_hz=30.0)
+        tr = trajectory.base_trajectory(p, rate_hz=30.0)
         assert np.allclose(np.diff(tr.t), 1 / 30)
         assert np.linalg.norm(tr.xy[0] - p.start_xy) < 0.03  # only the gait sway
         assert tr.xy[-1, 0] <= p.end_x + 0.03 and tr.xy[-2, 0] > p.end_x - 0.03
@@ -94,19 +95,19 @@ def test_base_trajectory_walks_from_start_to_end_at_speed() -> None:
 
 def test_base_trajectory_is_deterministic_and_rate_aware() -> None:
     p = rm.sample_walker(np.random.default_rng(2), "ood", ood_mode="wander")
-    a, b = rm.base_trajectory(p), rm.base_trajectory(p)
+    a, b = trajectory.base_trajectory(p), trajectory.base_trajectory(p)
     assert np.array_equal(a.xy, b.xy) and np.array_equal(a.heading, b.heading)
-    fast = rm.base_trajectory(p, rate_hz=60.0)
+    fast = trajectory.base_trajectory(p, rate_hz=60.0)
     assert abs(fast.t[-1] - a.t[-1]) < 0.05
     with pytest.raises(ValueError):
-        rm.base_trajectory(p, rate_hz=0.0)
+        trajectory.base_trajectory(p, rate_hz=0.0)
 
 
 def test_ood_pause_stops_and_restarts() -> None:
     p = rm.sample_walker(
         np.random.default_rng(5), "ood", ood_mode="pause", pause_time=1.0, pause_duration=1.5
     )
-    tr = rm.base_trajectory(p)
+    tr = trajectory.base_trajectory(p)
     v = _speeds(tr)
     still = v < 0.02
     assert still.sum() * (1 / 30) > 1.2  # stood for about pause_duration
@@ -115,13 +116,13 @@ def test_ood_pause_stops_and_restarts() -> None:
         1.0 < tr.t[first] < 2.2 and v[-10:-1].min() > 0.5 * p.speed
     )  # walking again at the end (last step is partial)
     id_twin = dataclasses.replace(p, kind="id", ood_mode=None)
-    assert len(tr) > len(rm.base_trajectory(id_twin)) + 30
+    assert len(tr) > len(trajectory.base_trajectory(id_twin)) + 30
 
 
 def test_ood_wander_deviates_laterally_then_rejoins() -> None:
     p = rm.sample_walker(np.random.default_rng(6), "ood", ood_mode="wander", wander_amplitude=0.4)
     twin = dataclasses.replace(p, kind="id", ood_mode=None)
-    wander, straight = rm.base_trajectory(p), rm.base_trajectory(twin)
+    wander, straight = trajectory.base_trajectory(p), trajectory.base_trajectory(twin)
     grid = np.linspace(p.start_xy[0] - 0.2, 0.0, 50)
     y_w = np.interp(grid, wander.xy[::-1, 0], wander.xy[::-1, 1])
     y_s = np.interp(grid, straight.xy[::-1, 0], straight.xy[::-1, 1])
@@ -132,22 +133,22 @@ def test_ood_wander_deviates_laterally_then_rejoins() -> None:
 def test_shoulder_and_rest_hand_are_on_the_right_at_body_heights() -> None:
     xy = np.array([[1.0, -0.9], [0.0, -0.9]])
     heading = np.array([math.pi, math.pi])
-    sh = rm.shoulder_position(xy, heading, 1.72)
-    hand = rm.hand_position(xy, heading, 1.72, swing_phase=0.0)
+    sh = trajectory.shoulder_position(xy, heading, 1.72)
+    hand = trajectory.hand_position(xy, heading, 1.72, swing_phase=0.0)
     assert sh.shape == (2, 3) and hand.shape == (2, 3)
     assert np.allclose(sh[:, 2], rm.SHOULDER_HEIGHT_RATIO * 1.72)
     assert np.all(sh[:, 1] > xy[:, 1]) and np.all(hand[:, 1] > sh[:, 1])  # right side faces +y
     assert np.allclose(hand[:, 2], rm.HAND_REST_HEIGHT_RATIO * 1.72)
-    assert np.all(np.linalg.norm(hand - sh, axis=1) <= rm.arm_reach(1.72))
-    tall = rm.hand_position(xy, heading, 1.9, swing_phase=0.0)
+    assert np.all(np.linalg.norm(hand - sh, axis=1) <= trajectory.arm_reach(1.72))
+    tall = trajectory.hand_position(xy, heading, 1.9, swing_phase=0.0)
     assert np.all(tall[:, 2] > hand[:, 2])
 
 
 def test_hand_swings_while_walking() -> None:
     p = rm.sample_walker(np.random.default_rng(8), "id")
-    tr = rm.base_trajectory(p)
-    hand = rm.hand_position(tr.xy, tr.heading, p.height, swing_phase=tr.gait_phase)
-    default = rm.hand_position(tr.xy, tr.heading, p.height)
+    tr = trajectory.base_trajectory(p)
+    hand = trajectory.hand_position(tr.xy, tr.heading, p.height, swing_phase=tr.gait_phase)
+    default = trajectory.hand_position(tr.xy, tr.heading, p.height)
     fwd = np.stack([np.cos(tr.heading), np.sin(tr.heading)], -1)
     along = np.sum((hand[:, :2] - tr.xy) * fwd, axis=1)
     assert np.ptp(along) > 0.15 and np.ptp(np.sum((default[:, :2] - tr.xy) * fwd, axis=1)) > 0.15
@@ -155,20 +156,20 @@ def test_hand_swings_while_walking() -> None:
 
 def test_reach_moves_toward_target_and_is_clipped_to_arm_length() -> None:
     xy, yaw, h = np.array([0.0, -0.9]), math.pi, 1.72
-    sh = rm.shoulder_position(xy, yaw, h)
+    sh = trajectory.shoulder_position(xy, yaw, h)
     near = sh + np.array([0.0, 0.4, -0.2])  # within reach
-    assert np.allclose(rm.hand_position(xy, yaw, h, target_xyz=near, reach=1.0), near)
-    rest = rm.hand_position(xy, yaw, h, target_xyz=near, reach=0.0, swing_phase=0.0)
-    half = rm.hand_position(xy, yaw, h, target_xyz=near, reach=0.5, swing_phase=0.0)
+    assert np.allclose(trajectory.hand_position(xy, yaw, h, target_xyz=near, reach=1.0), near)
+    rest = trajectory.hand_position(xy, yaw, h, target_xyz=near, reach=0.0, swing_phase=0.0)
+    half = trajectory.hand_position(xy, yaw, h, target_xyz=near, reach=0.5, swing_phase=0.0)
     assert np.allclose(half, 0.5 * (rest + near))
     far = sh + np.array([0.0, 2.0, 0.0])
-    got = rm.hand_position(xy, yaw, h, target_xyz=far, reach=1.0)
-    assert np.isclose(np.linalg.norm(got - sh), rm.arm_reach(h))
+    got = trajectory.hand_position(xy, yaw, h, target_xyz=far, reach=1.0)
+    assert np.isclose(np.linalg.norm(got - sh), trajectory.arm_reach(h))
     assert np.allclose((got - sh) / np.linalg.norm(got - sh), [0.0, 1.0, 0.0])
     # vectorised over a batch of reach fractions
-    batch = rm.hand_position(
+    batch = trajectory.hand_position(
         np.tile(xy, (5, 1)), np.full(5, yaw), h, target_xyz=near, reach=np.linspace(0, 1, 5)
     )
     assert batch.shape == (5, 3) and np.allclose(batch[-1], near)
     with pytest.raises(ValueError, match="target"):
-        rm.hand_position(xy, yaw, h, reach=0.5)
+        trajectory.hand_position(xy, yaw, h, reach=0.5)

@@ -9,9 +9,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from handover_env import receiver_motion as rm
-from handover_env.gait import arm_pose, walking_pose
-from handover_env.skeleton import (
+from handover_env.person import motion as rm
+from handover_env.person import trajectory
+from handover_env.person.gait import arm_pose, walking_pose
+from handover_env.person.skeleton import (
     N_SEGMENTS,
     SEG,
     SEGMENTS,
@@ -124,7 +125,7 @@ def test_measure_dims_keeps_lengths_and_rejects_bad_input():
 
 def test_walking_pose_swings_legs_in_antiphase_and_follows_the_track():
     walker = rm.sample_walker(np.random.default_rng(0), "id")
-    traj = rm.base_trajectory(walker)
+    traj = trajectory.base_trajectory(walker)
     dims = BodyDims.from_height(walker.height)
     pose = walking_pose(traj, dims)
     np.testing.assert_allclose(pose.origin[:, 0, :2], traj.xy, atol=1e-12)

@@ -18,7 +18,7 @@ from handover_env.data.__main__ import build_parser, main
 from handover_env.data.dataset import HandoverDataset, stratified_fold_ids
 from handover_env.data.filtering import hampel, lowpass, smooth_track
 from handover_env.data.synthetic import generate_synthetic
-from handover_env.data.transfer import (
+from handover_env.data.transfer.detect import (
     check_recording,
     detect_reach_onset,
     detect_release,
@@ -26,8 +26,8 @@ from handover_env.data.transfer import (
     to_body_frame,
     walking_frame,
 )
-from handover_env.data.transfer_measures import analyse_recording
-from handover_env.data.transfer_report import analyse_file, assign_halves
+from handover_env.data.transfer.measures import analyse_recording
+from handover_env.data.transfer.report import analyse_file, assign_halves
 
 RATE = 30.0
 REAL = (
@@ -306,7 +306,7 @@ def test_transfer_stats_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
 
 
 def test_figures(tmp_path: Path) -> None:
-    from handover_env.data.transfer_figures import write_figures
+    from handover_env.data.transfer.figures import write_figures
 
     results = [analyse_file(p) for p in sorted(_write_folder(tmp_path / "whole_motions").iterdir())]
     assign_halves(results, folds=2, calibration_folds=1)

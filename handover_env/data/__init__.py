@@ -12,7 +12,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from handover_env.data.dataset import DatasetError, Episode, HandoverDataset
+from handover_env.data.dataset import Episode, HandoverDataset
+from handover_env.data.errors import DatasetError
 from handover_env.data.public import UnsafePickleError, load_public_dataset
 from handover_env.data.synthetic import default_dataset, generate_synthetic
 

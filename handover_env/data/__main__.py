@@ -25,7 +25,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from handover_env.data.dataset import DatasetError, HandoverDataset
+from handover_env.data.dataset import HandoverDataset
+from handover_env.data.errors import DatasetError
 from handover_env.offline import hub_offline
 
 DEFAULT_KEYWORD = "synthetic"
@@ -187,7 +188,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def cmd_transfer_stats(args: argparse.Namespace) -> int:
-    from handover_env.data.transfer_report import run_transfer_stats
+    from handover_env.data.transfer.report import run_transfer_stats
 
     start = time.perf_counter()
     summary, written = run_transfer_stats(

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from handover_env.data.errors import DatasetError
 from handover_env.data.limits import (
     MAX_ABS_COORD_M,
     MAX_EPISODES,
@@ -26,6 +27,7 @@ from handover_env.data.limits import (
     MAX_TOTAL_FRAMES,
     MIN_QUAT_NORM,
 )
+from handover_env.data.npz import read_npz_members
 from handover_env.paths import new_file_mode
 
 FORMAT_VERSION = 1
@@ -44,10 +46,6 @@ _ARRAY_FIELDS: dict[str, int] = {
 }
 #: The position fields, bounded to +-MAX_ABS_COORD_M (metres).
 _POSITION_FIELDS = ("receiver_xy", "receiver_hand_xyz", "giver_xyz")
-
-
-class DatasetError(ValueError):
-    """A dataset file or episode is malformed; the message names the file or episode."""
 
 
 def rate_problem(rate_hz: object) -> str | None:
@@ -306,7 +304,7 @@ class HandoverDataset:
         """Read a file written by :meth:`save`, validating every array.
 
         Only the members :meth:`save` writes are read, each bounded before it is decompressed
-        (:mod:`handover_env.data.npz_io`); every scalar must have its exact dtype and shape
+        (:mod:`handover_env.data.npz`); every scalar must have its exact dtype and shape
         (``format_version`` an integer equal to :data:`FORMAT_VERSION`, ``rate_hz`` a float
         within :data:`MIN_RATE_HZ` .. :data:`MAX_RATE_HZ` Hz,
         ``is_ood`` booleans, ``source_id`` strings), and every episode passes :class:`Episode`'s
@@ -318,8 +316,6 @@ class HandoverDataset:
             DatasetError: the file is not a valid dataset; the message names the file and the
                 problem.
         """
-        from handover_env.data.npz_io import read_npz_members
-
         path = Path(path)
         if not path.exists():
             raise FileNotFoundError(f"no dataset file at {path}")

@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from handover_env.data.dataset import DatasetError
+from handover_env.data.errors import DatasetError
 from handover_env.data.limits import (
     MAX_ARRAY_BYTES,
     MAX_MEMO_ENTRIES,

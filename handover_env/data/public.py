@@ -53,7 +53,8 @@ from typing import Any
 import numpy as np
 from tqdm.auto import tqdm
 
-from handover_env.data.dataset import DEFAULT_RATE_HZ, DatasetError, Episode, HandoverDataset
+from handover_env.data.dataset import DEFAULT_RATE_HZ, Episode, HandoverDataset
+from handover_env.data.errors import DatasetError
 from handover_env.data.limits import MAX_FRAMES, MAX_PICKLE_BYTES
 from handover_env.data.pickle_scan import UnsafePickleError, scan_pickle
 
@@ -90,7 +91,7 @@ RIGHT_HAND_JOINT = 15
 ID_PREFIX = "motion_normal_"
 OOD_PREFIX = "motion_variation_"
 #: Canonical file names: ASCII digits, no leading zeros, nothing after ``.pkl`` (``fullmatch``).
-_NAME_RE = re.compile(r"(motion_normal|motion_variation)_(0|[1-9][0-9]{0,8})\.pkl", re.ASCII)
+FILE_NAME_RE = re.compile(r"(motion_normal|motion_variation)_(0|[1-9][0-9]{0,8})\.pkl", re.ASCII)
 
 
 class SafeUnpickler(pickle.Unpickler):
@@ -211,7 +212,7 @@ def safe_load_pickle(path: str | os.PathLike, root: Path | None = None) -> Any:
         ) from exc
 
 
-def _validate_record(record: Any, source: str) -> dict[str, np.ndarray]:
+def validate_record(record: Any, source: str) -> dict[str, np.ndarray]:
     """Check one recording's dict: keys, dtypes, shapes, finite values and equal lengths."""
     if not isinstance(record, dict):
         raise DatasetError(f"{source}: expected a dict of arrays, got {type(record).__name__}")
@@ -292,14 +293,14 @@ def load_public_file(path: str | os.PathLike, root: str | os.PathLike | None = N
             error on a crafted file becomes a DatasetError naming it).
     """
     path = Path(path)
-    match = _NAME_RE.fullmatch(path.name)
+    match = FILE_NAME_RE.fullmatch(path.name)
     if match is None:
         raise DatasetError(
             f"{_show(path)}: not a public-dataset file name (expected {ID_PREFIX}<i>.pkl or "
             f"{OOD_PREFIX}<i>.pkl, <i> in ASCII digits without leading zeros)"
         )
     try:
-        record = _validate_record(safe_load_pickle(path, Path(root) if root else None), _show(path))
+        record = validate_record(safe_load_pickle(path, Path(root) if root else None), _show(path))
         return episode_from_record(record, path.stem, is_ood=match.group(1) == "motion_variation")
     except DatasetError as exc:
         message = str(exc)
@@ -333,7 +334,7 @@ def list_public_files(folder: str | os.PathLike) -> list[Path]:
         )
 
     def key(p: Path) -> tuple[int, int, str]:
-        m = _NAME_RE.fullmatch(p.name)
+        m = FILE_NAME_RE.fullmatch(p.name)
         if m is None:
             return (2, 0, p.name)
         return (0 if m.group(1) == "motion_normal" else 1, int(m.group(2)), p.name)

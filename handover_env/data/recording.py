@@ -15,22 +15,23 @@ from typing import Any
 
 import numpy as np
 
-from handover_env.data.dataset import DatasetError, Episode
+from handover_env.data.dataset import Episode
+from handover_env.data.errors import DatasetError
 from handover_env.data.limits import MAX_ABS_COORD_M, MAX_FRAMES, MIN_BONE_M
 from handover_env.data.public import (
-    _NAME_RE,
-    _validate_record,
+    FILE_NAME_RE,
     episode_from_record,
     safe_load_pickle,
+    validate_record,
 )
-from handover_env.skeleton import N_JOINTS, shortest_bone
+from handover_env.person.skeleton import N_JOINTS, shortest_bone
 
 
 def position_array(value: Any, what: str, tail: tuple[int, ...]) -> np.ndarray:
     """A recorded position array, checked as :class:`Episode` checks its own, as float64.
 
     The one check of every replayed track and skeleton (:class:`Recording`, and
-    :func:`handover_env.person.recorded_motion` for every replay input form).
+    :func:`handover_env.person.person.recorded_motion` for every replay input form).
 
     Args:
         value: the array (or nested lists).
@@ -125,12 +126,12 @@ def load_recording(path: str | os.PathLike) -> Recording:
         UnsafePickleError, DatasetError: as :func:`handover_env.data.public.load_public_file`.
     """
     path = Path(path)
-    match = _NAME_RE.match(path.name)
+    match = FILE_NAME_RE.match(path.name)
     if match is None:
         raise DatasetError(
             f"{path}: not a public-dataset file name (motion_normal_<i>.pkl or "
             "motion_variation_<i>.pkl)"
         )
-    record = _validate_record(safe_load_pickle(path), str(path))
+    record = validate_record(safe_load_pickle(path), str(path))
     episode = episode_from_record(record, path.stem, is_ood=match.group(1) == "motion_variation")
     return Recording(episode=episode, receiver_pose=record["pose_receiver"].copy())

@@ -3,8 +3,8 @@
 Each episode is a receiver walking past a giver who hands over an object (paper Sec. IV-A,
 "Data Collection", and Sec. V-A), sampled at 30 Hz like the public recordings:
 
-1. **Receiver walk.** A walker from :func:`handover_env.receiver_motion.sample_walker` (ID, or OOD
-   wandering/pausing) and its :func:`~handover_env.receiver_motion.base_trajectory`: gait sway,
+1. **Receiver walk.** A walker from :func:`handover_env.person.motion.sample_walker` (ID, or OOD
+   wandering/pausing) and its :func:`~handover_env.person.trajectory.base_trajectory`: gait sway,
    speed ripple and drift. This is the same model the env's scripted receivers use.
 2. **Giver reach.** The giver stands near the origin holding the object at a rest point in front
    of them. When the receiver comes within a trigger distance (after a reaction time) the giver
@@ -13,7 +13,7 @@ Each episode is a receiver walking past a giver who hands over an object (paper 
    lifts a little and comes down to the handover height as the moment approaches, and then moves
    along with the receiver (velocity matching, the "dynamic" handover).
 3. **Receiver reach and pull.** The receiver's right hand
-   (:func:`~handover_env.receiver_motion.hand_position`) reaches for the object over a reach
+   (:func:`~handover_env.person.trajectory.hand_position`) reaches for the object over a reach
    time and meets it when the pelvis passes a sampled take point; this is the transfer (the hand
    is nearest the object there, the definition used by :mod:`handover_env.data.stats`). Then the
    receiver holds the object, pulls it toward the body and carries it on.
@@ -39,8 +39,9 @@ import numpy as np
 from scipy.signal import lfilter
 from tqdm.auto import tqdm
 
-from handover_env import receiver_motion as rm
 from handover_env.data.dataset import DEFAULT_RATE_HZ, Episode, HandoverDataset
+from handover_env.person import motion as rm
+from handover_env.person import trajectory
 
 _P = (0.0, 0.01, 0.05, 0.25, 0.50, 0.75, 0.95, 0.99, 1.0)
 #: Receiver pelvis x at the transfer (m), ID and OOD recordings.
@@ -184,7 +185,7 @@ def synthesize_episode(
     lo, hi = (round(v * rate_hz / DEFAULT_RATE_HZ) for v in LENGTH_RANGE)
     for _ in range(100):
         walker = rm.sample_walker(rng, kind)
-        traj = rm.base_trajectory(walker, rate_hz)
+        traj = trajectory.base_trajectory(walker, rate_hz)
         if lo <= len(traj) <= hi:
             break
     else:  # pragma: no cover - the calibrated distributions make this vanishingly rare
@@ -240,13 +241,13 @@ def synthesize_episode(
     )
 
     # ---- receiver hand: reach until the take
-    shoulder = rm.shoulder_position(xy, heading, walker.height)
+    shoulder = trajectory.shoulder_position(xy, heading, walker.height)
     to_obj = giver_hand - shoulder
     u = to_obj / np.maximum(np.linalg.norm(to_obj, axis=1, keepdims=True), 1e-9)
     # Ease-in: the hand closes in on the object fastest at the end, so the hand-object distance
     # has a sharp minimum at the take, as in the recordings.
     reach = np.clip((t - (t_take - reach_time)) / reach_time, 0.0, 1.0) ** 2
-    hand = rm.hand_position(
+    hand = trajectory.hand_position(
         xy,
         heading,
         walker.height,
@@ -269,7 +270,7 @@ def synthesize_episode(
         target = np.concatenate([target_xy, np.full((target_xy.shape[0], 1), grip0[2])], axis=1)
         tau = (t[after] - t_take) / pull_time
         r_after = 1.0 - (1.0 - carry_reach) * _smoothstep(tau)
-        grip = rm.hand_position(
+        grip = trajectory.hand_position(
             xy[after],
             heading[after],
             walker.height,

@@ -9,18 +9,15 @@ Timing: physics dt = 1/600 s; the impedance controller runs every 3 physics step
 global step counter, so its rate holds across env steps; one env step = 1/30 s = 20 physics steps
 (6 or 7 controller ticks). The receiver's mocap bodies are moved at every tick.
 
-Wrist force: the ``force``/``torque`` sensors on the gripper mounting plate measure what the
-gripper, plus anything it holds, exerts on the flange. The static load is subtracted with the
-payload's known mass and the ``accelerometer`` at the same site (which reads a - g), plus the
-rigid payload's rotational inertia terms: ``F_ext = R (m acc - F_sensor) + m (α × c + ω × (ω × c))``
-with ω, α the gripper's angular velocity and acceleration and c the payload's centre of mass
-relative to the site (world frame): the force the world applies to gripper and object. Without
-the rotational terms the estimate is off by up to ~5 N while the arm swings the object toward the
-receiver, close to f_r; with them, by ~0.2 N. The torque (observation only) is the quasi-static
-estimate with the payload's centre of mass.
-The force estimate is low-pass filtered (first order, ``force_filter_tau``) at every tick, like
-a real F/T signal; the torque is estimated at the env rate for the observation.
-When its magnitude exceeds f_r the gripper opens (paper Sec. IV-C).
+Wrist force: the external wrench at the wrist F/T sensor, static load removed and low-pass
+filtered at every tick (:mod:`handover_env.envs.wrist`). When its magnitude exceeds f_r the
+gripper opens (paper Sec. IV-C).
+
+This module is over 500 lines because the env's physics loop is one class: reset, step, the
+200 Hz tick, the observation and the info all work on the same views of ``MjData`` bound once
+(``_bind_data``) for the hot loop. What stands on its own is in its own module: the tasks
+(:mod:`handover_env.envs.tasks`), the wrist sensor (:mod:`.wrist`), the body contacts
+(:mod:`.contacts`) and the observation layout (:mod:`.observation`).
 
 Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 
@@ -33,7 +30,7 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 * ``dropped``: nobody holds the object (gripper weld off, receiver not holding) and it has fallen
   0.15 m below where it was last held, or touches the floor.
 * ``unsafe_force``: the person's pull on an object the robot still holds (the grip force,
-  :mod:`handover_env.grip`) exceeded ``safety_force`` (default 140 N: ISO/TS 15066, Annex A,
+  :mod:`handover_env.person.grip`) exceeded ``safety_force`` (default 140 N: ISO/TS 15066, Annex A,
   maximum permissible quasi-static force for the hand and fingers: a tug of war), or a
   robot/object contact on a body segment exceeded its body region's ISO/TS 15066 limit
   (:mod:`handover_env.envs.contacts`). The wrist sensor's peak is reported but not held to a
@@ -41,7 +38,7 @@ Outcomes (``info["outcome"]``), all with ``terminated=True`` except "running":
 * ``unstable``: MuJoCo reported a diverging position, velocity or acceleration (and reset its
   state); the episode is void and says so instead of going on from a reset simulation.
 * ``missed``: the person walked past without taking the object (gave up on an object left
-  behind them, see :class:`handover_env.receiver.ReceiverConfig`), or their walk ended (+1 s)
+  behind them, see :class:`handover_env.person.settings.ReceiverConfig`), or their walk ended (+1 s)
   without it. The static receiver waits; there only the TimeLimit ends an episode.
 """
 
@@ -59,14 +56,16 @@ from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
 from handover_env.config import HandoverParams
-from handover_env.controller import ControllerConfig, ImpedanceController, inverse_kinematics
 from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.observation import ObsLayout
 from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
 from handover_env.envs.tasks.dynamic import DynamicHandover
-from handover_env.receiver import CAMERA_RATE, Receiver, person_config
-from handover_env.receiver_motion import check_overrides
-from handover_env.scene import (
+from handover_env.envs.wrist import WristSensor
+from handover_env.person.motion import check_overrides
+from handover_env.person.receiver import CAMERA_RATE, Receiver
+from handover_env.person.settings import person_config
+from handover_env.robot.controller import ControllerConfig, ImpedanceController, inverse_kinematics
+from handover_env.robot.scene import (
     SceneConfig,
     build_model,
     place_object_in_gripper,
@@ -243,9 +242,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._segments.append(
                 [(lo in starts, hi - lo) for lo, hi in zip(bounds[:-1], bounds[1:])]
             )
-        self._filter_alpha = (self._ticks * self.model.opt.timestep) / (
-            force_filter_tau + self._ticks * self.model.opt.timestep
-        )
+        self.wrist = WristSensor(self.model, self.data, self.ids, self._ticks, force_filter_tau)
 
         low, high = self.layout.bounds()
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -288,13 +285,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
         valid; they save the attribute lookups and index arithmetic in the hot loop.
         """
         d, ids = self.data, self.ids
-        adrs = (ids.ft_force_adr, ids.ft_torque_adr, ids.ft_acc_adr)
-        lo = min(adrs)
-        self._ft_v = d.sensordata[lo:max(adrs) + 3]  # force, torque and accelerometer readings
-        self._ft_force_i, self._ft_torque_i, self._ft_acc_i = (a - lo for a in adrs)
-        self._ft_xmat_v = d.site_xmat[ids.ft_site]
-        self._grip_w_v = d.cvel[ids.gripper_root_body, 0:3]
-        self._grip_alpha_v = d.cacc[ids.gripper_root_body, 0:3]
         self._qpos_v = d.qpos
         self._eq_active_v = d.eq_active
         self._object_pos_v = d.xpos[ids.object_body]
@@ -340,9 +330,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.pull_force = 0.0
         self.released_while_held = False
         self.transfer_object_pos: np.ndarray | None = None
-        self.f_ext = np.zeros(3)
-        self._f_ext_f = (0.0, 0.0, 0.0)
-        self.tau_ext = np.zeros(3)
+        self.wrist.reset()
         self._gripper_holds = True
         self._last_held_z = float(READY_POS[2])
         self.t_enabled = 0.0
@@ -389,7 +377,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._last_held_z = float(d.xpos[ids.object_body, 2])
         self.controller.reset(d, rest_qpos=self._ready_q)
         self.controller.payload_mass = float(m.body_mass[ids.object_body])
-        self._update_payload()
+        self.wrist.update_payload(self._gripper_holds)
         # Camera noise is drawn once per frame from np_random (frames are made as the person
         # walks: a person who slows down is seen slowing down).
         n_noise = (
@@ -449,11 +437,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
                                 gripper_pos=self._tcp_pos_v.copy(),
                                 gripper_axis=(self._tcp_xmat_v.reshape(3, 3)[:, 2].copy()
                                               if self._gripper_holds else None))
-        self.receiver.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
+        self.receiver.targets.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
 
         # The controller ticks on the global step clock: the schedule of (tick?, physics steps)
         # segments depends only on the clock's phase at the start of the env step.
-        apply_tick, tick, mj_step = self.receiver.apply_tick, self._tick, mujoco.mj_step
+        apply_tick, tick = self.receiver.targets.apply_tick, self._tick
+        mj_step = mujoco.mj_step
         contacts = self.contacts
         for is_tick, n in self._segments[self._global_step % self._ticks]:
             if is_tick:
@@ -462,9 +451,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 if contacts.unsafe_segment >= 0:
                     # the episode ends at the unsafe contact, not pressed on to the step's end
                     break
-            mj_step(m, d, n)  # positional: pybind keyword parsing costs ~0.5 us a call
+            mj_step(m, d, n)  # positional arguments: the binding parses keywords per call
         self._global_step += FRAME_SKIP
-        self.receiver.apply(d, 1.0)
+        self.receiver.targets.apply(d, 1.0)
         self.receiver.end_step(d)
         self._step_count += 1
         self._record_camera_frame()
@@ -507,8 +496,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
 
     def wrist_force_magnitude(self) -> float:
         """N, the filtered external wrist force (what the release compares with f_r)."""
-        fx, fy, fz = self._f_ext_f
-        return math.sqrt(fx * fx + fy * fy + fz * fz)
+        return self.wrist.magnitude()
+
+    @property
+    def f_ext(self) -> np.ndarray:
+        """(3,) N, the filtered external wrist force (world frame)."""
+        return self.wrist.f_ext
 
     def clear_of_gripper(self, ox: float, oy: float, oz: float) -> bool:
         """Whether the object centre is more than ``clear_distance`` from the TCP."""
@@ -516,56 +509,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
         dx, dy, dz = ox - px, oy - py, oz - pz
         return math.sqrt(dx * dx + dy * dy + dz * dz) > self.clear_distance
 
-    def _update_payload(self) -> None:
-        """Mass and centre of mass (in the F/T site frame) of what hangs below the sensor."""
-        m, d, ids = self.model, self.data, self.ids
-        mass = float(m.body_subtreemass[ids.gripper_root_body])
-        com = d.subtree_com[ids.gripper_root_body] * mass
-        if self._gripper_holds:
-            mo = float(m.body_mass[ids.object_body])
-            com = com + d.xipos[ids.object_body] * mo
-            mass += mo
-        com = com / mass
-        rot = d.site_xmat[ids.ft_site].reshape(3, 3)
-        self._payload_mass = mass
-        self._payload_com = rot.T @ (com - d.site_xpos[ids.ft_site])
-        self._payload_com_f = tuple(self._payload_com.tolist())
-
     def _tick(self) -> None:
-        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques.
-
-        The wrist-force estimate is done in plain floats (3-vectors are cheaper that way than as
-        numpy arrays); see the module docstring for the formula.
-        """
+        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques."""
         d = self.data
-        ft = self._ft_v.tolist()
-        m_p = self._payload_mass
-        i = self._ft_acc_i
-        a0, a1, a2 = ft[i], ft[i + 1], ft[i + 2]
-        i = self._ft_force_i
-        s0, s1, s2 = ft[i], ft[i + 1], ft[i + 2]
-        l0, l1, l2 = m_p * a0 - s0, m_p * a1 - s1, m_p * a2 - s2  # site frame
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
-        c0, c1, c2 = self._payload_com_f
-        cx = r00 * c0 + r01 * c1 + r02 * c2
-        cy = r10 * c0 + r11 * c1 + r12 * c2
-        cz = r20 * c0 + r21 * c1 + r22 * c2
-        # Rigid-payload inertia beyond the site's linear acceleration: m (α × c + ω × (ω × c)),
-        # with ω, α of the gripper (world frame, from cvel/cacc) and c its centre of mass.
-        wx, wy, wz = self._grip_w_v.tolist()
-        ax, ay, az = self._grip_alpha_v.tolist()
-        vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx  # ω × c
-        gx = r00 * l0 + r01 * l1 + r02 * l2 + m_p * (ay * cz - az * cy + wy * vz - wz * vy)
-        gy = r10 * l0 + r11 * l1 + r12 * l2 + m_p * (az * cx - ax * cz + wz * vx - wx * vz)
-        gz = r20 * l0 + r21 * l1 + r22 * l2 + m_p * (ax * cy - ay * cx + wx * vy - wy * vx)
-        k = self._filter_alpha
-        fx, fy, fz = self._f_ext_f
-        fx += k * (gx - fx)
-        fy += k * (gy - fy)
-        fz += k * (gz - fz)
-        self._f_ext_f = (fx, fy, fz)
-        self.f_ext[0], self.f_ext[1], self.f_ext[2] = fx, fy, fz
-        f_mag = math.sqrt(fx * fx + fy * fy + fz * fz)
+        f_mag = self.wrist.tick()
         self.peak_wrist_force = max(self.peak_wrist_force, f_mag)
         rec = self.receiver
         holds = rec.grip.active
@@ -589,7 +536,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
             d.eq_active[self.ids.eq_gripper] = 0
             self._gripper_holds = False
             self.controller.payload_mass = 0.0
-            self._update_payload()
+            self.wrist.update_payload(self._gripper_holds)
         if rec.state == "reaching" and rec.try_grasp(self.model, d):
             self.transfer_object_pos = self._object_pos_v.copy()
         rec.grip.apply(d)
@@ -601,22 +548,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._arm_ctrl_v[...] = self.controller.compute(d)
         else:
             d.ctrl[self._arm_act] = self.controller.compute(d)
-
-    def _wrist_torque(self) -> np.ndarray:
-        """External torque at the wrist sensor (world frame), static load removed (per env step)."""
-        ft = self._ft_v.tolist()
-        m_p = self._payload_mass
-        i = self._ft_acc_i
-        l0, l1, l2 = m_p * ft[i], m_p * ft[i + 1], m_p * ft[i + 2]
-        i = self._ft_torque_i
-        c0, c1, c2 = self._payload_com_f
-        t0 = (c1 * l2 - c2 * l1) - ft[i]
-        t1 = (c2 * l0 - c0 * l2) - ft[i + 1]
-        t2 = (c0 * l1 - c1 * l0) - ft[i + 2]
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
-        self.tau_ext = np.array([r00 * t0 + r01 * t1 + r02 * t2, r10 * t0 + r11 * t1 + r12 * t2,
-                                 r20 * t0 + r21 * t1 + r22 * t2])
-        return self.tau_ext
 
     def _track_jerk(self) -> None:
         """Robot TCP jerk from the third difference of its 30 Hz positions (RMS and peak)."""
@@ -634,7 +565,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
         del hist[0]
 
     def _after_step(self) -> None:
-        self.task.before_outcome(self)
+        if math.isinf(self.t_enabled):  # the task tells when the robot may move, once it knows
+            self.t_detect = self.task.detection_time(self)
+            self.t_enabled = self.task.enabled_time(self)
         warning = self.data.warning
         if any(warning[w].number for w in _DIVERGED):
             # MuJoCo found a diverging acceleration and reset the simulation: the episode is void.
@@ -662,8 +595,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         v["ee_angvel"][...] = vel[:3]
         v["object_pos"][...] = self._object_pos_v
         v["object_held"][0] = 1.0 if self._gripper_holds else 0.0
-        v["wrist_force"][...] = self.f_ext
-        v["wrist_torque"][...] = self._wrist_torque()
+        v["wrist_force"][...] = self.wrist.f_ext
+        v["wrist_torque"][...] = self.wrist.torque()
         v["gripper_open"][0] = 1.0 if self.released else 0.0
         v["time"][0] = t
         k = max(0, len(self._hand_frames) - 1 - self.obs_latency)

@@ -15,8 +15,9 @@ reported beside it (``body_contact_force_raw``).
 Safety follows ISO/TS 15066:2016 (Annex A), which limits a contact force by body region and
 distinguishes a *transient* contact (the person can move away; shorter than 0.5 s), allowed up to
 twice the quasi-static limit, from a *quasi-static* one (clamping, or lasting longer), held to
-the quasi-static limit (:data:`handover_env.body_model.ISO_REGIONS`). A segment is unsafe when its
-force exceeds twice its region's limit at any tick, or exceeds the limit for longer than 0.5 s.
+the quasi-static limit (:data:`handover_env.person.body_model.ISO_REGIONS`). A segment is unsafe
+when its force exceeds twice its region's limit at any tick, or exceeds the limit for longer than
+0.5 s.
 """
 
 from __future__ import annotations
@@ -24,9 +25,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from handover_env.body_model import ISO_REGIONS
-from handover_env.scene import SceneIds
-from handover_env.skeleton import SEGMENTS
+from handover_env.person.body_model import ISO_REGIONS
+from handover_env.person.skeleton import SEGMENTS
+from handover_env.robot.scene import SceneIds
 
 ROBOT, OBJECT, PERSON = 1, 2, 4
 TRANSIENT_FACTOR = 2.0  # ISO/TS 15066 Annex A: transient limits are twice the quasi-static ones

@@ -11,10 +11,10 @@ class DynamicHandoverEnv(HandoverEnvBase):
 
     The robot (MuJoCo Menagerie models) stands on a pedestal at (0, -0.2, 0.79) in the frame of the
     public Dynamic Handover Dataset, holding the bottle. A simulated person (an articulated,
-    compliant body: :mod:`handover_env.body_model`) walks toward -x past the robot's side, as a
+    compliant body: :mod:`handover_env.person.body_model`) walks toward -x past the robot's side, as a
     scripted walker or a replayed recording. When the bottle will be at a comfortable place along
     their walk soon, their right hand reaches for it (calibrated to the recorded transfers:
-    :mod:`handover_env.receiver`), grasps it and, walking on, pulls. The wrist force/torque
+    :mod:`handover_env.person.receiver`), grasps it and, walking on, pulls. The wrist force/torque
     sensor measures the pull; when it exceeds f_r the gripper opens. The agent picks a Cartesian
     target at 30 Hz; a Cartesian impedance controller (paper Eq. 1, K and B from Θ) tracks it at
     200 Hz.
@@ -66,7 +66,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
     ``Episode`` or a dict of arrays; ``options["hand_mode"]`` ``"reach"`` (modelled hand) or
     ``"recorded"``); ``options["height"]`` and ``["speed"]`` fix the body height and walking
     speed, ``options["walker"]`` any other field of a scripted walker
-    (:class:`handover_env.receiver_motion.WalkerParams`, e.g. ``{"pass_y": -1.0}``). Unknown
+    (:class:`handover_env.person.motion.WalkerParams`, e.g. ``{"pass_y": -1.0}``). Unknown
     option keys are warned about by name.
 
     ## Episode End
@@ -103,8 +103,18 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | default_receiver | "id" | receiver when reset() gets no option |
     | object_mass | 0.4 | kg |
     | miss_distance | 0.35 | m behind the shoulder at which an unheld bottle is walked past |
-    | person | None | dict of :class:`handover_env.receiver.ReceiverConfig` overrides |
+    | person | None | dict of :class:`handover_env.person.settings.ReceiverConfig` overrides |
     | task | None | a :class:`~handover_env.envs.tasks.base.HandoverTask` instead of ``DynamicHandover`` |
     | reward | None | :class:`~handover_env.envs.tasks.base.HandoverReward` weights (or a dict of them) |
     | render_mode, width, height, camera | None, 640, 480, "overview" | rendering |
+
+    ## Version History
+    * v0: the UR5e with the Robotiq 2F-85 (MuJoCo Menagerie models) holding a 0.4 kg bottle,
+      driven by the Cartesian impedance controller (Eq. 1, Θ-hat) at 200 Hz toward the agent's
+      30 Hz Cartesian target. The receiver is an articulated, compliant person (rigid segments
+      following their motion through soft welds, ISO/TS 15066 stiffness and force limits): a
+      scripted ID or OOD walker, or a replayed recording with a modelled or the recorded hand,
+      who reaches, grasps and pulls. The gripper opens when the filtered wrist force exceeds
+      f_r. Outcomes success, premature_release, dropped, unsafe_force, missed and unstable;
+      TimeLimit 450 steps (15 s).
     """

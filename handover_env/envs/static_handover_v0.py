@@ -21,10 +21,10 @@ class StaticHandoverEnv(HandoverEnvBase):
     ## Receiver
     A scripted walker heading for ``STOP_XY`` = (0.45, -0.95), or a recorded person following their
     recording, decelerates and stops when the pelvis reaches the stop line x = 0.45 (see
-    :func:`handover_env.person.stopped`); so the static baseline meets the same recorded people as
-    the dynamic agents. They do not reach while walking. There they raise the right hand; the
-    hand counts as detected when fully raised. Until ``detect + stabilisation_delay`` the robot
-    holds its
+    :func:`handover_env.person.person.stopped`); so the static baseline meets the same recorded
+    people as the dynamic agents. They do not reach while walking. There they raise the right
+    hand; the hand counts as detected when fully raised. Until ``detect + stabilisation_delay`` the
+    robot holds its
     ready pose whatever the action (``robot_enabled`` = 0 in the observation). The raised hand
     waits until the robot brings the object within ``ReceiverConfig.present_reach`` (0.15 m),
     then grasps and pulls it toward the hip. Only the TimeLimit (600 steps, 20 s) ends an episode
@@ -42,6 +42,11 @@ class StaticHandoverEnv(HandoverEnvBase):
 
     ## Arguments
     As the dynamic env, plus ``stabilisation_delay`` (s, default 2.0).
+
+    ## Version History
+    * v0: the dynamic env's robot, person, spaces and outcomes; the receiver stops at
+      ``STOP_XY`` and raises the right hand, the robot may move ``stabilisation_delay`` after the
+      hand is detected, no ``missed``; TimeLimit 600 steps (20 s).
     """
 
     def default_task(self, reward: HandoverReward) -> HandoverTask:

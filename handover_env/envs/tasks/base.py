@@ -1,13 +1,18 @@
-"""The task interface of the handover envs and their shared reward and episode end."""
+"""The task interface of the handover envs and their shared reward and episode end.
+
+A task reads the env's physics through :class:`HandoverState` and returns values: the receiver
+it sets up, when the robot may move, the outcome and the reward terms. It never writes an env
+attribute; the env asks the task and stores the answers itself (as dm_control's ``Task``).
+"""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
-if TYPE_CHECKING:
-    from handover_env.envs.base_handover import HandoverEnvBase
+import mujoco
+import numpy as np
 
 #: How far below where it was last held (m) an object that nobody holds counts as dropped.
 DROP_DISTANCE = 0.15
@@ -71,6 +76,38 @@ class HandoverReward:
 TERMS = ("time", "force", "outcome")
 
 
+class HandoverState(Protocol):
+    """What a task reads of a handover env (:class:`handover_env.envs.base_handover.HandoverEnvBase`
+    is one)."""
+
+    np_random: np.random.Generator
+    data: mujoco.MjData
+    receiver: Any  # handover_env.person.receiver.Receiver: the simulated person
+    contacts: Any  # handover_env.envs.contacts.ContactMonitor: robot/object contacts on the body
+    params: Any  # handover_env.config.HandoverParams: Θ (f_r is ``params.release_force``)
+    dt: float
+    safety_force: float
+    outcome: str
+    released: bool
+    released_while_held: bool
+    pull_force: float
+
+    @property
+    def receiver_holds(self) -> bool: ...
+
+    @property
+    def gripper_holds(self) -> bool: ...
+
+    @property
+    def last_held_z(self) -> float: ...
+
+    def object_position(self) -> np.ndarray: ...
+
+    def wrist_force_magnitude(self) -> float: ...
+
+    def clear_of_gripper(self, ox: float, oy: float, oz: float) -> bool: ...
+
+
 @dataclass
 class HandoverTask:
     """A handover variant: receiver set-up, when the robot may move, episode end, reward.
@@ -84,7 +121,7 @@ class HandoverTask:
     #: seconds subtracted from the measured handover time in ``info["handover_time"]``.
     handover_delay: float = field(default=0.0, init=False)
 
-    def configure_receiver(self, env: HandoverEnvBase, kind: str, options: dict[str, Any]) -> None:
+    def configure_receiver(self, env: HandoverState, kind: str, options: dict[str, Any]) -> None:
         """Set up the receiver for a new episode (``reset``); ``options`` are reset()'s options."""
         walker = options.get("walker")
         if walker is not None and not isinstance(walker, dict):
@@ -98,19 +135,22 @@ class HandoverTask:
             walker_overrides=walker,
         )
 
-    def enabled_time(self, env: HandoverEnvBase) -> float:
+    def enabled_time(self, env: HandoverState) -> float:
         """When the robot may first follow the agent's action (s after reset); math.inf: not yet
-        known."""
+        known. The env asks at reset and, while the answer is math.inf, after every step
+        (before the outcome is judged)."""
         return 0.0
 
-    def before_outcome(self, env: HandoverEnvBase) -> None:
-        """Called after every env step, before the outcome is judged (e.g. a detection)."""
+    def detection_time(self, env: HandoverState) -> float:
+        """When the robot detected the receiver's cue to start (s after reset; math.nan: no cue
+        yet, or none in this variant). Asked with :meth:`enabled_time` while that is math.inf."""
+        return math.nan
 
-    def walked_past(self, env: HandoverEnvBase, t: float) -> bool:
+    def walked_past(self, env: HandoverState, t: float) -> bool:
         """The person went on without the object (a ``missed`` handover)."""
         return False
 
-    def outcome(self, env: HandoverEnvBase) -> str:
+    def outcome(self, env: HandoverState) -> str:
         """The episode's outcome after this step (``"running"`` while it goes on).
 
         ``unsafe_force`` (the pull above ``safety_force`` or a body contact above its ISO limit),
@@ -135,7 +175,7 @@ class HandoverTask:
             return "missed"
         return "running"
 
-    def reward_terms(self, env: HandoverEnvBase) -> dict[str, float]:
+    def reward_terms(self, env: HandoverState) -> dict[str, float]:
         """This step's reward terms (see :class:`HandoverReward`)."""
         return self.reward.terms(
             env.dt, env.wrist_force_magnitude(), env.params.release_force, env.outcome

@@ -3,12 +3,8 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
-from handover_env.envs.tasks.base import HandoverTask
-
-if TYPE_CHECKING:
-    from handover_env.envs.base_handover import HandoverEnvBase
+from handover_env.envs.tasks.base import HandoverState, HandoverTask
 
 #: s after the end of their walk at which a person without the object has missed it.
 WALK_END_GRACE = 1.0
@@ -26,7 +22,7 @@ class DynamicHandover(HandoverTask):
         reward: the reward's weights (:class:`~handover_env.envs.tasks.base.HandoverReward`).
     """
 
-    def walked_past(self, env: HandoverEnvBase, t: float) -> bool:
+    def walked_past(self, env: HandoverState, t: float) -> bool:
         rec = env.receiver
         return rec.state == "passed" or (
             rec.finished and t > rec.duration + rec.time_lost + WALK_END_GRACE

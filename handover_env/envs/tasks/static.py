@@ -4,12 +4,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from handover_env.envs.tasks.base import HandoverTask
-
-if TYPE_CHECKING:
-    from handover_env.envs.base_handover import HandoverEnvBase
+from handover_env.envs.tasks.base import HandoverState, HandoverTask
 
 STOP_XY = (0.45, -0.95)  # the predefined area where the receiver stops, m
 
@@ -37,7 +34,7 @@ class StaticHandover(HandoverTask):
             )
         self.handover_delay = float(self.stabilisation_delay)
 
-    def configure_receiver(self, env: HandoverEnvBase, kind: str, options: dict[str, Any]) -> None:
+    def configure_receiver(self, env: HandoverState, kind: str, options: dict[str, Any]) -> None:
         # Scripted walkers walk to the stop area; recorded people follow their recording until
         # their pelvis reaches the stop line (x = STOP_XY[0]), where both stop and stand.
         overrides = (
@@ -51,10 +48,11 @@ class StaticHandover(HandoverTask):
             walker_overrides=overrides, stop_x=STOP_XY[0],
         )
 
-    def enabled_time(self, env: HandoverEnvBase) -> float:
-        return math.inf  # until the raised hand is detected
+    def detection_time(self, env: HandoverState) -> float:
+        """When the raised hand was detected (fully raised); math.nan before."""
+        return env.receiver.t_hand_raised
 
-    def before_outcome(self, env: HandoverEnvBase) -> None:
-        if math.isinf(env.t_enabled) and not math.isnan(env.receiver.t_hand_raised):
-            env.t_detect = env.receiver.t_hand_raised
-            env.t_enabled = env.t_detect + self.stabilisation_delay
+    def enabled_time(self, env: HandoverState) -> float:
+        """``stabilisation_delay`` after the raised hand's detection; math.inf until then."""
+        t_detect = self.detection_time(env)
+        return math.inf if math.isnan(t_detect) else t_detect + self.stabilisation_delay

@@ -1,15 +1,15 @@
 """The receiver's body in MuJoCo: an articulated, compliant person built with ``MjSpec``.
 
-Structure. The 13 rigid segments of :data:`handover_env.skeleton.SEGMENTS` (pelvis, torso,
+Structure. The 13 rigid segments of :data:`handover_env.person.skeleton.SEGMENTS` (pelvis, torso,
 head, both upper arms, forearms and hands, both thighs and shanks with the feet) form a tree:
 the pelvis has a free joint, every other segment a ball joint at its BODY_34 origin joint. Each
 segment carries capsule (and one sphere) geoms that collide with the robot and the object, never
 with each other or the floor. Gravity is compensated (``gravcomp``): standing up is the
 person's own business, not the robot's.
 
-Driving. Each segment has a mocap *target* body, moved by :mod:`handover_env.receiver` along the
-recorded or scripted motion, and a soft **weld** from target to segment. So the person follows
-their motion in free space (the targets lead by the welds' velocity and acceleration lag,
+Driving. Each segment has a mocap *target* body, moved by :mod:`handover_env.person.receiver`
+along the recorded or scripted motion, and a soft **weld** from target to segment. So the person
+follows their motion in free space (the targets lead by the welds' velocity and acceleration lag,
 :func:`weld_lag_times`), while a collision with the robot deflects the touched parts with a
 bounded, measured force: there is no infinite-mass body pushing through the robot.
 
@@ -35,6 +35,11 @@ Masses: de Leva (1996) segment fractions of a body of mass 23 kg/m² x height² 
 Geometry is built for the template body (1.725 m) and resized in place for each episode's body
 (:func:`apply_dims`): segment offsets, capsule end points and radii, and the bounding volumes
 MuJoCo's collision detection uses.
+
+This module is over 500 lines because building the body (:func:`add_receiver`), finding it in a
+compiled model (:func:`body_ids`), resizing it per person (:func:`apply_dims`) and calibrating
+its weld gains (:func:`calibrate_weld_gains`) share one geometry table (``_GEOMS``) and one set
+of stiffness constants; they change together.
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from handover_env.skeleton import N_SEGMENTS, SEG, SEGMENTS, TEMPLATE_HEIGHT, BodyDims, J
+from handover_env.person.skeleton import N_SEGMENTS, SEG, SEGMENTS, TEMPLATE_HEIGHT, BodyDims, J
 
 PREFIX = "receiver/"
 #: ISO/TS 15066:2016 Annex A: effective spring constant (N/mm, Table A.3) and maximum permissible

@@ -1,22 +1,24 @@
 """Where the simulated person's body would be if nothing interfered: the nominal motion.
 
 A :class:`PersonMotion` is the receiver's whole-body motion at 30 Hz before any interaction:
-every segment's pose (:class:`handover_env.skeleton.BodyPose`), the pelvis track a camera sees,
-the walking direction and the right arm's walking swing. :mod:`handover_env.receiver` plays it
+every segment's pose (:class:`handover_env.person.skeleton.BodyPose`), the pelvis track a camera
+sees, the walking direction and the right arm's walking swing. :mod:`handover_env.person.receiver`
+plays it
 back (possibly slower, when the person waits for the object) and replaces the right arm when
 the person reaches.
 
 Sources:
 
-* :func:`scripted_motion`: a walker from :func:`handover_env.receiver_motion.sample_walker`
+* :func:`scripted_motion`: a walker from :func:`handover_env.person.motion.sample_walker`
   (ID, or OOD wandering / pausing), its pelvis track from ``base_trajectory`` and the rest of the
-  body from :func:`handover_env.gait.walking_pose`;
+  body from :func:`handover_env.person.gait.walking_pose`;
 * :func:`recorded_motion`: a public recording. With the receiver's BODY_34 skeleton
   (:class:`handover_env.data.recording.Recording`, or a dict with ``receiver_pose``), the body
-  is the recorded person, filtered once (:func:`handover_env.data.smoothing.smooth_track`) and
-  retargeted onto the rigid segments (:func:`handover_env.skeleton.retarget`). With the pelvis
-  track only (an :class:`~handover_env.data.dataset.Episode`, e.g. synthetic data), the scripted
-  gait walks along the filtered track. The camera always sees the *raw* recorded pelvis track.
+  is the recorded person, filtered once (:func:`handover_env.data.filtering.smooth_track`) and
+  retargeted onto the rigid segments (:func:`handover_env.person.skeleton.retarget`). With the
+  pelvis track only (an :class:`~handover_env.data.dataset.Episode`, e.g. synthetic data), the
+  scripted gait walks along the filtered track. The camera always sees the *raw* recorded pelvis
+  track.
 * :func:`stopped`: the static handover's variant of any motion: it follows the motion until the
   pelvis reaches the stop line, decelerates to rest there and stands.
 """
@@ -30,13 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from handover_env import receiver_motion as rm
 from handover_env.data.dataset import Episode
 from handover_env.data.filtering import smooth_track
 from handover_env.data.limits import MAX_ID_CHARS
 from handover_env.data.recording import Recording, position_array, skeleton_array
-from handover_env.gait import walking_pose
-from handover_env.skeleton import (
+from handover_env.person import motion as rm
+from handover_env.person import trajectory
+from handover_env.person.gait import walking_pose
+from handover_env.person.skeleton import (
     RIGHT_ARM,
     SEG,
     BodyDims,
@@ -141,13 +144,15 @@ def _heading(xy: np.ndarray) -> np.ndarray:
     return np.unwrap(heading)
 
 
-def _gait_track(xy: np.ndarray, heading: np.ndarray, height: float) -> rm.BaseTrajectory:
+def _gait_track(xy: np.ndarray, heading: np.ndarray, height: float) -> trajectory.BaseTrajectory:
     """A BaseTrajectory along a given pelvis track, stride phase from the distance walked."""
     step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     dist = np.concatenate([[0.0], np.cumsum(step)])
     phase = 2 * math.pi * dist / (2 * 0.28 * height)
     t = np.arange(len(xy)) / RATE
-    return rm.BaseTrajectory(t=t, xy=xy, heading=heading, gait_phase=np.mod(phase, 2 * math.pi))
+    return trajectory.BaseTrajectory(
+        t=t, xy=xy, heading=heading, gait_phase=np.mod(phase, 2 * math.pi)
+    )
 
 
 def _arm_swing(pose: BodyPose) -> np.ndarray:
@@ -171,14 +176,15 @@ def _from_pose(pose: BodyPose, dims: BodyDims, camera_xy: np.ndarray, heading: n
 
 def scripted_motion(rng: np.random.Generator, kind: str = "id", height: float | None = None,
                     speed: float | None = None, overrides: dict | None = None) -> PersonMotion:
-    """A scripted ID/OOD walker drawn from ``rng`` (see :func:`receiver_motion.sample_walker`)."""
+    """A scripted ID/OOD walker drawn from ``rng`` (see
+    :func:`handover_env.person.motion.sample_walker`)."""
     fixed = rm.check_overrides(overrides) if overrides is not None else {}
     if height is not None:
         fixed["height"] = float(height)
     if speed is not None:
         fixed["speed"] = float(speed)
     walker = rm.sample_walker(rng, kind, **fixed)
-    traj = rm.base_trajectory(walker, rate_hz=RATE)
+    traj = trajectory.base_trajectory(walker, rate_hz=RATE)
     dims = BodyDims.from_height(walker.height)
     pose = walking_pose(traj, dims)
     heading = np.unwrap(np.asarray(traj.heading, dtype=np.float64))
@@ -192,7 +198,8 @@ def replay_input(source: Any) -> tuple[np.ndarray, np.ndarray | None, str]:
 
     Tracks and skeletons go through :func:`handover_env.data.recording.position_array`: real
     numbers only, finite, within the +-MAX_ABS_COORD_M an :class:`Episode` may hold; a skeleton
-    also needs every bone (:func:`handover_env.skeleton.shortest_bone`) at least MIN_BONE_M long.
+    also needs every bone (:func:`handover_env.person.skeleton.shortest_bone`) at least MIN_BONE_M
+    long.
 
     Raises:
         ValueError (:class:`~handover_env.data.dataset.DatasetError`): naming the field.
@@ -234,7 +241,7 @@ def recorded_motion(source: Any, height: float | None = None) -> PersonMotion:
 
     Raises:
         ValueError: a malformed replay (:func:`replay_input`), or a skeleton whose body height
-            is not a person's (:data:`handover_env.receiver_motion.HEIGHT_RANGE`).
+            is not a person's (:data:`handover_env.person.motion.HEIGHT_RANGE`).
     """
     raw_xy, skeleton, source_id = replay_input(source)
     if skeleton is not None:

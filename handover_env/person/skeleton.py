@@ -1,7 +1,7 @@
 """The receiver's skeleton: the ZED BODY_34 layout, the body's rigid segments and retargeting.
 
-The simulated person (:mod:`handover_env.body_model`) is a tree of 15 rigid segments. This module
-holds everything about their motion that is independent of MuJoCo:
+The simulated person (:mod:`handover_env.person.body_model`) is a tree of 15 rigid segments. This
+module holds everything about their motion that is independent of MuJoCo:
 
 * the ZED SDK BODY_34 joint layout of the public recordings (``JOINTS``, ``PARENTS``);
 * the segment tree (``SEGMENTS``): each segment starts at a BODY_34 joint (its origin, where the

@@ -1,5 +1,5 @@
 """Markdown rendering of the receiver calibration summary
-(:mod:`handover_env.data.transfer_report`)."""
+(:mod:`handover_env.data.transfer.report`)."""
 
 from __future__ import annotations
 
@@ -133,7 +133,7 @@ def write_markdown(
     figures: list[str] | None = None,
     skipped: list[tuple[str, str]] | None = None,
 ) -> Path:
-    """Write ``receiver_calibration.md`` from a :func:`.transfer_report.summarise` dict."""
+    """Write ``receiver_calibration.md`` from a :func:`.report.summarise` dict."""
     split = summary["split"]
     rules = summary["rules"]
     lines = [

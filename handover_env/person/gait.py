@@ -1,15 +1,15 @@
 """Full-body motion of the scripted walker, and the arm posture for a hand target.
 
 The scripted receiver's pelvis track (position, heading, stride phase) comes from
-:func:`handover_env.receiver_motion.base_trajectory`, the model shared with the synthetic dataset.
-This module adds the rest of the body as :class:`handover_env.skeleton.BodyPose` rotations on top
-of the rest pose, so that scripted and recorded receivers drive the body the same way:
+:func:`handover_env.person.trajectory.base_trajectory`, the model shared with the synthetic dataset.
+This module adds the rest of the body as :class:`handover_env.person.skeleton.BodyPose` rotations
+on top of the rest pose, so that scripted and recorded receivers drive the body the same way:
 
 * **legs**: hip flexion ``HIP_AMPLITUDE`` sin(phase) and a knee that flexes during the swing
   (peak ``KNEE_PEAK``), the left leg half a stride behind the right;
 * **arms**: shoulder flexion opposite to the leg on the same side (``ARM_AMPLITUDE``) with a
   slightly bent elbow; the right arm's swing amplitude matches the hand's forward swing in
-  :func:`~handover_env.receiver_motion.hand_position` (``HAND_SWING_RATIO`` of the height);
+  :func:`~handover_env.person.trajectory.hand_position` (``HAND_SWING_RATIO`` of the height);
 * **trunk**: upright, with a small forward lean and vertical bob twice per stride.
 
 Joint angles are typical adult walking kinematics at 0.8-1.2 m/s (Winter, *Biomechanics and Motor
@@ -26,8 +26,7 @@ import math
 
 import numpy as np
 
-from handover_env.receiver_motion import BaseTrajectory
-from handover_env.skeleton import (
+from handover_env.person.skeleton import (
     SEG,
     SEGMENTS,
     BodyDims,
@@ -37,6 +36,7 @@ from handover_env.skeleton import (
     swing,
     yaw_matrix,
 )
+from handover_env.person.trajectory import BaseTrajectory
 
 HIP_AMPLITUDE = math.radians(22.0)
 KNEE_PEAK = math.radians(60.0)

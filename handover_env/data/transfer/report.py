@@ -6,7 +6,7 @@ quantiles.
 
 1. loads each ``motion_normal_*`` / ``motion_variation_*`` pickle with the safe loader
    (:func:`~handover_env.data.public.safe_load_pickle`, numpy arrays only) and analyses it with
-   :func:`~handover_env.data.transfer_measures.analyse_recording`;
+   :func:`~handover_env.data.transfer.measures.analyse_recording`;
 2. splits the recordings into a **calibration half** and a **held-out half** with Table I's
    stratified folds (:func:`~handover_env.data.dataset.stratified_fold_ids` over the files in
    :func:`~handover_env.data.public.list_public_files` order, i.e. the order of
@@ -14,7 +14,7 @@ quantiles.
 3. writes ``receiver_calibration.json`` (quantiles 5/25/50/75/95 of every quantity, per half and
    ID / OOD / pooled, detection counts, track noise before and after the filter, the rules'
    constants) and ``receiver_calibration.md`` (the same as tables), plus the figures of
-   :mod:`handover_env.data.transfer_figures`.
+   :mod:`handover_env.data.transfer.figures`.
 
 Only statistics over recordings leave this module; no per-recording value is written.
 """
@@ -30,15 +30,17 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from handover_env.data import filtering, transfer
-from handover_env.data.dataset import DatasetError, stratified_fold_ids
+from handover_env.data import filtering
+from handover_env.data.dataset import stratified_fold_ids
+from handover_env.data.errors import DatasetError
 from handover_env.data.public import (
     OOD_PREFIX,
-    _validate_record,
     list_public_files,
     safe_load_pickle,
+    validate_record,
 )
-from handover_env.data.transfer_measures import (
+from handover_env.data.transfer import detect
+from handover_env.data.transfer.measures import (
     HAND_JUMP,
     MEASURES,
     RecordingAnalysis,
@@ -80,14 +82,14 @@ class RecordingResult:
     calibration: bool = False
 
 
-def analyse_file(path: str | os.PathLike, rate_hz: float = transfer.RATE_HZ) -> RecordingResult:
+def analyse_file(path: str | os.PathLike, rate_hz: float = detect.RATE_HZ) -> RecordingResult:
     """Safely load one public-dataset pickle and analyse it.
 
     Raises:
         DatasetError: the file cannot be loaded or validated, or is too short to analyse.
     """
     path = Path(path)
-    record = _validate_record(safe_load_pickle(path), str(path))
+    record = validate_record(safe_load_pickle(path), str(path))
     receiver = record["pose_receiver"]
     try:
         analysis = analyse_recording(receiver, record["pose_object"], record["pose_giver"], rate_hz)
@@ -97,7 +99,7 @@ def analyse_file(path: str | os.PathLike, rate_hz: float = transfer.RATE_HZ) -> 
     smooth = filtering.smooth_track(receiver, rate_hz)
     noise_smooth = track_noise(smooth, rate_hz)
     onset, k = analysis.events["onset"], analysis.events["transfer"]
-    steps = np.linalg.norm(np.diff(smooth[:, transfer.R_HAND], axis=0), axis=1)
+    steps = np.linalg.norm(np.diff(smooth[:, detect.R_HAND], axis=0), axis=1)
     jumps = np.flatnonzero(steps > HAND_JUMP)
     in_reach = (jumps >= onset - 3) & (jumps <= k + 3) if onset is not None else np.zeros(0, bool)
     noise_smooth["hand_jumps_in_reach"] = float(in_reach.sum())
@@ -221,7 +223,7 @@ def grasp_radius(group: list[RecordingResult]) -> dict[str, list[float]]:
     """How often a replayed recorded hand (joint 15, smoothed) would close on the object.
 
     For each radius of :data:`GRASP_RADII`: the fraction of the group's recordings whose hand
-    comes within it of the object in the window :data:`~.transfer_measures.GRASP_WINDOW` around the
+    comes within it of the object in the window :data:`~.measures.GRASP_WINDOW` around the
     transfer (recordings without a transfer count as misses), and anywhere in the recording.
     Also the 50/80/90/95/99 % quantiles of the joint-15 distance at the transfer and its minimum
     over that window, over recordings with a transfer.
@@ -252,10 +254,10 @@ def rules() -> dict[str, float | int | str]:
         "MIN_BASELINE_FRAMES ONSET_RISE ONSET_BACKTRACK RELEASE_BASELINE_TIME RELEASE_MARGIN "
         "RELEASE_HOLD_TIME RELEASE_SPEED ARM_BACK_MARGIN"
     ).split()
-    out: dict[str, float | int | str] = {f"transfer.{n}": getattr(transfer, n) for n in names}
+    out: dict[str, float | int | str] = {f"transfer.{n}": getattr(detect, n) for n in names}
     for n in ("CUTOFF_HZ", "ORDER", "HAMPEL_HALF_WINDOW", "HAMPEL_SIGMAS", "HAMPEL_MIN_DEVIATION"):
         out[f"filtering.{n}"] = getattr(filtering, n)
-    out["hand joints"] = "nearest of " + ", ".join(map(str, transfer.HAND_JOINTS))
+    out["hand joints"] = "nearest of " + ", ".join(map(str, detect.HAND_JOINTS))
     return out
 
 
@@ -272,7 +274,7 @@ def summarise(
     groups = _groups(results)
     return {
         "source": source,
-        "rate_hz": transfer.RATE_HZ,
+        "rate_hz": detect.RATE_HZ,
         "recordings": len(results),
         "skipped_files": len(skipped or []),
         "split": {
@@ -285,7 +287,7 @@ def summarise(
         },
         "groups": {g: len(v) for g, v in groups.items()},
         "rules": rules(),
-        "failures": transfer.FAILURES,
+        "failures": detect.FAILURES,
         "detection": {g: _detection(v) for g, v in groups.items()},
         "measures": {
             name: {"section": sec, "label": label, "unit": unit}
@@ -328,7 +330,7 @@ def run_transfer_stats(
     Returns:
         ``(summary, written paths)``.
     """
-    from handover_env.data.transfer_markdown import write_markdown
+    from handover_env.data.transfer.markdown import write_markdown
 
     results, skipped = analyse_folder(folder, skip_bad=skip_bad, progress=progress, limit=limit)
     assign_halves(results, folds, seed, calibration_folds)
@@ -342,7 +344,7 @@ def run_transfer_stats(
     written = [write_json(summary, out / JSON_NAME)]
     figure_names: list[str] = []
     if figures:
-        from handover_env.data.transfer_figures import write_figures
+        from handover_env.data.transfer.figures import write_figures
 
         paths = write_figures(results, out)
         written += paths

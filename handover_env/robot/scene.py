@@ -3,8 +3,8 @@
 * The world (floor, pedestal, object, receiver mocap bodies, cameras) is our own MJCF,
   ``handover_env/assets/scene.xml``.
 * The UR5e (``universal_robots_ur5e/ur5e.xml``) and the 2F-85 (``robotiq_2f85/2f85.xml``) are the
-  unmodified Menagerie files (see :mod:`handover_env.menagerie`). The gripper is attached to the
-  UR5e ``attachment_site`` with ``MjSpec.attach``; the arm is attached to the pedestal's
+  unmodified Menagerie files (see :mod:`handover_env.robot.menagerie`). The gripper is attached to
+  the UR5e ``attachment_site`` with ``MjSpec.attach``; the arm is attached to the pedestal's
   ``robot_mount`` site at (0, -0.2, 0.79), the base position of the public dataset's own robot
   replay, turned by ``base_yaw``.
 * What we change in the compiled model, not in the files: the six UR5e position servos become
@@ -15,7 +15,7 @@
   gripper subtree (plus whatever it holds) exerts on the flange, in the site frame.
 * The robot's grasp is a weld equality, ``gripper_grasp`` (2F-85 pads <-> object), switched at
   runtime through ``data.eq_active`` (see :mod:`handover_env.envs.base_handover` for why). The
-  person holds the object through their compliant arm (:mod:`handover_env.grip`).
+  person holds the object through their compliant arm (:mod:`handover_env.person.grip`).
 
 Base yaw: the dataset's handovers happen at x 0..0.5, y -0.3..-0.8, z 1.0..1.36, i.e. beside the
 base toward -y (where the receiver walks past) and slightly +x (where the receiver comes from).
@@ -35,11 +35,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from handover_env.body_model import GEOM_NAMES, BodyIds, add_receiver, body_ids
-from handover_env.body_model import PREFIX as RECEIVER_PREFIX
-from handover_env.menagerie import robotiq_2f85_xml, ur5e_xml
+from handover_env.person.body_model import GEOM_NAMES, BodyIds, add_receiver, body_ids
+from handover_env.person.body_model import PREFIX as RECEIVER_PREFIX
+from handover_env.robot.menagerie import robotiq_2f85_xml, ur5e_xml
 
-ASSETS = Path(__file__).resolve().parent / "assets"
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
 ROBOT_BASE = (0.0, -0.2, 0.79)
 ARM_JOINTS = (
     "shoulder_pan_joint",

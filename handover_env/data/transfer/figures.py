@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from handover_env.data.transfer import RATE_HZ
-from handover_env.data.transfer_measures import trace_lags
+from handover_env.data.transfer.detect import RATE_HZ
+from handover_env.data.transfer.measures import trace_lags
 
 #: Plot a lag only where at least this many recordings have a value.
 MIN_RECORDINGS = 10

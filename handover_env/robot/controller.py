@@ -33,6 +33,11 @@ We implement it as a torque controller, run every ``ticks`` physics steps on a g
   are precomputed in one matrix product per replan. With Λ frozen the whole law is affine in
   the measured TCP pose and twists, so each planned tick gets one (7, 26) matrix at the replan
   and a tick is J, three small products and the clip (see :class:`ImpedanceController`).
+
+This module is over 500 lines because the controller is one class whose per-tick law and the
+precomputation that makes it affine (gain maps, reference filter, frozen Λ) share the same
+matrices and index layout (``_Z_*``/``_B_*``); split apart, each half would only be read with
+the other. :func:`inverse_kinematics` (the ready pose) shares :func:`target_rotation`.
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ import mujoco
 import numpy as np
 
 from handover_env.config import HandoverParams
-from handover_env.scene import TORQUE_LIMITS, SceneIds
+from handover_env.robot.scene import TORQUE_LIMITS, SceneIds
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
@@ -181,7 +186,7 @@ class ImpedanceController:
 
     Args:
         model: the compiled scene.
-        ids: index lookup from :func:`handover_env.scene.scene_ids`.
+        ids: index lookup from :func:`handover_env.robot.scene.scene_ids`.
         params: Θ (K and B are used here).
         config: fixed controller settings.
         rest_qpos: the posture the null-space term pulls toward (6,).

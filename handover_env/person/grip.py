@@ -17,9 +17,9 @@ relaxed posture (Mussa-Ivaldi, Hogan & Bizzi 1985: 300-800 N/m; Tsuji et al. 199
 So the pull on the robot builds up as the person walks on while the robot still holds the object:
 the wrist F/T sensor measures exactly this force, and the gripper opens when it exceeds f_r.
 
-The hand's own pose follows the person's motion (a stiff weld, see :mod:`handover_env.body_model`);
-the grip spring is the only coupling between the person and the object, so the force the person
-exerts (``pull``) is known exactly.
+The hand's own pose follows the person's motion (a stiff weld, see
+:mod:`handover_env.person.body_model`); the grip spring is the only coupling between the person
+and the object, so the force the person exerts (``pull``) is known exactly.
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handover_env.data.dataset import DatasetError
+from handover_env.data.errors import DatasetError
 from handover_env.data.limits import (
     MAX_NPZ_BYTES,
     MAX_NPZ_MEMBER_BYTES,

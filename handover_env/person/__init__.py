@@ -1,0 +1,15 @@
+"""The simulated person who takes the object: body, motion and behaviour.
+
+* :mod:`.skeleton`: the BODY_34 skeleton, body dimensions and segment poses;
+* :mod:`.body_model`: the articulated, compliant body in MuJoCo;
+* :mod:`.motion`: scripted walkers (calibrated distributions, field ranges, body proportions);
+* :mod:`.trajectory`: a walker's pelvis track, and the shoulder and hand along it;
+* :mod:`.gait`: the walking pose of the whole body, and the arm's inverse kinematics;
+* :mod:`.person`: a person's nominal motion, scripted or recorded;
+* :mod:`.settings`: how the person reaches, grasps, holds and pulls (``ReceiverConfig``);
+* :mod:`.receiver`: the person during an episode (walk on, reach, grasp, hold, pull);
+* :mod:`.pose`: the body at a playback position, the arm posed toward the hand's target;
+* :mod:`.targets`: the MuJoCo targets that move the body, at every controller tick;
+* :mod:`.effort`: what the handover costs the person (reach, arm-out time, path deviation);
+* :mod:`.grip`, :mod:`.min_jerk`: the hand's grip on the object and its minimum-jerk paths.
+"""

@@ -1,0 +1,205 @@
+"""The simulated person's body at a playback position of their nominal motion.
+
+A :class:`MotionPose` reads a :class:`handover_env.person.person.PersonMotion` at a fractional
+frame ``tau``: the pelvis, the right shoulder and the walking direction, the grip point of the
+walking arm swing or of the recorded arm, and the whole body's segment poses with the right arm
+posed toward a hand target (two-link inverse kinematics, :func:`handover_env.person.gait.arm_pose`)
+and the trunk turned and leaned toward a far one. Velocities scale with the playback speed
+factor ``rho`` (1 = as recorded). :class:`handover_env.person.receiver.Receiver` decides the hand
+target; this module only poses the body.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from handover_env.person.gait import arm_pose
+from handover_env.person.person import RATE, PersonMotion
+from handover_env.person.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, mat_to_quat
+
+#: The arm counts as straight at this fraction of its full length (the elbow never locks).
+STRAIGHT_ARM = 0.97
+#: The farthest the trunk turns and leans toward a far hand target, rad (20 deg).
+TRUNK_MAX_TURN = math.radians(20.0)
+#: The torso and the segments it carries (head, both arms), which turn with it.
+UPPER_BODY = tuple(i for i in range(len(SEGMENTS)) if i == SEG["torso"] or SEGMENTS[i].parent in (
+    SEG["torso"], SEG["upper_arm_r"], SEG["forearm_r"], SEG["upper_arm_l"], SEG["forearm_l"]))
+#: Multiplies a unit quaternion (w, x, y, z) into its conjugate, the inverse rotation.
+QUAT_CONJ = np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (..., 4) quaternions."""
+    w1, x1, y1, z1 = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    w2, x2, y2, z2 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    out[..., 1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    out[..., 2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    out[..., 3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+    return out
+
+
+def quat_to_mat(q: np.ndarray) -> np.ndarray:
+    """The rotation matrix (3, 3) of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def interp(frames: np.ndarray, tau: float) -> np.ndarray:
+    """``frames`` (T, ...) linearly interpolated at the fractional frame ``tau`` (clamped)."""
+    n = frames.shape[0]
+    f = min(max(tau, 0.0), n - 1.0)
+    i = min(int(f), n - 2)
+    a = f - i
+    return frames[i] * (1.0 - a) + frames[i + 1] * a
+
+
+class MotionPose:
+    """The body of one person's nominal motion at playback positions.
+
+    Args:
+        motion: the person's nominal motion (its ``dims`` fix the body's proportions).
+
+    Attributes:
+        shoulder_local: the right shoulder in the torso frame, m.
+        grip_local: the right hand's grip point in the hand frame, m.
+        arm_reach: shoulder to grip point of the straight right arm, m.
+    """
+
+    def __init__(self, motion: PersonMotion) -> None:
+        self.motion = motion
+        dims = motion.dims
+        self.shoulder_local = dims.local(J["RIGHT_SHOULDER"], SEG["torso"])
+        self.grip_local = dims.grip("r")
+        self.arm_reach = float(
+            np.linalg.norm(dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"]))
+            + np.linalg.norm(dims.grip("r") + dims.local(J["RIGHT_WRIST"], SEG["forearm_r"]))
+        )
+
+    def body_frame(self, tau: float, rho: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """(right shoulder, walking direction (3,), walking speed) at playback position tau."""
+        m = self.motion
+        torso_q = interp(m.quat[:, SEG["torso"]], tau)
+        torso = quat_to_mat(torso_q / np.linalg.norm(torso_q))
+        shoulder = interp(m.origin[:, SEG["torso"]], tau) + torso @ self.shoulder_local
+        h = float(interp(m.heading, tau))
+        u = np.array([math.cos(h), math.sin(h), 0.0])
+        return shoulder, u, float(interp(m.speed, tau)) * rho
+
+    def pelvis(self, tau: float, rho: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nominal pelvis position, rotation and velocity at tau."""
+        m = self.motion
+        q = interp(m.quat[:, 0], tau)
+        i = min(int(tau), m.frames - 2)
+        vel = (m.origin[i + 1, 0] - m.origin[i, 0]) * RATE * rho
+        return interp(m.origin[:, 0], tau), quat_to_mat(q / np.linalg.norm(q)), vel
+
+    def swing_hand(self, tau: float, rho: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Grip point of the walking swing at tau, with its velocity (zero acceleration)."""
+        p0 = self.grip_from_arm(tau, self.motion.arm_swing)
+        p1 = self.grip_from_arm(tau + 1.0, self.motion.arm_swing)
+        return p0, (p1 - p0) * RATE * rho, np.zeros(3)
+
+    def arm_rotations(self, tau: float, arm: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        """The torso's rotation and the right arm's segment rotations (world frame) at tau, for
+        arm rotations ``arm`` (T, 3, 3, 3) relative to the torso."""
+        m = self.motion
+        torso_q = interp(m.quat[:, SEG["torso"]], tau)
+        torso = quat_to_mat(torso_q / np.linalg.norm(torso_q))
+        rel = interp(arm, tau)
+        return torso, [torso @ rel[k] for k in range(3)]
+
+    def grip_from_arm(self, tau: float, arm: np.ndarray) -> np.ndarray:
+        """Grip point of the right hand at tau for arm rotations ``arm`` relative to the torso."""
+        torso, rots = self.arm_rotations(tau, arm)
+        m, dims = self.motion, self.motion.dims
+        shoulder = interp(m.origin[:, SEG["torso"]], tau) + torso @ self.shoulder_local
+        elbow = shoulder + rots[0] @ dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"])
+        wrist = elbow + rots[1] @ dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])
+        return wrist + rots[2] @ self.grip_local
+
+    def recorded_grip(self, tau: float) -> np.ndarray:
+        """Grip point of the recorded right arm at tau."""
+        m = self.motion
+        q = interp(m.quat[:, SEG["hand_r"]], tau)
+        rot = quat_to_mat(q / np.linalg.norm(q))
+        return interp(m.origin[:, SEG["hand_r"]], tau) + rot @ self.grip_local
+
+    def at(
+        self, tau: float, hand: np.ndarray | None, swing_arm: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Segment origins (S, 3) and quaternions (S, 4) at playback position tau.
+
+        Args:
+            tau: playback position, frames.
+            hand: the right hand's grip target (the arm is posed to it and the trunk leans
+                toward it), or None.
+            swing_arm: without a hand target, pose the right arm in its walking swing (the
+                modelled hand) instead of leaving the motion's own arm (a recorded hand).
+        """
+        m = self.motion
+        origin = interp(m.origin, tau)
+        quat = interp(m.quat, tau)
+        quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
+        arm = None
+        if hand is not None:
+            self.lean_toward(origin, quat, hand)
+            torso = quat_to_mat(quat[SEG["torso"]])
+            shoulder = origin[SEG["torso"]] + torso @ self.shoulder_local
+            # A hand held out toward an object is level, pointing away from the shoulder.
+            level = hand - shoulder
+            level[2] = 0.0
+            n = float(np.linalg.norm(level))
+            arm = arm_pose(shoulder, torso, hand, m.dims, level / n if n > 0.05 else None)
+        elif swing_arm:
+            torso = quat_to_mat(quat[SEG["torso"]])
+            rel = interp(m.arm_swing, tau)
+            arm = tuple(torso @ rel[k] for k in range(3))
+        if arm is not None:
+            dims = m.dims
+            rot_q = mat_to_quat(np.stack(arm))
+            prev = quat[list(RIGHT_ARM)]
+            rot_q *= np.where(np.sum(rot_q * prev, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+            quat[list(RIGHT_ARM)] = rot_q
+            torso = quat_to_mat(quat[SEG["torso"]])
+            shoulder = origin[SEG["torso"]] + torso @ self.shoulder_local
+            elbow = shoulder + arm[0] @ dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"])
+            wrist = elbow + arm[1] @ dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])
+            origin[RIGHT_ARM[0]], origin[RIGHT_ARM[1]], origin[RIGHT_ARM[2]] = (
+                shoulder,
+                elbow,
+                wrist,
+            )
+        return origin, quat
+
+    def lean_toward(self, origin: np.ndarray, quat: np.ndarray, hand: np.ndarray) -> None:
+        """Turn and lean the upper body toward a hand target beyond the straight arm's reach.
+
+        People reaching far bring their shoulder toward the target by turning and leaning the
+        trunk. The torso (with the head and arms) rotates about its base toward the target by
+        the smallest rotation that brings the shoulder close enough, at most ``TRUNK_MAX_TURN``
+        (modifies ``origin`` and ``quat`` in place).
+        """
+        base = origin[SEG["torso"]]
+        torso = quat_to_mat(quat[SEG["torso"]])
+        s = torso @ self.shoulder_local
+        need = float(np.linalg.norm(base + s - hand)) - STRAIGHT_ARM * self.arm_reach
+        if need <= 0.0:
+            return
+        h = hand - base
+        axis = np.cross(s, h)
+        n = float(np.linalg.norm(axis))
+        if n < 1e-9:
+            return
+        angle = min(need / float(np.linalg.norm(s)), TRUNK_MAX_TURN)
+        half = 0.5 * angle
+        dq = np.concatenate([[math.cos(half)], axis / n * math.sin(half)])
+        rot = quat_to_mat(dq)
+        for i in UPPER_BODY:
+            quat[i] = quat_mul(dq, quat[i])
+            origin[i] = base + rot @ (origin[i] - base)

@@ -1,0 +1,500 @@
+"""The simulated person during an episode: walks on, reaches, grasps, holds and pulls.
+
+This module decides, at the env's 30 Hz, what the person does and where the hand goes
+(:class:`~handover_env.person.settings.ReceiverConfig` holds the settings); the body is posed for
+it by :mod:`~handover_env.person.pose` and moved by :mod:`~handover_env.person.targets`:
+
+* **Walking.** The nominal motion (:class:`handover_env.person.person.PersonMotion`: a recorded
+  person or the scripted walker) is played back at a speed factor rho (1 = as recorded). A person
+  waiting for an object they cannot reach yet slows down (rho falls at ``slow_rate`` per second, not
+  below ``min_speed_factor``) and speeds up again once it is within reach; the camera sees the
+  pelvis of this played-back walk.
+* **Reaching** (``hand_mode="reach"``, the modelled hand): the person reaches when the object
+  will be at a comfortable place along their own path soon: its grasp point is predicted to come
+  within ``comfort_reach`` of the right shoulder when it is ``meet_forward`` ahead of it, in at
+  most ``reach_lead_time``. The hand then moves on a minimum-jerk path re-planned every step
+  toward the moving grasp point (Hoff & Arbib 1993), with a nominal duration ``reach_duration``.
+  The arm follows by two-link inverse kinematics (:func:`handover_env.person.gait.arm_pose`). If the
+  object falls behind the shoulder by ``give_up_behind`` unheld, the person walks on (a miss).
+* **Recorded hand** (``hand_mode="recorded"``): the right arm is the recorded one; when the
+  recorded grip point comes within ``close_radius`` of the object's grasp point, the hand closes
+  onto it on a minimum-jerk path of ``close_time`` (the last few cm a hand travels when it
+  grasps; the ZED hand joint sits 0.04-0.16 m off the object at the recorded transfers).
+* **Grasp rule**: the hand grasps when its grip point (the RIGHT_HAND joint) is within
+  ``grasp_radius`` of the object's grasp point (on the bottle's axis, ``grasp_offset`` below its
+  centre, below the gripper's pads): the ``receiver_grasp`` weld switches on with zero initial
+  force. Then the hand draws the object toward the carry pose while the person walks on, which
+  is the pull that the wrist sensor measures.
+* **Static handover** (``present_after_walk``): the person stops (see
+  :func:`handover_env.person.person.stopped`), raises the right hand to ``PRESENT_OFFSET`` from the
+  shoulder in ``present_time`` and waits until the robot brings the object within
+  ``present_reach``; then takes it.
+
+Effort (``effort()``): :class:`handover_env.person.effort.Effort`'s measures, plus the time lost
+to slowing down and the slowest speed factor.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from handover_env.person import motion as rm
+from handover_env.person.body_model import apply_dims
+from handover_env.person.effort import Effort
+from handover_env.person.grip import ArmGrip
+from handover_env.person.min_jerk import min_jerk_step
+from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
+from handover_env.person.pose import STRAIGHT_ARM, TRUNK_MAX_TURN, MotionPose, interp
+from handover_env.person.settings import (
+    HEIGHT_OPTION_RANGE,
+    PASS_DISTANCE,
+    ReceiverConfig,
+    check_option,
+)
+from handover_env.person.skeleton import SEG, J
+from handover_env.person.targets import BodyTargets
+from handover_env.robot.scene import SceneIds
+
+CAMERA_RATE = RATE
+STATES = ("walking", "reaching", "holding", "presenting", "presented", "passed")
+#: Shortest re-planning horizon of a hand that holds a point fixed to the body, s.
+HOLD_TRACKING = 0.3
+#: A hand drawing an object out keeps it this far from the pelvis axis (horizontally), m: the
+#: held bottle stays clear of the torso.
+CARRY_CLEARANCE = 0.35
+#: A held object counts as out of the (released) gripper once its centre is this far from the
+#: TCP (m): the bottle's radius plus the open fingers' depth.
+CLEAR_OF_GRIPPER = 0.1
+#: Where the static receiver holds the raised right hand: forward, right and up from the
+#: shoulder in the body frame, m (a hand held out in front, below shoulder height).
+PRESENT_OFFSET = (0.30, -0.15, -0.15)
+
+
+class Receiver:
+    """Drives the simulated person in a compiled handover scene.
+
+    Args:
+        model: the compiled scene (its receiver geometry is resized at every reset).
+        ids: scene indices (``ids.body`` holds the receiver's).
+        config: behaviour settings.
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, ids: SceneIds, config: ReceiverConfig | None = None
+    ) -> None:
+        self.model, self.ids, self.body = model, ids, ids.body
+        self.config = config or ReceiverConfig()
+        self.grip = ArmGrip(
+            model, int(ids.body.bodies[SEG["hand_r"]]), ids.body.grip_site, ids.object_body
+        )
+        self._v6 = np.zeros(6)
+        self.motion: PersonMotion | None = None
+        self.kind, self.source_id, self.hand_mode = "id", "", "reach"
+        self.present_after_walk = False
+        self.targets = BodyTargets(model, ids.body)
+        self.measured = Effort(ids.body)
+        self.pose: MotionPose | None = None
+        self._reset_state()
+
+    # ------------------------------------------------------------------ setup
+    def reset(self, rng: np.random.Generator, kind: str = "id", height: float | None = None,
+              speed: float | None = None, episode: Any = None, hand_mode: str = "reach",
+              walker_overrides: dict | None = None, stop_x: float | None = None) -> None:
+        """Choose the person for a new episode (validates everything before changing state).
+
+        Args:
+            rng: the env's ``np_random``.
+            kind: ``"id"`` or ``"ood"`` scripted walker, or ``"replay"``.
+            height: body height, m (scripted: fixes it; replay: default measured / 1.725).
+            speed: nominal walking speed, m/s (scripted only).
+            episode: for ``"replay"``: a ``Recording``, an ``Episode`` or a dict of arrays
+                (``receiver_xy``, optionally ``receiver_pose``, ``source_id``).
+            hand_mode: ``"reach"`` (modelled hand) or ``"recorded"`` (replay with a skeleton).
+            walker_overrides: extra ``WalkerParams`` fields for scripted walkers.
+            stop_x: static handover: stop at this pelvis x and present the hand.
+        """
+        if kind not in ("id", "ood", "replay"):
+            raise ValueError(f"receiver must be 'id', 'ood' or 'replay', got {kind!r}")
+        if hand_mode not in ("reach", "recorded"):
+            raise ValueError(f"hand_mode must be 'reach' or 'recorded', got {hand_mode!r}")
+        if height is not None:
+            height = check_option("height", height, HEIGHT_OPTION_RANGE, "m")
+        if speed is not None:
+            speed = check_option("speed", speed, rm.SPEED_RANGE, "m/s")
+        if kind == "replay":
+            if episode is None:
+                raise ValueError(
+                    "receiver='replay' needs options['episode'] (a Recording, Episode or dict)"
+                )
+            motion = recorded_motion(episode, height)
+            if hand_mode == "recorded" and not motion.has_skeleton:
+                raise ValueError("hand_mode='recorded' needs the recorded skeleton (a Recording or "
+                                 "a dict with 'receiver_pose')")
+        else:
+            if hand_mode == "recorded":
+                raise ValueError("hand_mode='recorded' is for replayed receivers")
+            motion = scripted_motion(rng, kind, height, speed, walker_overrides)
+        self.t_depart = motion.t_depart
+        if stop_x is not None:
+            motion = stopped(motion, stop_x)
+        self.motion = motion
+        self.kind, self.hand_mode, self.source_id = kind, hand_mode, motion.source_id
+        self.walker = motion.walker
+        self.height = motion.dims.height
+        self.present_after_walk = stop_x is not None
+        apply_dims(self.model, self.body, motion.dims)
+        self.targets.resize()
+        dims = motion.dims
+        self.pose = MotionPose(motion)
+        # Arm length as the recordings measure it (shoulder-elbow-wrist-hand joints) sets the
+        # comfortable distance; the trunk's turn adds to the straight arm's reach.
+        arm_length = sum(
+            float(np.linalg.norm(dims.joints[j] - dims.joints[J[p]]))
+            for j, p in (
+                (J["RIGHT_ELBOW"], "RIGHT_SHOULDER"),
+                (J["RIGHT_WRIST"], "RIGHT_ELBOW"),
+                (J["RIGHT_HAND"], "RIGHT_WRIST"),
+            )
+        )
+        self._comfort = self.config.comfort_fraction * arm_length
+        self._max_reach = (STRAIGHT_ARM * self.pose.arm_reach
+                           + float(np.linalg.norm(self.pose.shoulder_local))
+                           * math.sin(TRUNK_MAX_TURN))
+        self._reset_state()
+
+    def _reset_state(self) -> None:
+        self._grasp_side = 1.0  # +1: the hand takes the object's top part; -1: its bottom part
+        self._object_axis = np.array([0.0, 0.0, 1.0])
+        self.grip.active = False  # mj_resetData clears the grip's applied wrench
+        self.grip.force[:] = 0.0
+        self.state = "walking"
+        self.tau = 0.0
+        self.rho = 1.0
+        self.t_grasp = math.nan
+        self.t_reach = math.nan
+        self.t_hand_raised = math.nan
+        self.grasp_pelvis_xy = None
+        self._hand: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._hand_goal_time = 0.0
+        self.targets.reset()
+        self.measured.reset()
+        self.min_rho = 1.0
+        self._released = False
+        self._dt = 1.0 / RATE
+        self._gripper: np.ndarray | None = None
+        self._clear = False
+        self._gripper_axis: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def duration(self) -> float:
+        """Length of the nominal motion, s (the playback may take longer when slowed)."""
+        return 0.0 if self.motion is None else self.motion.duration
+
+    @property
+    def finished(self) -> bool:
+        """True once the playback has reached the end of the nominal motion."""
+        return self.motion is not None and self.tau >= self.motion.frames - 1
+
+    @property
+    def at_rest(self) -> bool:
+        """True once a stopping person (static handover) stands still."""
+        rest = None if self.motion is None else self.motion.rest_frame
+        return rest is not None and self.tau >= rest
+
+    @property
+    def time_lost(self) -> float:
+        """How far the person is behind their nominal walk, s."""
+        return max(0.0, self._t - self.tau / RATE)
+
+    def camera_xy(self) -> np.ndarray:
+        """The pelvis xy a camera sees now (raw recorded track at the playback position)."""
+        return interp(self.motion.camera_xy, self.tau)
+
+    def base(self) -> tuple[float, float, float]:
+        """Nominal pelvis x, y and walking heading at the playback position."""
+        x, y = interp(self.motion.origin[:, 0, :2], self.tau)
+        return float(x), float(y), float(interp(self.motion.heading, self.tau))
+
+    # ------------------------------------------------------------------ per env step
+    def start(self, data: mujoco.MjData) -> None:
+        """Put the body at the start of its motion (call at reset, before ``mj_forward``)."""
+        self._t = 0.0
+        self.targets.start(data, self._pose_at(0.0, None))
+
+    def plan_step(self, t0: float, t1: float, data: mujoco.MjData, object_pos: np.ndarray,
+                  object_vel: np.ndarray, object_rot: np.ndarray, object_free: bool,
+                  released: bool, gripper_pos: np.ndarray | None = None,
+                  gripper_axis: np.ndarray | None = None) -> None:
+        """Decide the body targets at the end of the env step [t0, t1] (once per 30 Hz step).
+
+        Args:
+            t0, t1: the env step.
+            data: the simulation (read only: the body's actual pose, for the effort measures).
+            object_pos, object_vel, object_rot: the object's position, velocity and rotation.
+            object_free: the person does not hold the object yet.
+            released: the gripper has opened.
+            gripper_pos: the gripper's TCP (the hand avoids it and draws the object clear of it).
+            gripper_axis: the gripper's approach axis (toward its fingertips) while it holds.
+        """
+        cfg = self.config
+        dt = t1 - t0
+        self._t = t0
+        self._released = released
+        self._gripper = None if gripper_pos is None else np.asarray(gripper_pos, dtype=np.float64)
+        if self._gripper is not None and self.state == "holding" and released and not self._clear:
+            self._clear = float(np.linalg.norm(object_pos - self._gripper)) > CLEAR_OF_GRIPPER
+        self._gripper_axis = (
+            None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
+        )
+        self._object_axis = object_rot[:, 2].copy()
+        grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
+        # ---- how fast to walk on
+        slow = False
+        if object_free and self.state in ("walking", "reaching"):
+            slow = self._should_slow(grasp_point, object_vel)
+        target_rho = cfg.min_speed_factor if slow else 1.0
+        step = cfg.slow_rate * dt
+        self.rho = min(max(target_rho, self.rho - step), self.rho + step)
+        self.min_rho = min(self.min_rho, self.rho)
+        self.tau = min(self.tau + self.rho * dt * RATE, self.motion.frames - 1.0)
+        # ---- what the hand does
+        if object_free:
+            self._decide(t1, grasp_point, object_vel)
+        key = self._pose_at(self.tau, (grasp_point, object_vel, dt))
+        self.targets.push(key)
+        self._t = t1
+        self._dt = dt
+
+    def _meeting(
+        self, grasp_point: np.ndarray, object_vel: np.ndarray
+    ) -> tuple[float, float, float]:
+        """Where the object is along the person's walk and when they would meet it.
+
+        Returns:
+            (forward offset of the grasp point from the right shoulder; time until it is
+            ``meet_forward`` ahead of the pelvis if both keep their velocities along the walk;
+            its distance from the shoulder then, with its current offset across the walk
+            (sideways and up) and the meeting point's offset along it).
+        """
+        shoulder, u, v = self.pose.body_frame(self.tau, self.rho)
+        pelvis = interp(self.motion.origin[:, 0], self.tau)
+        rel = grasp_point - shoulder
+        fwd = float(rel @ u)
+        across = float(np.linalg.norm(rel - fwd * u))
+        gap = float((grasp_point - pelvis) @ u) - self.config.meet_forward
+        if gap <= 0.0:
+            return fwd, 0.0, float(np.linalg.norm(rel))
+        closing = v - float(object_vel @ u)
+        if closing <= 1e-3:
+            return fwd, math.inf, math.inf
+        return fwd, gap / closing, math.hypot(across, fwd - gap)
+
+    def _left_behind(self, fwd: float, dist: float) -> bool:
+        """The person has walked past the object: it is ``give_up_behind`` behind the shoulder
+        and they are beside it (not just heading elsewhere far from it)."""
+        return fwd < -self.config.give_up_behind and dist < PASS_DISTANCE
+
+    def _should_slow(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> bool:
+        cfg = self.config
+        if self.present_after_walk:
+            return False
+        fwd, t_meet, dist = self._meeting(grasp_point, object_vel)
+        if self._left_behind(fwd, dist):
+            return False
+        return t_meet <= cfg.reach_lead_time and dist > self._comfort
+
+    def _decide(self, t: float, grasp_point: np.ndarray, object_vel: np.ndarray) -> None:
+        cfg = self.config
+        if self.state == "walking" and not self.present_after_walk and self.hand_mode == "reach":
+            fwd, t_meet, dist = self._meeting(grasp_point, object_vel)
+            if self._left_behind(fwd, dist):
+                self._pass(t)
+            elif t_meet <= cfg.reach_lead_time and dist <= self._max_reach:
+                self._begin_reach(t, cfg.reach_duration)
+        elif (
+            self.state == "walking" and self.hand_mode == "recorded" and not self.present_after_walk
+        ):
+            grip = self.pose.recorded_grip(self.tau)
+            centre = grasp_point - self._object_axis * (self._grasp_side * cfg.grasp_offset)
+            if np.linalg.norm(grip - centre) <= cfg.close_radius:
+                # Close on the part of the object the hand comes from (its top or its bottom).
+                self._grasp_side = (
+                    1.0 if float((grip - centre) @ self._object_axis) >= 0.0 else -1.0
+                )
+                self._begin_reach(t, cfg.close_time)
+        elif self.state == "walking" and self.present_after_walk and self.at_rest:
+            self.state = "presenting"
+            self._hand = self.pose.swing_hand(self.tau, self.rho)
+            self._hand_goal_time = t + cfg.present_time
+        elif self.state == "presenting" and t >= self._hand_goal_time:
+            self.state = "presented"
+            self.t_hand_raised = t
+        elif (
+            self.state == "presented"
+            and np.linalg.norm(self._hand[0] - grasp_point) <= cfg.present_reach
+        ):
+            self._begin_reach(t, cfg.close_time)
+        elif self.state == "reaching" and self.hand_mode == "reach" and not self.present_after_walk:
+            fwd, _, dist = self._meeting(grasp_point, object_vel)
+            if self._left_behind(fwd, dist):
+                self._pass(t)
+
+    def _pass(self, t: float) -> None:
+        """The object is left behind: the person walks on (the arm returns to its swing)."""
+        self.state = "passed"
+        self._hand_goal_time = t + self.config.pull_time
+
+    def _begin_reach(self, t: float, duration: float) -> None:
+        if self._hand is None:  # start from where the arm is, at its current velocity
+            if self.hand_mode == "recorded":
+                p0, p1 = self.pose.recorded_grip(self.tau), self.pose.recorded_grip(self.tau + 1.0)
+                self._hand = (p0, (p1 - p0) * RATE * self.rho, np.zeros(3))
+            else:
+                self._hand = self.pose.swing_hand(self.tau, self.rho)
+        self.state = "reaching"
+        self.t_reach = t
+        self._hand_goal_time = t + duration
+
+    def _hand_target(
+        self, tau: float, grasp: tuple[np.ndarray, np.ndarray, float] | None
+    ) -> np.ndarray | None:
+        """Advance the modelled hand one env step; None when the arm follows the nominal motion."""
+        cfg = self.config
+        state = self.state
+        if state == "walking" or (state == "passed" and self._hand is None):
+            return None
+        if grasp is None:
+            return self._hand[0] if self._hand is not None else None
+        grasp_point, object_vel, dt = grasp
+        shoulder, _, _ = self.pose.body_frame(tau, self.rho)
+        if state == "reaching":
+            # Approach the grasp point from the person's side and a little above: aim at a point
+            # ``approach_distance`` toward the shoulder (horizontally) and ``approach_height`` up,
+            # and close in over the last ``close_time``, so the hand does not sweep through the
+            # gripper holding the object.
+            away = shoulder - grasp_point
+            away[2] = 0.0
+            if self._gripper_axis is not None:
+                # From the fingertips' side of the gripper, if that side faces the person.
+                axis = self._gripper_axis.copy()
+                axis[2] = 0.0
+                if float(axis @ away) > 0.0:
+                    away = axis
+            norm = float(np.linalg.norm(away))
+            if float(np.linalg.norm(grasp_point - shoulder)) > self._max_reach:
+                # Out of reach: hold the hand ready in front of the object; close in only once
+                # it can be taken.
+                self._hand_goal_time = max(self._hand_goal_time, self._t + cfg.close_time)
+            remaining = self._hand_goal_time - self._t
+            w = min(max(remaining / cfg.close_time, 0.0), 1.0)
+            w = w * w * (3.0 - 2.0 * w)
+            offset = away * (cfg.approach_distance * w / norm) if norm > 1e-6 else np.zeros(3)
+            offset[2] = self._grasp_side * cfg.approach_height * w
+            goal, goal_v = grasp_point + offset, object_vel
+        elif state == "holding" and self._t < self.t_grasp + cfg.hold_time:
+            # The arm stays out, moving with the body (the shared hold of the recordings).
+            pelvis, rot, vel = self.pose.pelvis(tau, self.rho)
+            goal, goal_v = pelvis + rot @ self._hold_rel, vel
+        elif state == "holding" and not self._clear:
+            # Draw the object out toward the body at the height it is held, not down across the
+            # gripper's fingers, until it is clear of the gripper.
+            pelvis, rot, vel = self.pose.pelvis(tau, self.rho)
+            pull = self._hold_rel.copy()
+            reach = float(np.linalg.norm(pull[:2]))
+            pull[:2] *= max(reach - cfg.pull_distance, min(reach, CARRY_CLEARANCE)) / max(
+                reach, 1e-6
+            )
+            goal, goal_v = pelvis + rot @ pull, vel
+        elif state == "holding":
+            swing = self.pose.swing_hand(tau, self.rho)
+            _, u, _ = self.pose.body_frame(tau, self.rho)
+            goal, goal_v = swing[0] + cfg.carry_forward * u, swing[1]
+        elif state in ("presenting", "presented"):
+            torso, _ = self.pose.arm_rotations(tau, self.motion.arm_swing)
+            goal, goal_v = shoulder + torso @ np.asarray(PRESENT_OFFSET), np.zeros(3)
+        else:  # passed: the hand returns to the swing
+            goal, goal_v = self.pose.swing_hand(tau, self.rho)[:2]
+        if state == "holding" and self._t < self.t_grasp + cfg.hold_time:
+            # Settle onto the body-fixed hold over the hold time (no yank to catch up).
+            remaining = max(self.t_grasp + cfg.hold_time - self._t, HOLD_TRACKING)
+        elif state == "passed":
+            remaining = max(self._hand_goal_time - self._t, cfg.pull_time)
+        else:
+            remaining = max(self._hand_goal_time - self._t, 0.1)
+        # Aim where the goal will be when the movement ends (it moves on at goal_v).
+        x, v, a = min_jerk_step(*self._hand, goal + goal_v * remaining, goal_v, remaining, dt)
+        off = x - shoulder
+        dist = float(np.linalg.norm(off))
+        if dist > self.pose.arm_reach:
+            x = shoulder + off * (self.pose.arm_reach / dist)
+        self._hand = (x, v, a)
+        return x
+
+    def _pose_at(self, tau: float, grasp: tuple | None) -> tuple[np.ndarray, np.ndarray]:
+        """Segment origins (S, 3) and quaternions (S, 4) at playback position tau, the modelled
+        hand advanced by one env step."""
+        hand = self._hand_target(tau, grasp)
+        return self.pose.at(tau, hand, swing_arm=self.hand_mode == "reach")
+
+    def end_step(self, data: mujoco.MjData) -> None:
+        """The env step's physics is done: record the person's effort over it."""
+        arm_out = self.state in ("reaching", "presenting", "presented") or (
+            self.state == "holding" and not self._released
+        )
+        # the nominal pelvis at the end of this step
+        self.measured.track(data, arm_out, self.targets.key1[0][0], self._dt)
+
+    # ------------------------------------------------------------------ grasp
+    def grasp_point(self, data: mujoco.MjData) -> np.ndarray:
+        """Where the hand holds the object: on its axis, ``grasp_offset`` from its centre."""
+        ob = self.ids.object_body
+        return data.xpos[ob] + data.xmat[ob].reshape(3, 3)[:, 2] * (
+            self._grasp_side * self.config.grasp_offset
+        )
+
+    @property
+    def holding(self) -> bool:
+        """True while the person's hand holds the object."""
+        return self.grip.active
+
+    def try_grasp(self, model: mujoco.MjModel, data: mujoco.MjData) -> bool:
+        """Grasp if the grip point is at the object's grasp point and moves with it (within
+        ``grasp_radius`` and ``grasp_speed``). Returns True on grasp."""
+        if self.state != "reaching":
+            return False
+        cfg = self.config
+        grip = data.site_xpos[self.body.grip_site]
+        if np.linalg.norm(grip - self.grasp_point(data)) > cfg.grasp_radius:
+            return False
+        v = self._v6
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_SITE, self.body.grip_site, v, 0)
+        v_grip = v[3:].copy()
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, self.ids.object_body, v, 0)
+        if np.linalg.norm(v_grip - v[3:]) > cfg.grasp_speed:
+            return False
+        self.grip.close(data, np.array([0.0, 0.0, self._grasp_side * cfg.grasp_offset]))
+        self.state = "holding"
+        self.t_grasp = float(data.time)
+        self.grasp_pelvis_xy = data.xpos[self.body.bodies[0], :2].copy()
+        pelvis, rot, _ = self.pose.pelvis(self.tau, self.rho)
+        self._hold_rel = (
+            rot.T @ (self._hand[0] - pelvis) if self._hand is not None else rot.T @ (grip - pelvis)
+        )
+        self._hand_goal_time = self.t_grasp + self.config.hold_time + self.config.pull_time
+        return True
+
+    # ------------------------------------------------------------------ effort
+    def effort(self) -> dict[str, float]:
+        """The person's effort so far (see the module docstring)."""
+        return {
+            "reach_distance": self.measured.reach_distance,
+            "arm_extended_time": self.measured.arm_out_time,
+            "time_lost": self.time_lost,
+            "min_speed_factor": self.min_rho,
+            "path_deviation": self.measured.path_deviation,
+        }

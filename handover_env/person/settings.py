@@ -1,0 +1,197 @@
+"""How the simulated person reaches, grasps, holds, slows down and pulls: :class:`ReceiverConfig`.
+
+The settings of :class:`handover_env.person.receiver.Receiver` (the envs' ``person=`` overrides),
+each a real number within a stated range (:data:`SETTING_RANGES`), and the checks of the numeric
+reset options (``height``, ``speed``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from handover_env.person.person import RATE
+
+#: Speed up to which a segment's target is led by the feed-forward, m/s (peak hand speeds of
+#: fast human reaches are about 2-3 m/s).
+MAX_SEGMENT_SPEED = 3.0
+#: An object behind the person counts as walked past only if it is within this distance, m.
+PASS_DISTANCE = 1.2
+
+# Ranges of the person settings (ReceiverConfig; the envs' ``person=`` overrides). A value
+# outside its range is refused with the setting and the range named.
+#: The env's longest episode, s (StaticHandover-v0: 600 steps at 30 Hz): a slower movement never
+#: ends within an episode.
+LONGEST_EPISODE = 20.0
+#: The shortest movement, s: one env step (the hand's path is re-planned once per step).
+SHORTEST_MOVE = 1.0 / RATE
+#: The longest arm's reach, m: shoulder to grip centre of a 2.3 m body (ARM_REACH_RATIO 0.386).
+LONGEST_REACH = 0.9
+#: The ``height`` reset option's range, m (adults; the walker model itself takes 1.0 .. 2.3).
+HEIGHT_OPTION_RANGE = (1.2, 2.2)
+#: Half the height of the bottle handed over, m (handover_env/assets/scene.xml: size 0.033 0.1).
+OBJECT_HALF_HEIGHT = 0.1
+#: (low, high, unit, where the range comes from) of every ReceiverConfig field.
+SETTING_RANGES: dict[str, tuple[float, float, str, str]] = {
+    "reach_duration": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "reach_lead_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "meet_forward": (0.0, LONGEST_REACH, "m", "ahead of the pelvis within the longest reach"),
+    "comfort_fraction": (0.1, 2.0, "", "of the arm's length"),
+    "min_speed_factor": (0.05, 1.0, "", "a waiting person walks at least 1/20 of their speed"),
+    "slow_rate": (1.0 / LONGEST_EPISODE, RATE, "1/s",
+                  "changes the speed factor by 1 over the longest episode .. in one env step"),
+    "give_up_behind": (0.0, 1.0, "m", f"an object is walked past only within {PASS_DISTANCE} m"),
+    "hold_time": (0.0, LONGEST_EPISODE, "s", "up to the longest episode"),
+    "pull_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "pull_distance": (0.0, LONGEST_REACH, "m", "within the longest reach"),
+    "grasp_radius": (0.005, 2 * OBJECT_HALF_HEIGHT, "m", "5 mm .. the bottle's height"),
+    "grasp_speed": (0.01, MAX_SEGMENT_SPEED, "m/s", "up to a fast human hand"),
+    "grasp_offset": (-OBJECT_HALF_HEIGHT, OBJECT_HALF_HEIGHT, "m",
+                     "on the bottle's axis, within its half-height"),
+    "approach_distance": (0.0, 0.5 * LONGEST_REACH, "m", "within half the longest reach"),
+    "approach_height": (0.0, 0.5 * LONGEST_REACH, "m", "within half the longest reach"),
+    "close_radius": (0.005, LONGEST_REACH, "m", "5 mm .. the longest reach"),
+    "close_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "carry_forward": (0.0, 0.5 * LONGEST_REACH, "m", "within half the longest reach"),
+    "present_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
+    "present_reach": (0.005, LONGEST_REACH, "m", "5 mm .. the longest reach"),
+}
+
+
+@dataclass(frozen=True)
+class ReceiverConfig:
+    """How the person reaches, grasps, holds, slows down and pulls (see the module docstring).
+
+    The defaults are calibrated on the calibration half (Table I folds 0-4) of the development
+    copy's ID recordings by ``python -m handover_env.data transfer-stats``
+    (``docs/calibration/receiver_calibration.md``; medians unless said otherwise):
+
+    Args:
+        reach_duration: onset to grasp of a reach, s (0.63).
+        reach_lead_time: the reach starts when the object will be at the meeting point within
+            this time, s (the onset leads the transfer by the reach duration, 0.63).
+        meet_forward: how far ahead of the pelvis, along the walk, people take the object, m (0.35).
+        comfort_fraction: the farthest people take the object from, as a fraction of their arm
+            length (shoulder-elbow-wrist-hand joints): p95 of the object-shoulder distance over
+            the arm length at transfer, 1.10 (median 0.86; the grip centre lies beyond the hand
+            joint, and the trunk turns toward the object). People start to reach for an object
+            that they can reach when they meet it (straight arm and turned trunk); if it will be
+            farther than this fraction, they also slow down (down to ``min_speed_factor``).
+        min_speed_factor: the slowest people walk while waiting for the object, as a fraction of
+            their own speed (p25 of the minimum walking speed in the handover window relative to
+            the speed before the reach, 0.82; the median, 0.91, is above the same measure in a
+            window without a handover, 0.75: people do not slow down for a handover that is on
+            time). ``slow_rate``: how fast the speed factor changes, 1/s.
+        give_up_behind: an unheld object this far behind the shoulder (along the walk) is left
+            behind: the person walks past, m.
+        hold_time: after the grasp the arm stays out, moving with the body, for this long before
+            drawing back, s (arm-extended time 1.30 s minus the reach, 0.67; the hand is drawn
+            back 0.37 s before the giver lets go, 1.0 s after the grasp: 0.63).
+        pull_time: how long drawing the hand back takes, s: first straight toward the body at
+            the height of the hold, by ``pull_distance`` (m, but no closer than
+            ``CARRY_CLEARANCE`` to the pelvis axis), until the object is clear of the gripper,
+            then down to the carry pose.
+        grasp_radius: the hand grasps when its grip point is this close to the grasp point, m,
+        grasp_speed: and moves relative to it slower than this, m/s (a hand closes on an object
+            it has caught up with; the grip is then :mod:`handover_env.person.grip`'s spring).
+        grasp_offset: the grasp point's offset from the object's centre along its axis, m: the
+            top of the bottle, above the gripper's pads (a modelled reach, which lifts the hand
+            above the object), or its bottom, below the pads (a recorded hand that closes in
+            from below).
+        approach_distance, approach_height: the hand approaches the grasp point from this far
+            toward the person and this far above it, closing in over the last ``close_time``, m.
+        close_radius: recorded hand: the hand closes onto the object once the recorded grip point
+            is this close to the object's centre, m (0.28: p95 of the recorded hand joint's
+            distance from the object at the transfer; the ZED hand joint sits 0.17 m off the
+            object there in the median recording).
+        close_time: the closing motion's duration, s.
+        carry_forward: the carry pose is this far forward of the hand's walking swing, m.
+        present_time: static handover: time to raise the hand, s.
+        present_reach: static handover: the raised hand takes the object once it is this close, m.
+    """
+
+    reach_duration: float = 0.63
+    reach_lead_time: float = 0.63
+    meet_forward: float = 0.35
+    comfort_fraction: float = 1.10
+    min_speed_factor: float = 0.82
+    slow_rate: float = 1.5
+    give_up_behind: float = 0.35
+    hold_time: float = 0.63
+    pull_time: float = 0.5
+    pull_distance: float = 0.2
+    grasp_radius: float = 0.03
+    grasp_speed: float = 0.2
+    grasp_offset: float = 0.075
+    approach_distance: float = 0.12
+    approach_height: float = 0.04
+    close_radius: float = 0.28
+    close_time: float = 0.25
+    carry_forward: float = 0.15
+    present_time: float = 0.8
+    present_reach: float = 0.15
+
+    def __post_init__(self) -> None:
+        for name in self.__dataclass_fields__:
+            object.__setattr__(self, name, check_setting(name, getattr(self, name)))
+
+
+def check_setting(name: str, value: object) -> float:
+    """``value`` as a float if it is a valid person setting ``name`` (:data:`SETTING_RANGES`)."""
+    lo, hi, unit, why = SETTING_RANGES[name]
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        raise ValueError(f"person setting {name} must be a number, got {value!r:.80}")
+    x = float(value)
+    if not (math.isfinite(x) and lo <= x <= hi):
+        raise ValueError(
+            f"person setting {name} must be {'' if math.isfinite(x) else 'finite and '}in "
+            f"[{lo:.4g}, {hi:.4g}]{' ' + unit if unit else ''} ({why}), got {value!r}"
+        )
+    return x
+
+
+def check_option(name: str, value: object, bounds: tuple[float, float], unit: str) -> float:
+    """A numeric reset option as a float: a real number (not a bool), finite, within bounds."""
+    lo, hi = bounds
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}] {unit}, got {value!r:.80}")
+    x = float(value)
+    if not (math.isfinite(x) and lo <= x <= hi):
+        raise ValueError(f"{name} must be in [{lo:g}, {hi:g}] {unit}, got {value!r}")
+    return x
+
+
+def person_config(person: object, miss_distance: float) -> ReceiverConfig:
+    """The env's ``person=`` overrides as a :class:`ReceiverConfig` (``give_up_behind`` defaults
+    to the env's ``miss_distance``).
+
+    Raises:
+        ValueError: ``person`` is not a dict, names an unknown setting, or a value is not a
+            number within its range (:data:`SETTING_RANGES`); the message names the setting.
+    """
+    if person is None:
+        person = {}
+    if not isinstance(person, Mapping):
+        raise ValueError(
+            f"person must be a dict of ReceiverConfig settings, got {type(person).__name__}"
+        )
+    known = ReceiverConfig.__dataclass_fields__
+    unknown = sorted(repr(k) for k in person if not isinstance(k, str) or k not in known)
+    if unknown:
+        raise ValueError(
+            f"unknown person setting(s) {unknown}; see handover_env.person.settings.ReceiverConfig"
+        )
+    overrides = dict(person)
+    if "give_up_behind" not in overrides:
+        try:
+            overrides["give_up_behind"] = check_setting("give_up_behind", miss_distance)
+        except ValueError as exc:
+            raise ValueError(f"miss_distance (the person's give_up_behind): {exc}") from None
+    return ReceiverConfig(**overrides)
