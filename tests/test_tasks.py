@@ -1,5 +1,6 @@
 """The handover variants are Task objects: receiver set-up, episode end and a weighted reward in
-info."""
+info; a task reads the env and returns values, it never writes an env attribute (dm_control's
+Task)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import pytest
 
 import handover_env  # noqa: F401
 from agents.reactive import ReactiveAgent
+from agents.static import StaticAgent
 from handover_env.envs.tasks import DynamicHandover, HandoverReward, HandoverTask, StaticHandover
 
 DYNAMIC = "handover_env/DynamicHandover-v0"
@@ -112,3 +114,63 @@ def test_bad_task_and_reward_arguments_are_clear_errors():
         gym.make(DYNAMIC, reward={"sucess": 1.0})
     with pytest.raises(ValueError, match="stabilisation_delay"):
         StaticHandover(stabilisation_delay=-1.0)
+
+
+# -------------------------------------------------------------- tasks write no env attribute
+class _ReadOnlyEnv:
+    """The env as a task sees it: every attribute readable, none writable."""
+
+    def __init__(self, env) -> None:
+        object.__setattr__(self, "_env", env)
+
+    def __getattr__(self, name):
+        return getattr(self._env, name)
+
+    def __setattr__(self, name, value):
+        raise AssertionError(f"a task wrote env.{name}")
+
+
+class _Guarded:
+    """A task whose methods get the read-only env."""
+
+    def __init__(self, task) -> None:
+        self._task = task
+
+    def __getattr__(self, name):
+        attr = getattr(self._task, name)
+        if not callable(attr):
+            return attr
+        return lambda env, *args, **kwargs: attr(_ReadOnlyEnv(env), *args, **kwargs)
+
+
+def _static_episode(guard: bool) -> tuple[list[float], dict, float, float]:
+    env = gym.make("handover_env/StaticHandover-v0")
+    u = env.unwrapped
+    if guard:
+        u.task = _Guarded(u.task)
+    agent = StaticAgent()
+    obs, _ = env.reset(seed=3, options={"receiver": "id"})
+    agent.reset()
+    enabled = [float(obs[u.layout.slices()["robot_enabled"][0]][0])]
+    while True:
+        obs, _, term, trunc, info = env.step(agent.act(obs))
+        enabled.append(float(obs[u.layout.slices()["robot_enabled"][0]][0]))
+        if term or trunc:
+            break
+    t_detect, t_enabled = u.t_detect, u.t_enabled
+    env.close()
+    return enabled, info, t_detect, t_enabled
+
+
+def test_tasks_return_values_and_the_env_stores_them():
+    enabled, info, t_detect, t_enabled = _static_episode(guard=True)
+    # the env asked the task: the robot was held until the raised hand's detection + 2 s
+    assert info["outcome"] == "success"
+    assert not math.isnan(t_detect) and t_enabled == t_detect + 2.0
+    assert enabled[0] == 0.0 and enabled[-1] == 1.0
+    first = enabled.index(1.0)
+    assert np.all(np.asarray(enabled[:first]) == 0.0) and np.all(np.asarray(enabled[first:]) == 1.0)
+    assert abs(first / 30.0 - t_enabled) <= 1.0 / 30.0 + 1e-9
+    # the same episode as with the task called directly
+    plain = _static_episode(guard=False)
+    assert plain[0] == enabled and plain[1] == info and plain[2:] == (t_detect, t_enabled)

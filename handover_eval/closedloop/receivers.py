@@ -13,8 +13,8 @@ Every agent meets the same receivers, so that each can be paired with the reacti
   its dataset index.
 
 For recordings, :func:`recorded_transfer` gives when and where the recorded receiver took the
-object (``handover_env.data.transfer.detect_transfer`` on the smoothed skeleton and object), the
-reference that the simulated transfer is compared with (Δt, Δx).
+object (``handover_env.data.transfer.detect.detect_transfer`` on the smoothed skeleton and
+object), the reference that the simulated transfer is compared with (Δt, Δx).
 """
 
 from __future__ import annotations
@@ -147,7 +147,7 @@ def recorded_transfer(path: str) -> tuple[float, float]:
     """``(time s, pelvis x m)`` of the recorded receiver's grasp, NaNs when none is detected."""
     from handover_env.data.filtering import smooth_track
     from handover_env.data.recording import load_recording
-    from handover_env.data.transfer import detect_transfer
+    from handover_env.data.transfer.detect import detect_transfer
 
     rec = load_recording(path)
     pose = smooth_track(rec.receiver_pose, RATE_HZ)
