@@ -11,7 +11,7 @@ import re
 
 import pytest
 
-from handover_eval.cli import closedloop as closedloop_cli
+from handover_eval.cli import closedloop as cli_closedloop
 from handover_eval.cli import evaluate as evaluate_cli
 from handover_eval.cli import train as train_cli
 from handover_eval.cli.args import IntRange, int_in_range
@@ -44,8 +44,8 @@ def test_every_integer_option_is_bounded() -> None:
     """No plain ``type=int`` is left unchecked: each is an IntRange, or (evaluate.py's open- and
     closed-loop commands, whose bad values are one-line errors of the command) in COUNTS."""
     checked_later = {"table1": evaluate_cli.COUNTS, "sample-efficiency": evaluate_cli.COUNTS,
-                     "tradeoff": evaluate_cli.COUNTS, "closed-loop": closedloop_cli.COUNTS,
-                     "theta-sweep": closedloop_cli.COUNTS}
+                     "tradeoff": evaluate_cli.COUNTS, "closed-loop": cli_closedloop.COUNTS,
+                     "theta-sweep": cli_closedloop.COUNTS}
     seen = 0
     for parser in (train_cli.build_parser(), evaluate_cli.build_parser()):
         for name, sub in _subcommands(parser).items():

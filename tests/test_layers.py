@@ -221,6 +221,18 @@ def test_the_robot_and_the_person_do_not_import_the_envs():
     assert env_importers_below(graph) == []
 
 
+def test_no_two_classes_share_a_name():
+    seen: dict[str, list[str]] = {}
+    for pkg in LAYERS:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ClassDef):
+                    seen.setdefault(node.name, []).append(str(path.relative_to(ROOT)))
+    twins = {name: where for name, where in seen.items() if len(where) > 1}
+    assert not twins, f"one name per idea: {twins}"
+
+
 def _tree(root: Path, files: dict[str, str]) -> Path:
     for rel, text in files.items():
         path = root / rel

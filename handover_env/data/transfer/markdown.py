@@ -143,8 +143,8 @@ def write_markdown(
         f"docs/calibration` from `{summary['source']}` ({summary['recordings']} recordings"
         + (f", first {summary['limit']} of each kind only" if summary.get("limit") else "")
         + f", {summary['skipped_files']} skipped). Statistics over recordings only; no recording's "
-        "own values are stored. Code: `handover_env/data/transfer.py` (rules), "
-        "`transfer_measures.py` (quantities), `filtering.py` (the track filter).",
+        "own values are stored. Code: `handover_env/data/transfer/detect.py` (rules), "
+        "`transfer/measures.py` (quantities), `data/filtering.py` (the track filter).",
         "",
         "## Split",
         "",
