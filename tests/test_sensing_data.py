@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from handover_env.data.__main__ import main
 from handover_env.data.sensing import sensing_figures, track_jitter
 from handover_env.receiver_motion import base_trajectory, sample_walker
 from handover_env.sensors import Camera, make_profile
@@ -20,9 +21,21 @@ REAL = Path(os.environ.get("HANDOVER_PUBLIC_DIR", "") or (
     Path(__file__).resolve().parents[1].parent
     / "shared" / "data" / "dynamic_handover_dataset" / "whole_motions"
 ))
-pytestmark = pytest.mark.skipif(
+needs_data = pytest.mark.skipif(
     not REAL.is_dir(), reason="public dataset copy not found at ../shared/data"
 )
+
+
+def test_sensing_command_refuses_a_folder_without_recordings(tmp_path, capsys):
+    assert main(["sensing", str(tmp_path)]) == 2
+    assert "no motion_normal_<i>.pkl" in capsys.readouterr().err
+
+
+@needs_data
+def test_sensing_command_prints_the_figures(capsys):
+    assert main(["sensing", str(REAL), "--limit", "5"]) == 0
+    out = capsys.readouterr().out
+    assert "ID recordings: 5" in out and "pelvis jitter" in out and "mm" in out
 
 
 @pytest.fixture(scope="module")
@@ -30,6 +43,7 @@ def figures() -> dict[str, float]:
     return sensing_figures(REAL)
 
 
+@needs_data
 def test_simulated_pelvis_jitter_matches_the_recordings(figures):
     """Acceptance: the same statistic (track_jitter) within 20 % on a walker's smooth track."""
     params = make_profile("paper").camera
@@ -45,6 +59,7 @@ def test_simulated_pelvis_jitter_matches_the_recordings(figures):
     assert model == pytest.approx(recorded, rel=0.2)
 
 
+@needs_data
 def test_paper_camera_profile_quotes_the_recordings(figures):
     cam = make_profile("paper").camera
     assert figures["recordings"] >= 700 and figures["repeated_frames"] == 0
