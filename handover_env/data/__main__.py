@@ -11,6 +11,7 @@ Commands (each has ``--help``)::
     plot DATASET OUT.png               top-down receiver and giver paths, ID and OOD
     transfer-stats PUBLIC_DIR --out DIR
                                        receiver calibration: when/where the object changes hands
+    sensing PUBLIC_DIR [--limit N]     camera-model figures: jitter, hand error, re-fit bursts
 
 Wherever a dataset is read, PATH may be a ``.npz``, a public-dataset folder, or ``synthetic``
 for the embedded default (900 ID + 100 OOD, seed 0).
@@ -212,6 +213,13 @@ def cmd_transfer_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sensing(args: argparse.Namespace) -> int:
+    from handover_env.data.sensing import format_figures, sensing_figures
+
+    print(format_figures(sensing_figures(args.public_dir, limit=args.limit)))
+    return 0
+
+
 def _fraction(text: str) -> float:
     value = float(text)
     if not 0.0 <= value <= 1.0:
@@ -375,6 +383,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="analyse only the first N ID and N OOD files (a quick look; not Table I's split)",
     )
     p.set_defaults(func=cmd_transfer_stats)
+
+    p = sub.add_parser(
+        "sensing",
+        help="camera-model figures derived from the recordings",
+        description="Measure, over the ID recordings, the pelvis jitter, the ZED hand's error "
+        "against the OptiTrack object while carrying, and the tracker's re-fit bursts: the "
+        "numbers of the 'paper' camera profile (handover_env.sensors). Prints them only.",
+    )
+    p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
+    p.add_argument("--limit", type=_positive_int, default=None,
+                   help="use only the first N ID recordings (a quick look)")
+    p.set_defaults(func=cmd_sensing)
     return parser
 
 
