@@ -14,7 +14,8 @@ import pytest
 
 from handover_env.data.__main__ import main
 from handover_env.data.sensing import sensing_figures, track_jitter
-from handover_env.receiver_motion import base_trajectory, sample_walker
+from handover_env.person.motion import sample_walker
+from handover_env.person.trajectory import base_trajectory
 from handover_env.sensors import Camera, make_profile
 
 REAL = Path(os.environ.get("HANDOVER_PUBLIC_DIR", "") or (

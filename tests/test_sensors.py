@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from handover_env.data.sensing import ar1_highpass, track_jitter
-from handover_env.receiver_motion import base_trajectory, sample_walker
+from handover_env.person.motion import sample_walker
+from handover_env.person.trajectory import base_trajectory
 from handover_env.sensors import (
     Camera,
     CameraParams,
