@@ -414,15 +414,17 @@ class HandoverEnvBase(gym.Env, EzPickle):
         if self.outcome != "running":
             raise RuntimeError("step() called after the episode ended; call reset()")
         a = np.asarray(action)
-        if a.shape != (4,) or not (
-            np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
-        ):
+        kind = a.dtype.kind  # "f" floating, "i"/"u" integer: np.issubdtype without its cost
+        if a.shape != (4,) or kind not in "fiu":
             raise ValueError(f"action must be 4 finite real numbers (x, y, z, yaw), got {action!r}")
-        vals = a.astype(np.float64).tolist()
-        if not all(math.isfinite(v) for v in vals):
+        # float16/32/64 become the same Python floats as through float64; others convert first
+        vals = (a if kind == "f" and a.dtype.itemsize <= 8 else a.astype(np.float64)).tolist()
+        x, y, z, yaw = vals
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(yaw)):
             raise ValueError(f"action must be 4 finite numbers (x, y, z, yaw), got {action!r}")
-        lo, hi = self._act_low, self._act_high
-        x, y, z, yaw = (min(max(v, lo[k]), hi[k]) for k, v in enumerate(vals))  # np.clip to the Box
+        lo, hi = self._act_low, self._act_high  # np.clip to the Box
+        x, y, z = min(max(x, lo[0]), hi[0]), min(max(y, lo[1]), hi[1]), min(max(z, lo[2]), hi[2])
+        yaw = min(max(yaw, lo[3]), hi[3])
         m, d = self.model, self.data
         t0 = d.time
         if t0 >= self.t_enabled:
