@@ -336,6 +336,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.t_enabled = 0.0
         self.t_detect = math.nan
         self._receiver_frames: list[tuple[float, float]] = []
+        # the same frames as an array (rows [0, len(_receiver_frames))) for the observation
+        self._frames_buf = np.zeros((1024, 2))
         self._hand_frames: list[np.ndarray] = []
         self._step_count = 0
         self.contacts.reset()
@@ -404,6 +406,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
             nx, ny = self._camera_noise[min(k, self._camera_noise.shape[0] - 1)].tolist()
             x, y = x + nx, y + ny
         self._receiver_frames.append((x, y))
+        buf = self._frames_buf
+        if k >= buf.shape[0]:  # an env stepped past its TimeLimit (or without one)
+            buf = self._frames_buf = np.concatenate([buf, np.zeros_like(buf)])
+        buf[k, 0], buf[k, 1] = x, y
 
     def step(self, action: np.ndarray):
         if not getattr(self, "_ready", False):
@@ -584,7 +590,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         n_true = len(self._receiver_frames)
         n = max(1, n_true - self.obs_latency)
         w = self.layout.history
-        frames = np.asarray(self._receiver_frames[max(0, n - w):n])
+        frames = self._frames_buf[max(0, n - w):n]
         hist = v["receiver_xy_history"].reshape(w, 2)
         hist[w - frames.shape[0]:] = frames
         hist[: w - frames.shape[0]] = frames[0]
