@@ -4,7 +4,13 @@ Each benchmark is a standalone script that times our code against a reference in
 (the env against raw ``mj_step``, the SPGP planner against IAAL, the baselines against the
 planner) and prints ratios: absolute times on a shared machine are noise, ratios are not.
 
-Usage: ``python bench/run_all.py [--quick] [--only NAME ...]``
+``rl_throughput`` (agent steps per second per core, one and two vector envs) and
+``agent_episode_cost`` (CPU seconds per closed-loop episode of every agent) report throughput
+rather than a ratio. ``make_test_time`` (the wall time of ``make install`` and of ``make
+test``'s pytest on a fresh clone) installs a whole environment, so it runs only when asked:
+``--make-test-clone PATH`` (with ``--dry-run`` it prints its commands instead).
+
+Usage: ``python bench/run_all.py [--quick] [--only NAME ...] [--make-test-clone PATH [--dry-run]]``
 """
 
 from __future__ import annotations
@@ -24,6 +30,8 @@ ORDER = (
     "baseline_latency",
     "reactive_success",
     "sweep_backends",
+    "rl_throughput",
+    "agent_episode_cost",
 )
 
 
@@ -37,7 +45,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--only", nargs="*", default=None, help="benchmark names to run (default: all)"
     )
+    parser.add_argument(
+        "--make-test-clone", default=None, metavar="PATH",
+        help="also time make install / make test in this fresh clone (bench/make_test_time.py)",
+    )
+    parser.add_argument(
+        "--dry-run", action="store_true", help="with --make-test-clone: print its commands only"
+    )
     args = parser.parse_args(argv)
+    if args.dry_run and not args.make_test_clone:
+        parser.error("--dry-run applies to --make-test-clone")
     names = [n for n in ORDER if (BENCH_DIR / f"{n}.py").is_file()]
     if args.only:
         unknown = sorted(set(args.only) - set(names))
@@ -54,6 +71,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"--- {name}: exit {code}, {time.perf_counter() - start:.1f} s wall", flush=True)
         if code:
             failures.append(name)
+    if args.make_test_clone:
+        print("\n=== bench/make_test_time.py ===", flush=True)
+        cmd = [sys.executable, str(BENCH_DIR / "make_test_time.py"), args.make_test_clone]
+        if subprocess.call(cmd + (["--dry-run"] if args.dry_run else []), env=env):
+            failures.append("make_test_time")
     if failures:
         print(f"\nfailed: {failures}")
     return 1 if failures else 0

@@ -336,6 +336,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.t_enabled = 0.0
         self.t_detect = math.nan
         self._receiver_frames: list[tuple[float, float]] = []
+        # the same frames as an array (rows [0, len(_receiver_frames))) for the observation
+        self._frames_buf = np.zeros((1024, 2))
         self._hand_frames: list[np.ndarray] = []
         self._step_count = 0
         self.contacts.reset()
@@ -404,6 +406,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
             nx, ny = self._camera_noise[min(k, self._camera_noise.shape[0] - 1)].tolist()
             x, y = x + nx, y + ny
         self._receiver_frames.append((x, y))
+        buf = self._frames_buf
+        if k >= buf.shape[0]:  # an env stepped past its TimeLimit (or without one)
+            buf = self._frames_buf = np.concatenate([buf, np.zeros_like(buf)])
+        buf[k, 0], buf[k, 1] = x, y
 
     def step(self, action: np.ndarray):
         if not getattr(self, "_ready", False):
@@ -414,15 +420,17 @@ class HandoverEnvBase(gym.Env, EzPickle):
         if self.outcome != "running":
             raise RuntimeError("step() called after the episode ended; call reset()")
         a = np.asarray(action)
-        if a.shape != (4,) or not (
-            np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)
-        ):
+        kind = a.dtype.kind  # "f" floating, "i"/"u" integer: np.issubdtype without its cost
+        if a.shape != (4,) or kind not in "fiu":
             raise ValueError(f"action must be 4 finite real numbers (x, y, z, yaw), got {action!r}")
-        vals = a.astype(np.float64).tolist()
-        if not all(math.isfinite(v) for v in vals):
+        # float16/32/64 become the same Python floats as through float64; others convert first
+        vals = (a if kind == "f" and a.dtype.itemsize <= 8 else a.astype(np.float64)).tolist()
+        x, y, z, yaw = vals
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(yaw)):
             raise ValueError(f"action must be 4 finite numbers (x, y, z, yaw), got {action!r}")
-        lo, hi = self._act_low, self._act_high
-        x, y, z, yaw = (min(max(v, lo[k]), hi[k]) for k, v in enumerate(vals))  # np.clip to the Box
+        lo, hi = self._act_low, self._act_high  # np.clip to the Box
+        x, y, z = min(max(x, lo[0]), hi[0]), min(max(y, lo[1]), hi[1]), min(max(z, lo[2]), hi[2])
+        yaw = min(max(yaw, lo[3]), hi[3])
         m, d = self.model, self.data
         t0 = d.time
         if t0 >= self.t_enabled:
@@ -582,7 +590,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         n_true = len(self._receiver_frames)
         n = max(1, n_true - self.obs_latency)
         w = self.layout.history
-        frames = np.asarray(self._receiver_frames[max(0, n - w):n])
+        frames = self._frames_buf[max(0, n - w):n]
         hist = v["receiver_xy_history"].reshape(w, 2)
         hist[w - frames.shape[0]:] = frames
         hist[: w - frames.shape[0]] = frames[0]

@@ -35,6 +35,7 @@ K_ARM = 500.0
 B_ARM = 10.0
 K_ROT = 5.0
 B_ROT = 0.2
+_SITE, _BODY = int(mujoco.mjtObj.mjOBJ_SITE), int(mujoco.mjtObj.mjOBJ_BODY)
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,6 @@ class ArmGrip:
         self.model = model
         self.hand, self.site, self.obj = hand_body, grip_site, object_body
         self.config = config or GripConfig()
-        self._qfrc = np.zeros(model.nv)
         self._v_site = np.zeros(6)
         self._v_obj = np.zeros(6)
         self.active = False
@@ -93,6 +93,11 @@ class ArmGrip:
         self._inertia = model.body_inertia[object_body].copy()
         self._mass = float(model.body_mass[object_body])
         self._rot_damping = np.full(3, self.config.rot_damping)
+        self._bound: mujoco.MjData | None = None
+        self._rel_w = np.zeros(3)
+        self._grasp = np.zeros(3)
+        self._grip = np.zeros(3)
+        self._neg_force = np.zeros(3)
 
     def close(self, data: mujoco.MjData, grasp_local: np.ndarray) -> None:
         """Close the hand: hold the object at its point ``grasp_local`` (object frame), keeping
@@ -112,30 +117,62 @@ class ArmGrip:
         self.force[:] = 0.0
         data.qfrc_applied[:] = 0.0
 
+    def _bind(self, data: mujoco.MjData) -> None:
+        """Views of the ``data`` rows read at every tick (MjData buffers never move)."""
+        self._bound = data
+        self._r_obj_v = data.xmat[self.obj].reshape(3, 3)
+        self._r_hand_v = data.xmat[self.hand].reshape(3, 3)
+        self._pos_obj_v = data.xpos[self.obj]
+        self._grip_v = data.site_xpos[self.site]
+        self._qfrc_v = data.qfrc_applied
+
     def apply(self, data: mujoco.MjData) -> None:
-        """Write this tick's grip wrench into ``data.qfrc_applied`` (call at every tick)."""
+        """Write this tick's grip wrench into ``data.qfrc_applied`` (call at every tick).
+
+        The 3-vector sums and cross products are plain floats (the same IEEE operations as
+        numpy's elementwise ones, at a fraction of the call overhead); the 3x3 products stay
+        numpy's, whose rounding they are defined by.
+        """
         if not self.active:
             return
+        if data is not self._bound:
+            self._bind(data)
         m, c = self.model, self.config
-        r_obj = data.xmat[self.obj].reshape(3, 3)
-        grasp = data.xpos[self.obj] + r_obj @ self.offset_local
-        grip = data.site_xpos[self.site]
-        mujoco.mj_objectVelocity(m, data, mujoco.mjtObj.mjOBJ_SITE, self.site, self._v_site, 0)
-        mujoco.mj_objectVelocity(m, data, mujoco.mjtObj.mjOBJ_BODY, self.obj, self._v_obj, 0)
+        r_obj = self._r_obj_v
+        pos = self._pos_obj_v
+        arm = r_obj @ self.offset_local
+        a0, a1, a2 = arm.tolist()
+        p0, p1, p2 = pos.tolist()
+        g0, g1, g2 = p0 + a0, p1 + a1, p2 + a2  # the object's grasp point
+        v_site, v_obj = self._v_site, self._v_obj
+        mujoco.mj_objectVelocity(m, data, _SITE, self.site, v_site, 0)
+        mujoco.mj_objectVelocity(m, data, _BODY, self.obj, v_obj, 0)
         # Velocity of the object's grasp point: v_origin + w x (grasp - origin).
-        w_obj = self._v_obj[:3]
-        v_grasp = self._v_obj[3:] + np.cross(w_obj, grasp - data.xpos[self.obj])
-        force = c.stiffness * (grip - grasp) + c.damping * (self._v_site[3:] - v_grasp)
-        r_goal = data.xmat[self.hand].reshape(3, 3) @ self._rel_rot
+        wx, wy, wz, vx, vy, vz = v_obj.tolist()
+        d0, d1, d2 = g0 - p0, g1 - p1, g2 - p2
+        u0, u1, u2 = vx + (wy * d2 - wz * d1), vy + (wz * d0 - wx * d2), vz + (wx * d1 - wy * d0)
+        sx, sy, sz, s0, s1, s2 = v_site.tolist()
+        h0, h1, h2 = self._grip_v.tolist()
+        k, b = c.stiffness, c.damping
+        force = self.force
+        force[0] = k * (h0 - g0) + b * (s0 - u0)
+        force[1] = k * (h1 - g1) + b * (s1 - u1)
+        force[2] = k * (h2 - g2) + b * (s2 - u2)
+        r_goal = self._r_hand_v @ self._rel_rot
         # In the object's frame (its z is the bottle's axis): transverse axes only.
         e = r_obj.T @ _rotation_vector(r_goal @ r_obj.T)
-        w = r_obj.T @ (self._v_site[:3] - w_obj)
+        rel_w = self._rel_w
+        rel_w[0], rel_w[1], rel_w[2] = sx - wx, sy - wy, sz - wz
+        w = r_obj.T @ rel_w
         torque_local = c.rot_stiffness * e + self._rot_damping * w
         torque_local[2] = 0.0
         torque = r_obj @ torque_local
-        self.force[:] = force
-        q = self._qfrc
+        grasp, grip = self._grasp, self._grip
+        grasp[0], grasp[1], grasp[2] = g0, g1, g2
+        grip[0], grip[1], grip[2] = h0, h1, h2
+        q = self._qfrc_v
         q[:] = 0.0
         mujoco.mj_applyFT(m, data, force, torque, grasp, self.obj, q)
-        mujoco.mj_applyFT(m, data, -force, -torque, grip, self.hand, q)
-        data.qfrc_applied[:] = q
+        np.negative(force, out=self._neg_force)
+        np.negative(torque, out=torque)
+        mujoco.mj_applyFT(m, data, self._neg_force, torque, grip, self.hand, q)

@@ -14,7 +14,7 @@ import numpy as np
 
 from handover_env.person.body_model import BodyIds, weld_lag_times
 from handover_env.person.person import RATE
-from handover_env.person.pose import QUAT_CONJ, quat_mul
+from handover_env.person.pose import quat_mul
 from handover_env.person.settings import MAX_SEGMENT_SPEED
 from handover_env.person.skeleton import SEGMENTS
 
@@ -54,6 +54,17 @@ class BodyTargets:
     def resize(self) -> None:
         """Read the welds' lag times again (after the body was resized for a new person)."""
         self._lag, self._acc_gain = weld_lag_times(self.model, self.body)
+        n = len(self._lag)
+        self._lag_dt = self._lag / (1.0 / RATE)  # lag / dt
+        # Per-row gain and limit of the stacked [velocity; acceleration] feed-forward.
+        self._gains = np.concatenate([self._lag, self._acc_gain])[:, None]
+        self._limits = np.repeat([MAX_SEGMENT_SPEED, MAX_SEGMENT_ACCEL], n)[:, None].astype(float)
+        self._dq = np.zeros((3, n))
+        self._keys = np.zeros((2, n, 4))
+        self._quats = np.zeros((2, n, 4))
+        self._dquat = np.zeros((n, 4))
+        self._dpos = np.zeros((n, 3))
+        self._vel_acc = np.zeros((2 * n, 3))
 
     def start(self, data: mujoco.MjData, pose: Pose) -> None:
         """Put the body and its targets at ``pose``, at rest (call at reset, before
@@ -79,31 +90,60 @@ class BodyTargets:
 
     def plan_ticks(self, alphas: list[float]) -> None:
         """The fractions of this env step at which controller ticks fall; prepares the step's
-        target interpolation (start pose and increment, velocity feed-forward included)."""
+        target interpolation (start pose and increment, velocity feed-forward included).
+
+        Every value is the same elementwise arithmetic as :func:`quat_mul` and :func:`clip_norm`
+        on the keyframes (so the targets are bit for bit those of the plain formulas), batched
+        into a few numpy calls on preallocated buffers: this runs at every env step.
+        """
         self._ticks = alphas
         self._tick_i = 0
         dt = 1.0 / RATE
         (o0, q0), (o1, q1) = self.key0, self.key1
-        # Angular velocity from q0 -> q1 (world frame): 2 log(q1 q0^-1) / dt.
-        dq = quat_mul(q1, q0 * QUAT_CONJ)
-        dq *= np.where(dq[:, :1] < 0, -1.0, 1.0)
+        # Angular velocity from q0 -> q1 (world frame): 2 log(q1 q0^-1) / dt; dq = q1 conj(q0),
+        # sign-flipped to w >= 0 (only its vector part and the sign of w are needed).
+        w1, x1, y1, z1 = q1.T
+        w0, x0, y0, z0 = q0.T
+        dq = self._dq
+        dw = w1 * w0 - x1 * -x0 - y1 * -y0 - z1 * -z0
+        dq[0] = w1 * -x0 + x1 * w0 + y1 * -z0 - z1 * -y0
+        dq[1] = w1 * -y0 - x1 * -z0 + y1 * w0 + z1 * -x0
+        dq[2] = w1 * -z0 + x1 * -y0 - y1 * -x0 + z1 * w0
         # Velocity feed-forward: a weld with damping b and stiffness k lags a target moving at v
         # by (b / k) v, so the target is placed that far ahead (the segment then sits on the
-        # nominal pose and its weld force is zero in free motion). The feed-forward rotation is
-        # constant over the step, so it is applied to both keyframes once here.
-        lag = self._lag[:, None]
-        ff_q = np.concatenate([np.ones((len(lag), 1)), dq[:, 1:] * (lag / dt)], axis=1)
-        vel = (o1 - o0) / dt
-        acc = (vel - self._vel) / dt
-        self._vel = vel
+        # nominal pose and its weld force is zero in free motion). The feed-forward rotation
+        # ff = (1, dq_xyz lag / dt) is constant over the step, so it is applied to both
+        # keyframes once here (with w = 1 the Hamilton product's 1 * q terms are exact).
+        sign = np.where(dw < 0, -1.0, 1.0)
+        dq *= sign
+        fx, fy, fz = np.multiply(dq, self._lag_dt, out=dq)
+        keys = self._keys
+        keys[0], keys[1] = q0, q1
+        kw, kx, ky, kz = keys.transpose(2, 0, 1)  # (2, S) each: both keyframes at once
+        quat = self._quats
+        quat[..., 0] = kw - fx * kx - fy * ky - fz * kz
+        quat[..., 1] = kx + fx * kw + fy * kz - fz * ky
+        quat[..., 2] = ky - fx * kz + fy * kw + fz * kx
+        quat[..., 3] = kz + fx * ky - fy * kx + fz * kw
+        self._quat0 = quat[0]
+        np.subtract(quat[1], quat[0], out=self._dquat)
+        vel_acc = self._vel_acc  # rows [0, S): velocity, [S, 2S): acceleration
+        n = len(o0)
+        vel, acc = vel_acc[:n], vel_acc[n:]
+        np.subtract(o1, o0, out=self._dpos)
+        np.divide(self._dpos, dt, out=vel)
+        np.subtract(vel, self._vel, out=acc)
+        acc /= dt
+        self._vel = vel.copy()
         # The feed-forward assumes human speeds and accelerations (a recorded arm can be tracked
         # at several m/s for a frame or two): beyond them a segment lags its recorded motion
-        # instead of being pulled by a target far ahead of it.
-        self._pos0 = (o0 + clip_norm(vel, MAX_SEGMENT_SPEED) * lag
-                      + clip_norm(acc, MAX_SEGMENT_ACCEL) * self._acc_gain[:, None])
-        self._dpos = o1 - o0
-        self._quat0 = quat_mul(ff_q, q0)
-        self._dquat = quat_mul(ff_q, q1) - self._quat0
+        # instead of being pulled by a target far ahead of it (clip_norm of both at once).
+        norm = np.sqrt(np.add.reduce(vel_acc * vel_acc, axis=1, keepdims=True))
+        scale = np.minimum(1.0, self._limits / np.maximum(norm, 1e-12))
+        lead = vel_acc * scale
+        lead *= self._gains
+        self._pos0 = o0 + lead[:n]
+        self._pos0 += lead[n:]
 
     def apply_tick(self, data: mujoco.MjData) -> None:
         """Move the targets to their pose at the next tick (linear between the step's keyframes)."""
