@@ -170,7 +170,8 @@ def leaderboard_figure(results: list[tuple[str, dict]]) -> Any:
         axes[0].errorbar(pos, vals, yerr=[lo, hi], fmt="none", ecolor="k", capsize=2, lw=0.7)
     axes[0].set_ylabel("closed-loop success (%), 95 % Wilson CI")
     axes[0].set_ylim(0, 105)
-    axes[0].legend(fontsize=7, loc="lower left")
+    axes[0].legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=len(sets),
+                   frameon=False)
     metrics = [("rms_now_axis_mm", "current-frame RMS"), ("ade_10_mm", "ADE 1 s"),
                ("fde_10_mm", "FDE 1 s")]
     width = 0.8 / len(metrics)
@@ -178,7 +179,8 @@ def leaderboard_figure(results: list[tuple[str, dict]]) -> Any:
         vals = [(_get(r, "metrics", "openloop", "all", m, "value") or math.nan) for r in ranked]
         axes[1].bar(x + (k - 1) * width, vals, width, label=label)
     axes[1].set_ylabel("open-loop error (mm), all test episodes")
-    axes[1].legend(fontsize=7)
+    axes[1].legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=3,
+                   frameon=False)
     for ax in axes:
         ax.set_xticks(x)
         ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
