@@ -1,11 +1,13 @@
 """The methods compared in Table I and the figures, built and fitted the same way for every run.
 
 ``ours`` is the paper's SPGP planner (inducing ratio 0.4 by default), ``iaal`` the same model with
-exact GPs, ``bc_mlp`` and ``act`` the learned baselines. The learned baselines are trained once per
-(method, configuration, training set, seed) and their checkpoints are reused when a matching one
-exists under the cache folder; the nonparametric methods fit in seconds and are never cached.
-The experiments pre-train ACT's models for all folds in parallel worker processes into that same
-cache (:mod:`handover_eval.act_folds`), so :func:`fit_agent` then only loads them.
+exact GPs, ``bc_mlp`` and ``act`` the learned baselines, and ``cv`` the constant-velocity predictor
+(:mod:`agents.constant_velocity`: the reactive agent's extrapolation, nothing learned), the simple
+baseline that learned trajectory predictors are held against. The learned baselines are trained
+once per (method, configuration, training set, seed) and their checkpoints are reused when a
+matching one exists under the cache folder; the nonparametric methods fit in seconds and are
+never cached. The experiments pre-train ACT's models for all folds in parallel worker processes
+into that same cache (:mod:`handover_eval.act_folds`), so :func:`fit_agent` then only loads them.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 from agents.base import Agent
 from handover_env.data.dataset import HandoverDataset
 
-METHODS: tuple[str, ...] = ("ours", "iaal", "act", "bc_mlp")
+METHODS: tuple[str, ...] = ("ours", "iaal", "act", "bc_mlp", "cv")
 LEARNED: frozenset[str] = frozenset({"act", "bc_mlp"})
 COMPLETE = "evaluate_complete.json"
 
@@ -92,6 +94,11 @@ def check_methods(names: list[str] | tuple[str, ...]) -> list[str]:
 def build_agent(name: str, options: MethodOptions, inducing_ratio: float | None = None) -> Agent:
     """A fresh, unfitted agent for ``name``."""
     check_methods([name])
+    if name == "cv":
+        from agents.constant_velocity import ConstantVelocityAgent
+        from agents.reactive import ReactiveConfig
+
+        return ConstantVelocityAgent(ReactiveConfig(horizon=options.horizon))
     if name in ("ours", "iaal"):
         from agents.nonparametric import NonparametricAgent, NonparametricConfig
         from baselines.iaal import IAALAgent
@@ -137,6 +144,40 @@ def dataset_fingerprint(dataset: HandoverDataset) -> str:
         h.update(np.ascontiguousarray(ep.receiver_xy).tobytes())
         h.update(np.ascontiguousarray(ep.giver_xyz).tobytes())
     return h.hexdigest()[:16]
+
+
+def with_test_data(dataset: HandoverDataset, test_data: HandoverDataset) -> HandoverDataset:
+    """``dataset``'s episodes, then ``test_data``'s, in one dataset (``--replay-data``).
+
+    The models fit on indices ``0 .. len(dataset) - 1`` (all of ``dataset``) and are scored on the
+    rest. A clear ValueError when the rates differ, ``test_data`` is empty, or it shares an
+    episode (the same source id or the same arrays) with ``dataset``: the recordings scored on
+    must not be in the data the models fit on.
+    """
+    if float(test_data.rate_hz) != float(dataset.rate_hz):
+        raise ValueError(
+            f"--replay-data is at {test_data.rate_hz:g} Hz, --data at {dataset.rate_hz:g} Hz"
+        )
+    if len(test_data) == 0:
+        raise ValueError("--replay-data holds no episode")
+    ids = {ep.source_id for ep in dataset}
+    prints = {dataset.subset([i]).fingerprint() for i in range(len(dataset))}
+    shared = [
+        ep.source_id
+        for i, ep in enumerate(test_data)
+        if ep.source_id in ids or test_data.subset([i]).fingerprint() in prints
+    ]
+    if shared:
+        raise ValueError(
+            f"--replay-data shares {len(shared)} episode(s) with --data (e.g. {shared[0]!r}): "
+            "the recordings scored on must not be in the data the models fit on"
+        )
+    return HandoverDataset(
+        list(dataset) + list(test_data),
+        rate_hz=dataset.rate_hz,
+        name=f"{dataset.name or 'data'} (models fit on all {len(dataset)} episodes) + "
+        f"{test_data.name or 'other data'} ({len(test_data)} episodes scored)",
+    )
 
 
 def _config_dict(agent: Agent) -> dict:

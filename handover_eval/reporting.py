@@ -26,6 +26,7 @@ METHOD_LABELS: dict[str, str] = {
     "act": "ACT",
     "iaal": "IAAL",
     "ours": "Ours (SPGP)",
+    "cv": "Constant velocity",
 }
 
 

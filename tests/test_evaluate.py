@@ -26,7 +26,7 @@ def _rows(path: Path) -> list[dict]:
 def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert evaluate.main(["table1", "--quick", "--no-progress", "--out", str(tmp_path)]) == 0
     rows = _rows(tmp_path / "table1.csv")
-    assert [r["method"] for r in rows] == ["ours", "iaal", "act", "bc_mlp"]
+    assert [r["method"] for r in rows] == ["ours", "iaal", "act", "bc_mlp", "cv"]
     for r in rows:
         for key in ("id_rms_3d_mm", "ood_rms_3d_mm"):
             assert math.isfinite(float(r[key])) and float(r[key]) > 0
@@ -34,7 +34,7 @@ def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture)
             float(r["id_rms_3d_mm"]) / math.sqrt(3), rel=1e-4
         )
     folds = _rows(tmp_path / "table1_folds.csv")
-    assert len(folds) == 4 * 3  # methods x folds
+    assert len(folds) == 5 * 3  # methods x folds
     for (
         r
     ) in rows:  # the current-frame column is the mean over folds of each fold's row-0 per-axis RMS
@@ -44,7 +44,7 @@ def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture)
         )  # CSV keeps 6 digits
         assert 0 < float(r["id_now_axis_mm"]) < float(r["id_rms_3d_mm"])
     episodes = _rows(tmp_path / "table1_episodes.csv")
-    assert len(episodes) == 4 * 30  # every episode is tested exactly once per method
+    assert len(episodes) == 5 * 30  # every episode is tested exactly once per method
     md = (tmp_path / "table1.md").read_text()
     assert "55.13 ± 2.48" in md and "BC-MLP" in md and "IAAL" in md
     out = capsys.readouterr().out

@@ -37,7 +37,7 @@ from handover_eval.closedloop.receivers import SETS
 from handover_eval.closedloop.roster import AGENTS
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, run_closed_loop
 from handover_eval.closedloop.stats import N_BOOTSTRAP
-from handover_eval.methods import MethodOptions, default_workers
+from handover_eval.methods import MethodOptions, default_workers, with_test_data
 from handover_eval.output_lock import OutputLock
 
 COMMANDS = ("closed-loop", "theta-sweep")
@@ -104,6 +104,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help=f"scripted walkers per set, seeds 0..N-1 (ID) and 10000.. (OOD) (default: 50; "
         f"{QUICK_WALKERS} with --quick)",
+    )
+    p.add_argument(
+        "--replay-data",
+        default=None,
+        metavar="PATH",
+        help="recordings to replay that are not in --data (folder, .npz): the learning agents "
+        "fit on all of --data and meet every episode of PATH (--replays-per-fold caps how many) "
+        "instead of the held-out folds of --data",
     )
     p = sub.add_parser(
         "theta-sweep",
@@ -273,8 +281,8 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
         per_fold = (
             args.replays_per_fold
             if args.replays_per_fold is not None
-            else (QUICK_REPLAYS if quick else None)
-        )
+            else (QUICK_REPLAYS if quick and getattr(args, "replay_data", None) is None else None)
+        )  # --replay-data: every episode of it, unless capped
         receivers = ClosedLoopEvalConfig(
             agents=tuple(getattr(args, "agents", ["reactive"])),
             sets=tuple(getattr(args, "sets", SETS)),
@@ -324,8 +332,14 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
 
 def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cache: Path) -> int:
     """The closed-loop run or Θ sweep into the locked folder ``out``; the exit status."""
+    replay_data = getattr(args, "replay_data", None)
     try:
         dataset = load_dataset(args.data, args.quick, args.seed)
+        replay = None
+        if replay_data is not None:
+            if not Path(replay_data).exists():
+                raise FileNotFoundError(f"--replay-data {replay_data}: no such file or folder")
+            replay = load_dataset(replay_data, args.quick, args.seed)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
@@ -339,9 +353,12 @@ def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cach
     try:
         with session(backend, receivers.workers) as sess:
             if sweep is None:
-                run = run_closed_loop(receivers, dataset, args.data, options, cache, progress)
+                run = run_closed_loop(
+                    receivers, dataset, args.data, options, cache, progress, replay, replay_data
+                )
+                shown = dataset if replay is None else with_test_data(dataset, replay)
                 write_closed_loop(
-                    run, receivers, dataset, out, args.bootstrap, args.seed, args.quick
+                    run, receivers, shown, out, args.bootstrap, args.seed, args.quick
                 )
             else:
                 from handover_eval.closedloop.theta_sweep import run_sweep

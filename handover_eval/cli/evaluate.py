@@ -9,6 +9,9 @@
     matter?
     python evaluate.py user-study --participants 8 --trials 5     # H1-H3 with simulated
     participants
+    python evaluate.py benchmark --agent my_agent.py:make_agent   # score your agent (protocol v1)
+    python evaluate.py leaderboard a/result.json b/result.json    # ranked table + PNG
+    python evaluate.py rescore a/closedloop_episodes.csv          # rebuild the tables, no episode
 
 PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
 omitted for the embedded synthetic default. Every method is scored by the same open-loop protocol
@@ -34,7 +37,7 @@ from handover_eval.backend import (
     JobError,
     session,
 )
-from handover_eval.cli import closedloop, user_study
+from handover_eval.cli import benchmark, closedloop, user_study
 from handover_eval.cli.args import (
     EPOCHS,
     FOLDS,
@@ -182,6 +185,13 @@ def build_parser() -> argparse.ArgumentParser:
         "per-episode CSVs.",
     )
     common(p, METHODS, 10)
+    p.add_argument(
+        "--replay-data",
+        default=None,
+        metavar="PATH",
+        help="recordings to score on that are not in --data (folder, .npz): every method fits "
+        "on all of --data and is scored on every episode of PATH, instead of the k-fold split",
+    )
     p = sub.add_parser(
         "sample-efficiency",
         help="RMS vs training-data ratio (PNG + CSV)",
@@ -209,6 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="test episodes streamed frame by frame to time each variant (default: 20)")
     closedloop.add_parsers(sub)
     user_study.add_parser(sub)
+    benchmark.add_parsers(sub)
     return parser
 
 
@@ -243,6 +254,8 @@ def main(argv: list[str] | None = None) -> int:
         return closedloop.main(args, load_dataset)
     if args.command == "user-study":
         return user_study.run(args)
+    if args.command in benchmark.COMMANDS:
+        return benchmark.main(args, load_dataset)
     from handover_eval.openloop.protocol import OpenLoopProtocol
 
     try:
@@ -286,8 +299,14 @@ def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) 
     """table1, sample-efficiency or tradeoff into the locked folder ``out``; the exit status."""
     from handover_eval.openloop import experiments, output, report
 
+    replay_path = getattr(args, "replay_data", None)
     try:
         dataset = load_dataset(args.data, args.quick, args.seed)
+        test_data = None
+        if replay_path is not None:
+            if not Path(replay_path).exists():
+                raise FileNotFoundError(f"--replay-data {replay_path}: no such file or folder")
+            test_data = load_dataset(replay_path, args.quick, args.seed)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
@@ -313,9 +332,10 @@ def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) 
                     out,
                     reuse=not args.no_reuse,
                     progress=progress,
+                    test_data=test_data,
                 )
                 output.write_table1(
-                    run, dataset, folds, args.seed, protocol, options.giver_state, out
+                    run, dataset, folds, args.seed, protocol, options.giver_state, out, test_data
                 )
                 print("\n" + report.table1_summary(run.rows))
             elif args.command == "sample-efficiency":

@@ -12,6 +12,11 @@ Every agent meets the same receivers, so that each can be paired with the reacti
   (the body walks the recorded pelvis track with a scripted gait). The reset seed of a replay is
   its dataset index.
 
+With ``--replay-data`` (:func:`other_replays`) the replays are every episode of another dataset
+instead: none of it is in ``--data``, the models fit on all of ``--data``
+(:data:`FIT_ALL`), and a replay's dataset index is its place after ``--data``'s episodes in the
+one dataset the workers receive (:func:`handover_eval.methods.with_test_data`).
+
 For recordings, :func:`recorded_transfer` gives when and where the recorded receiver took the
 object (``handover_env.data.transfer.detect.detect_transfer`` on the smoothed skeleton and
 object), the reference that the simulated transfer is compared with (Δt, Δx).
@@ -28,6 +33,8 @@ import numpy as np
 from handover_env.data.dataset import HandoverDataset, stratified_fold_ids
 
 SETS: tuple[str, ...] = ("id", "ood", "replay")
+#: The model "fold" of ``--replay-data`` runs: fitted on every episode of ``--data``.
+FIT_ALL = -1
 FIRST_SEED = {"id": 0, "ood": 10_000}
 RATE_HZ = 30.0
 
@@ -140,6 +147,37 @@ def replays(
                     recorded_pelvis_x=x_rec,
                 )
             )
+    return out
+
+
+def other_replays(
+    replay: HandoverDataset,
+    offset: int,
+    paths: dict[str, str],
+    max_n: int | None = None,
+) -> list[ReceiverSpec]:
+    """Every episode of ``replay`` (or ``max_n`` of them, spread evenly) as a replay receiver.
+
+    ``offset`` = the number of training episodes before them (``methods.with_test_data``); the reset
+    seed and the index are ``offset + i``; ``fold`` is None (no split: see :data:`FIT_ALL`).
+    """
+    out = []
+    for i in pick_evenly(np.arange(len(replay)), max_n):
+        ep = replay[int(i)]
+        path = paths.get(ep.source_id)
+        t_rec, x_rec = recorded_transfer(path) if path else (math.nan, math.nan)
+        out.append(
+            ReceiverSpec(
+                "replay",
+                ep.source_id,
+                offset + int(i),
+                index=offset + int(i),
+                path=path,
+                is_ood=ep.is_ood,
+                recorded_transfer_time=t_rec,
+                recorded_pelvis_x=x_rec,
+            )
+        )
     return out
 
 

@@ -12,12 +12,17 @@ scripted walkers use the fold-0 model. BC-MLP and ACT are loaded from Table I's 
 ones first, ACT through :func:`handover_eval.act_folds.pretrain_act`); ours and IAAL
 are fitted in each worker (about a second each), at most once per worker and fold.
 Θ: t_f goes to the agent (``agent.params``), K, B and f_r to the env.
+
+Besides the names, :func:`make_agent` accepts any :class:`agents.base.Agent` object (an external
+agent, e.g. one loaded by ``evaluate.py benchmark --agent``): it gets Θ's t_f when it has a
+``params`` attribute, as the built-in predictive agents do.
 """
 
 from __future__ import annotations
 
 import time
 from collections import OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -88,7 +93,7 @@ class ModelRecord:
 def prepare_models(
     dataset: HandoverDataset,
     agents: list[str],
-    splits: list[tuple[np.ndarray, np.ndarray]],
+    splits: Mapping[int, tuple[np.ndarray, np.ndarray]] | list[tuple[np.ndarray, np.ndarray]],
     folds_needed: list[int],
     options: MethodOptions,
     cache_dir: Path,
@@ -221,8 +226,16 @@ def fold_model(
     return model, record
 
 
-def make_agent(name: str, params: HandoverParams, model: Agent | None = None) -> Agent:
-    """A ready agent for one chunk of episodes (Θ's t_f set on it; K, B, f_r are the env's)."""
+def make_agent(name: str | Agent, params: HandoverParams, model: Agent | None = None) -> Agent:
+    """A ready agent for one chunk of episodes (Θ's t_f set on it; K, B, f_r are the env's).
+
+    ``name`` is a built-in name, or an external :class:`Agent` object, returned as it is with
+    ``params`` set when it has that attribute (a :class:`agents.predictive.PredictiveAgent`).
+    """
+    if isinstance(name, Agent):
+        if isinstance(getattr(name, "params", None), HandoverParams):
+            name.params = params  # type: ignore[attr-defined]
+        return name
     if name in LEARNING:
         assert model is not None, f"{name} needs its fold model"
         model.params = params  # type: ignore[attr-defined]

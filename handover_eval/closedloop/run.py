@@ -15,6 +15,12 @@ The run, top to bottom (:func:`run_closed_loop`):
    "timeout" for a TimeLimit truncation, for replays the recorded transfer and Δt, Δx, and the
    number of MuJoCo instabilities (auto-resets) in the episode.
 
+With ``--replay-data`` (``replay`` below) the replays are every episode of that other dataset,
+none of them in ``--data``, and every learning agent meets every receiver (walkers and replays)
+with one model fitted on all of ``--data`` (model fold
+:data:`~handover_eval.closedloop.receivers.FIT_ALL`); the workers receive ``--data`` followed by
+the replays (:func:`handover_eval.methods.with_test_data`).
+
 The tables and the plot are made by :mod:`.report`, :mod:`.markdown` and :mod:`.plot`; the
 files are written by :mod:`.output`.
 """
@@ -24,6 +30,7 @@ from __future__ import annotations
 import os
 import time
 import uuid
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,10 +40,12 @@ from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
 from handover_eval.backend import map_folds
 from handover_eval.closedloop.receivers import (
+    FIT_ALL,
     SETS,
     ReceiverSpec,
     fold_of,
     held_out_folds,
+    other_replays,
     recording_paths,
     replays,
     walkers,
@@ -54,7 +63,7 @@ from handover_eval.closedloop.worker import (  # noqa: F401 - episode_row re-exp
     episode_row,
     run_job,
 )
-from handover_eval.methods import MethodOptions
+from handover_eval.methods import MethodOptions, with_test_data
 
 
 @dataclass(frozen=True)
@@ -106,7 +115,7 @@ class ClosedLoopEvalConfig:
 def plan_jobs(
     config: ClosedLoopEvalConfig,
     receivers: list[ReceiverSpec],
-    splits: list[tuple[np.ndarray, np.ndarray]],
+    splits: Mapping[int, tuple[np.ndarray, np.ndarray]] | list[tuple[np.ndarray, np.ndarray]],
     options: MethodOptions,
     cache_dir: Path,
     token: str,
@@ -114,19 +123,23 @@ def plan_jobs(
     """Chunks of receivers per agent; learning agents get the fold model each receiver needs.
 
     Giver replay meets replays only. Jobs are ordered by model fold (so a worker's fold models
-    are fitted once) and, within that, by agent.
+    are fitted once) and, within that, by agent. ``splits`` maps a model fold to its (train,
+    test) indices; a replay without a fold (``--replay-data``) and every walker then meet
+    :data:`FIT_ALL`, the model of all of ``--data``.
     """
+    fit_all = FIT_ALL in (splits if isinstance(splits, Mapping) else {})
     jobs = []
     for agent in config.agents:
         groups: dict[tuple[str, int | None], list[ReceiverSpec]] = {}
         for spec in receivers:
             if agent == "giver-replay" and spec.set != "replay":
                 continue
-            fold = (
-                (spec.fold if spec.set == "replay" else config.walker_fold)
-                if agent in LEARNING
-                else None
-            )
+            if agent not in LEARNING:
+                fold = None
+            elif fit_all:
+                fold = FIT_ALL
+            else:
+                fold = spec.fold if spec.set == "replay" else config.walker_fold
             groups.setdefault((spec.set, fold), []).append(spec)
         for (_, fold), specs in groups.items():
             for i in range(0, len(specs), config.chunk):
@@ -192,12 +205,28 @@ class ClosedLoopRun:
 
 
 def build_receivers(
-    config: ClosedLoopEvalConfig, dataset: HandoverDataset, data: str | None
+    config: ClosedLoopEvalConfig,
+    dataset: HandoverDataset,
+    data: str | None,
+    replay: HandoverDataset | None = None,
+    replay_data: str | None = None,
 ) -> tuple[list[ReceiverSpec], tuple[int, ...]]:
-    """The walkers and replays of ``config`` (replays of recordings when ``data`` is a folder)."""
+    """The walkers and replays of ``config`` (replays of recordings when ``data`` is a folder).
+
+    With ``replay`` (loaded from ``replay_data``) the replays are every episode of it
+    (``config.replays_per_fold`` caps their number), indexed after ``dataset``'s episodes.
+    """
     specs = walkers(config.walkers, tuple(s for s in config.sets if s != "replay"))
     folds: tuple[int, ...] = ()
-    if "replay" in config.sets:
+    if "replay" in config.sets and replay is not None:
+        paths = recording_paths(replay_data, replay)
+        if config.hand_mode == "recorded" and not paths:
+            raise ValueError(
+                "--hand-mode recorded needs recordings with the skeleton: "
+                "--replay-data a public-dataset folder (whole_motions/)"
+            )
+        specs += other_replays(replay, len(dataset), paths, config.replays_per_fold)
+    elif "replay" in config.sets:
         fold_ids = fold_of(dataset, config.folds, config.seed)
         folds = (
             held_out_folds(config.folds)
@@ -223,12 +252,26 @@ def run_closed_loop(
     options: MethodOptions,
     cache_dir: Path,
     progress: bool = True,
+    replay: HandoverDataset | None = None,
+    replay_data: str | None = None,
 ) -> ClosedLoopRun:
-    """Receivers, fold models, then every agent's episodes (module docstring)."""
-    specs, replay_folds = build_receivers(config, dataset, data)
-    splits = dataset.stratified_kfold(config.folds, config.seed)
-    walker_folds = {config.walker_fold} if any(s.set != "replay" for s in specs) else set()
-    needed = sorted(walker_folds | {s.fold for s in specs if s.fold is not None})
+    """Receivers, fold models, then every agent's episodes (module docstring).
+
+    ``replay`` (loaded from ``replay_data``): score on every episode of it, with the models
+    fitted on all of ``dataset`` (``--replay-data``).
+    """
+    specs, replay_folds = build_receivers(config, dataset, data, replay, replay_data)
+    splits: dict[int, tuple[np.ndarray, np.ndarray]]
+    if replay is None:
+        splits = dict(enumerate(dataset.stratified_kfold(config.folds, config.seed)))
+        walker_folds = {config.walker_fold} if any(s.set != "replay" for s in specs) else set()
+        needed = sorted(walker_folds | {s.fold for s in specs if s.fold is not None})
+        shared = dataset
+    else:
+        n = len(dataset)
+        splits = {FIT_ALL: (np.arange(n, dtype=np.int64), np.arange(n, n + len(replay)))}
+        needed = [FIT_ALL]
+        shared = with_test_data(dataset, replay)
     token = f"{os.getpid()}-{uuid.uuid4().hex}"
     jobs = plan_jobs(config, specs, splits, options, cache_dir, token)
     if not jobs:
@@ -239,7 +282,7 @@ def run_closed_loop(
     )
     prepared = time.perf_counter() - t0
     t0 = time.perf_counter()
-    rows, fits = run_jobs(dataset, jobs, config.workers, progress)
+    rows, fits = run_jobs(shared, jobs, config.workers, progress)
     return ClosedLoopRun(
         rows, specs, models + fits, prepared, time.perf_counter() - t0, replay_folds
     )

@@ -20,7 +20,13 @@ import numpy as np
 
 from handover_env.data.dataset import HandoverDataset
 from handover_eval.backend import map_folds
-from handover_eval.methods import MethodOptions, build_agent, check_methods, fit_agent
+from handover_eval.methods import (
+    MethodOptions,
+    build_agent,
+    check_methods,
+    fit_agent,
+    with_test_data,
+)
 from handover_eval.openloop.protocol import OpenLoopProtocol, evaluate_openloop, summarise
 from handover_eval.reporting import PAPER_TABLE1
 
@@ -138,6 +144,8 @@ def _table1_fold(dataset: HandoverDataset, job: _Table1Fold) -> tuple[list[dict]
                 "ood_now_axis_mm": summary["ood"]["rms_now_axis_mm"],
                 "n_id": summary["id"]["n_episodes"],
                 "n_ood": summary["ood"]["n_episodes"],
+                "n_train": len(train),
+                "train_fingerprint": train.fingerprint(),
                 "fit_seconds": fit_s,
                 "checkpoint_reused": reused,
             }
@@ -151,6 +159,10 @@ def _table1_fold(dataset: HandoverDataset, job: _Table1Fold) -> tuple[list[dict]
                 "rms_3d_mm": r.rms_3d_mm,
                 "rms_axis_mm": r.rms_axis_mm,
                 "rms_now_axis_mm": r.rms_now_axis_mm,
+                "ade_05_mm": r.ade_05_mm,
+                "fde_05_mm": r.fde_05_mm,
+                "ade_10_mm": r.ade_10_mm,
+                "fde_10_mm": r.fde_10_mm,
                 "n_queries": r.n_queries,
             }
             for r in records
@@ -169,6 +181,7 @@ def run_table1(
     reuse: bool = True,
     progress: bool = True,
     workers: int | None = None,
+    test_data: HandoverDataset | None = None,
 ) -> OpenLoopRun:
     """Stratified k-fold open-loop RMS of every method (paper Table I).
 
@@ -176,14 +189,24 @@ def run_table1(
     ``workers`` processes (default ``options.workers``), into the checkpoint cache the fold loop
     then loads from (:func:`handover_eval.act_folds.pretrain_act`). ACT's
     ``fit_seconds`` is that training time (measured in its worker, beside the other workers).
+
+    With ``test_data`` (``--replay-data``) there is one "fold" (0): every method fits on all of
+    ``dataset`` and is scored on every episode of ``test_data``
+    (:func:`handover_eval.methods.with_test_data`); the ±
+    of a row is then the standard deviation over the test episodes, not over folds.
     """
     methods = check_methods(list(methods))
-    splits = _splits(dataset, folds, seed)
+    if test_data is None:
+        shared, splits = dataset, _splits(dataset, folds, seed)
+    else:
+        shared = with_test_data(dataset, test_data)
+        n, m = len(dataset), len(test_data)
+        splits = [(np.arange(n, dtype=np.int64), np.arange(n, n + m, dtype=np.int64))]
     act_runs = _pretrain_act(
         dataset,
         methods,
         [tr for tr, _ in splits],
-        [f"fold {f}" for f in range(folds)],
+        [f"fold {f}" for f in range(len(splits))],
         options,
         out_dir,
         reuse,
@@ -207,7 +230,7 @@ def run_table1(
     ]
     results = map_folds(
         _table1_fold,
-        dataset,
+        shared,
         jobs,
         workers=n_workers,
         progress=progress,
@@ -217,13 +240,24 @@ def run_table1(
     fold_rows = [row for fold, _ in results for row in fold]
     episode_rows = [row for _, eps in results for row in eps]
     rows = []
+    nan_pair = {"id": (math.nan, math.nan), "ood": (math.nan, math.nan)}
     for name in methods:
         mine = [r for r in fold_rows if r["method"] == name]
-        id_m, id_s = _fold_stats([r["id_rms_3d_mm"] for r in mine])
-        ood_m, ood_s = _fold_stats([r["ood_rms_3d_mm"] for r in mine])
-        id_now_m, id_now_s = _fold_stats([r["id_now_axis_mm"] for r in mine])
-        ood_now_m, ood_now_s = _fold_stats([r["ood_now_axis_mm"] for r in mine])
-        paper = PAPER_TABLE1[name]
+        if test_data is None:  # mean ± std over the folds of the per-fold means
+            id_m, id_s = _fold_stats([r["id_rms_3d_mm"] for r in mine])
+            ood_m, ood_s = _fold_stats([r["ood_rms_3d_mm"] for r in mine])
+            id_now_m, id_now_s = _fold_stats([r["id_now_axis_mm"] for r in mine])
+            ood_now_m, ood_now_s = _fold_stats([r["ood_now_axis_mm"] for r in mine])
+        else:  # one fit: mean ± std over the test episodes
+            eps = [r for r in episode_rows if r["method"] == name]
+
+            def over(key: str, ood: bool, eps: list[dict] = eps) -> tuple[float, float]:
+                return _fold_stats([r[key] for r in eps if r["is_ood"] == ood])
+
+            (id_m, id_s), (ood_m, ood_s) = over("rms_3d_mm", False), over("rms_3d_mm", True)
+            id_now_m, id_now_s = over("rms_now_axis_mm", False)
+            ood_now_m, ood_now_s = over("rms_now_axis_mm", True)
+        paper = PAPER_TABLE1.get(name, nan_pair)
         rows.append(
             {
                 "method": name,

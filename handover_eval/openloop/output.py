@@ -22,14 +22,16 @@ def write_table1(
     protocol: OpenLoopProtocol,
     giver_state: bool,
     out: Path,
+    test_data: HandoverDataset | None = None,
 ) -> list[Path]:
-    """table1.csv, table1_folds.csv, table1_episodes.csv and table1.md in ``out``."""
+    """table1.csv, table1_folds.csv, table1_episodes.csv and table1.md in ``out`` (``test_data``:
+    the ``--replay-data`` the methods were scored on)."""
     return [
         write_csv(run.rows, out / "table1.csv"),
         write_csv(run.per_fold, out / "table1_folds.csv"),
         write_csv(run.episodes, out / "table1_episodes.csv"),
         write_text(
-            table1_markdown(run.rows, dataset, folds, seed, protocol, giver_state),
+            table1_markdown(run.rows, dataset, folds, seed, protocol, giver_state, test_data),
             out / "table1.md",
         ),
     ]

@@ -24,6 +24,11 @@ Every method (SPGP planner, IAAL, BC-MLP, ACT, ...) is scored by this one protoc
   the planner scores 53.69 +- 1.69 (ID) / 60.81 +- 8.33 (OOD) mm on it against the paper's
   55.13 +- 2.48 / 61.83 +- 5.32, while the full 1 s horizon gives ~111 / ~152 mm in 3D. The paper
   does not state its metric, so both are reported and neither is called "the" Table I figure.
+* **Displacement errors** (``ade_05_mm``, ``fde_05_mm``, ``ade_10_mm``, ``fde_10_mm``, the
+  trajectory-prediction metrics): the mean 3D Euclidean error over the future rows 1 .. K of the
+  chunk (ADE) and the error at row K (FDE), for K = 15 (0.5 s ahead) and K = 29 (1 s: the 30-row
+  chunk's last row, 29 / 30 s ahead), in millimetres; each over the queries whose rows exist in
+  the episode (NaN when none does).
 * **Summary.** :func:`summarise` gives the mean and standard deviation over episodes, for ID and
   OOD episodes separately. **k-fold** (:func:`kfold_rms`, the paper's stratified 10-fold):
   :meth:`HandoverDataset.stratified_kfold` splits ID and OOD episodes separately; for each fold
@@ -45,6 +50,9 @@ from agents.base import Agent
 from handover_env.data.dataset import Episode, HandoverDataset
 
 SQRT3 = math.sqrt(3.0)
+#: (name, seconds ahead) of the displacement errors; row K = round(seconds * 30), at most H - 1.
+DISPLACEMENT_HORIZONS: tuple[tuple[str, float], ...] = (("05", 0.5), ("10", 1.0))
+RATE_HZ = 30.0
 
 
 @dataclass(frozen=True)
@@ -82,6 +90,10 @@ class EpisodeRecord:
     n_queries: int
     n_rows: int
     rms_now_axis_mm: float = float("nan")  # row 0 only, RMS per coordinate (see the module doc)
+    ade_05_mm: float = float("nan")
+    fde_05_mm: float = float("nan")
+    ade_10_mm: float = float("nan")
+    fde_10_mm: float = float("nan")
 
 
 def query_times(length: int, protocol: OpenLoopProtocol = OpenLoopProtocol()) -> np.ndarray:
@@ -106,9 +118,29 @@ def episode_errors(
 
     NaN, NaN and 0 when the episode has no query.
     """
+    m = episode_metrics(agent, episode, protocol)
+    return m["rms_3d_mm"], m["rms_now_axis_mm"], int(m["n_rows"])
+
+
+def displacement_row(seconds: float, horizon: int) -> int:
+    """Row K of the chunk that lies ``seconds`` ahead (at most the last row, ``horizon - 1``)."""
+    return max(1, min(int(round(seconds * RATE_HZ)), horizon - 1))
+
+
+def episode_metrics(
+    agent: Agent, episode: Episode, protocol: OpenLoopProtocol = OpenLoopProtocol()
+) -> dict[str, float]:
+    """Every open-loop metric of one episode from one set of predictions (module docstring).
+
+    Keys: ``rms_3d_mm``, ``rms_now_axis_mm``, ``ade_05_mm``, ``fde_05_mm``, ``ade_10_mm``,
+    ``fde_10_mm`` (mm) and ``n_rows`` (compared rows); NaNs and 0 rows without a query.
+    """
+    nan = float("nan")
     times = query_times(episode.length, protocol)
+    out = {"rms_3d_mm": nan, "rms_now_axis_mm": nan, "n_rows": 0.0}
+    out.update({f"{k}_{n}_mm": nan for n, _ in DISPLACEMENT_HORIZONS for k in ("ade", "fde")})
     if times.size == 0:
-        return float("nan"), float("nan"), 0
+        return out
     pred = np.asarray(agent.predict_episode(episode, times), dtype=np.float64)
     if (
         pred.shape[0] != times.size
@@ -129,8 +161,18 @@ def episode_errors(
         (pred[:, : protocol.horizon] - giver[np.minimum(rows, episode.length - 1)]) ** 2, axis=2
     )
     n = int(valid.sum())
-    now_axis = float(np.sqrt(err2[:, 0].mean() / 3.0) * 1000.0)  # row 0 always exists (t_c < L)
-    return float(np.sqrt(err2[valid].mean()) * 1000.0), now_axis, n
+    out["rms_now_axis_mm"] = float(np.sqrt(err2[:, 0].mean() / 3.0) * 1000.0)  # t_c < L: row 0
+    out["rms_3d_mm"] = float(np.sqrt(err2[valid].mean()) * 1000.0)
+    out["n_rows"] = float(n)
+    dist = np.sqrt(err2) * 1000.0
+    for name, seconds in DISPLACEMENT_HORIZONS:
+        k = displacement_row(seconds, protocol.horizon)
+        future = valid[:, 1 : k + 1]
+        if future.any():
+            out[f"ade_{name}_mm"] = float(dist[:, 1 : k + 1][future].mean())
+        if valid[:, k].any():
+            out[f"fde_{name}_mm"] = float(dist[valid[:, k], k].mean())
+    return out
 
 
 def evaluate_openloop(
@@ -144,18 +186,19 @@ def evaluate_openloop(
     records = []
     start = time.perf_counter()
     for i, ep in enumerate(dataset):
-        rms, now_axis, n_rows = episode_errors(agent, ep, protocol)
-        if n_rows == 0:
+        m = episode_metrics(agent, ep, protocol)
+        if m["n_rows"] == 0:
             continue
         records.append(
             EpisodeRecord(
                 ep.source_id,
                 ep.is_ood,
-                rms,
-                rms / SQRT3,
+                m["rms_3d_mm"],
+                m["rms_3d_mm"] / SQRT3,
                 int(query_times(ep.length, protocol).size),
-                n_rows,
-                now_axis,
+                int(m["n_rows"]),
+                m["rms_now_axis_mm"],
+                *(m[f"{k}_{n}_mm"] for n, _ in DISPLACEMENT_HORIZONS for k in ("ade", "fde")),
             )
         )
         if progress and (i + 1) % 50 == 0:

@@ -1,0 +1,191 @@
+"""``evaluate.py leaderboard``: the ranked Markdown table and a figure from result files.
+
+Only comparable results are ranked together: every file must be protocol v1 (the same version),
+and for each track every result that reports it must share that track's fingerprint (the same
+data, the same scoring data and receivers, the same protocol settings); otherwise
+:class:`LeaderboardError` says which files differ and how, in one line. Rank: by closed-loop
+success over all test receivers, then far-pass success, then the median handover time; results
+with the open-loop track only follow, by current-frame RMS.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from handover_eval.benchmark.files import check_result, load_json, protocol_version_of
+from handover_eval.benchmark.protocol import CLOSEDLOOP_SETS, REFERENCE_AGENT, TRACKS
+from handover_eval.reporting import markdown_table
+
+
+class LeaderboardError(ValueError):
+    """Results that cannot be ranked together (one line: which files, why)."""
+
+
+def load_results(paths: Sequence[str | Path]) -> list[tuple[str, dict]]:
+    """Every file parsed, the protocol versions compared, then every field checked."""
+    if not paths:
+        raise LeaderboardError("no result file given")
+    raw = [(str(p), load_json(p)) for p in paths]
+    versions = [(f, protocol_version_of(d, f)) for f, d in raw]
+    first_file, first = versions[0]
+    for f, v in versions[1:]:
+        if v != first:
+            raise LeaderboardError(
+                f"{f} is protocol version {v!r} but {first_file} is {first!r}: results of "
+                "different protocol versions are not comparable"
+            )
+    for f, d in raw:
+        check_result(d, f)
+    for track in TRACKS:
+        have = [(f, d["fingerprints"][track]) for f, d in raw if track in d["tracks"]]
+        for f, fp in have[1:]:
+            ref_file, ref = have[0]
+            if fp["fingerprint"] != ref["fingerprint"]:
+                raise LeaderboardError(
+                    f"{f} and {ref_file} differ in the {track} fingerprint "
+                    f"({fp['fingerprint'][:8]} vs {ref['fingerprint'][:8]}: "
+                    f"{_what_differs(fp, ref)}): not scored on the same data and receivers"
+                )
+    names = [d["agent"]["name"] for _, d in raw]
+    dup = next((n for n in names if names.count(n) > 1), None)
+    if dup is not None:
+        raise LeaderboardError(f"two results are for agent {dup!r}: rank each agent once")
+    return raw
+
+
+def _what_differs(a: dict, b: dict) -> str:
+    keys = [k for k in sorted(set(a) | set(b)) if k != "fingerprint" and a.get(k) != b.get(k)]
+    return "different " + ", ".join(keys) if keys else "different contents"
+
+
+def _get(d: dict, *keys: str) -> Any:
+    for k in keys:
+        if not isinstance(d, dict) or d.get(k) is None:
+            return None
+        d = d[k]
+    return d
+
+
+def _num(v: Any, default: float) -> float:
+    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else default
+
+
+def rank_key(result: dict) -> tuple:
+    """Sort key (module docstring): higher success first, then faster, then lower RMS."""
+    cl = _get(result, "metrics", "closedloop")
+    if cl is not None:
+        return (0, -_num(_get(cl, "all", "success", "value"), -1.0),
+                -_num(_get(cl, "far-pass", "success", "value"), -1.0),
+                _num(_get(cl, "all", "handover_time", "value"), math.inf),
+                result["agent"]["name"])
+    ol = _get(result, "metrics", "openloop")
+    return (1, _num(_get(ol, "all", "rms_now_axis_mm", "value"), math.inf), 0.0, 0.0,
+            result["agent"]["name"])
+
+
+def _pct(c: dict | None) -> str:
+    if c is None or c.get("value") is None:
+        return "–"
+    return f"{100 * c['value']:.0f} % [{100 * c['low']:.0f}, {100 * c['high']:.0f}]"
+
+
+def _ci(c: dict | None, digits: int, key: str = "value") -> str:
+    if c is None or c.get(key) is None or c.get("low") is None:
+        return "–"
+    sign = "+" if key == "diff" else ""
+    star = " *" if key == "diff" and (c["low"] > 0 or c["high"] < 0) else ""
+    return f"{c[key]:{sign}.{digits}f} [{c['low']:{sign}.{digits}f}, " \
+           f"{c['high']:{sign}.{digits}f}]{star}"
+
+
+def leaderboard_markdown(results: list[tuple[str, dict]]) -> str:
+    """The ranked table and what it was scored on."""
+    ranked = sorted(results, key=lambda fd: rank_key(fd[1]))
+    body = []
+    for i, (_, r) in enumerate(ranked, start=1):
+        cl = _get(r, "metrics", "closedloop") or {}
+        ol = _get(r, "metrics", "openloop") or {}
+        body.append([
+            i,
+            r["agent"]["name"] + (" (quick)" if r["quick"] else ""),
+            _pct(_get(cl, "all", "success")),
+            *(_pct(_get(cl, s, "success")) for s in CLOSEDLOOP_SETS),
+            _ci(_get(cl, "all", "handover_time"), 2),
+            _ci(_get(cl, "far-pass", "paired", "success"), 2, "diff"),
+            _ci(_get(ol, "all", "rms_now_axis_mm"), 1),
+            _ci(_get(ol, "all", "ade_10_mm"), 1),
+            _ci(_get(ol, "all", "fde_10_mm"), 1),
+        ])
+    header = ["rank", "agent", "success, all", *(f"success, {s}" for s in CLOSEDLOOP_SETS),
+              "handover time (s)", f"far-pass success − {REFERENCE_AGENT}",
+              "current-frame RMS (mm)", "ADE 1 s (mm)", "FDE 1 s (mm)"]
+    first = results[0][1]
+    prints = "; ".join(
+        f"{t} {first['fingerprints'][t]['fingerprint'][:12]}"
+        for t in TRACKS
+        if any(t in r["tracks"] for _, r in results) and t in first["fingerprints"]
+    )
+    quick = any(r["quick"] for _, r in results)
+    return (
+        f"# Leaderboard (benchmark protocol v{first['protocol_version']})\n\n"
+        + markdown_table(header, body)
+        + f"\n{len(results)} result file(s); fingerprints {prints or '–'}. Success: share of "
+        "episodes [95 % Wilson CI]; handover time: median over successes [95 % bootstrap CI]; "
+        f"far-pass success − {REFERENCE_AGENT}: paired on the same receivers [95 % bootstrap "
+        "CI], * the CI excludes 0; open-loop errors: mean over test episodes [95 % bootstrap "
+        "CI]. Ranked by success over all closed-loop receivers, then far-pass success, then "
+        "handover time (docs/benchmark.md)."
+        + (" **Quick runs: never for reported numbers.**" if quick else "")
+        + "\n"
+    )
+
+
+def leaderboard_figure(results: list[tuple[str, dict]]) -> Any:
+    """Closed-loop success per receiver set (Wilson CIs) and the open-loop errors, per agent."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    ranked = [r for _, r in sorted(results, key=lambda fd: rank_key(fd[1]))]
+    names = [r["agent"]["name"] for r in ranked]
+    fig, axes = plt.subplots(1, 2, figsize=(max(10.0, 1.4 * len(names) + 4), 4.2), dpi=130)
+    x = np.arange(len(names))
+    sets = [*CLOSEDLOOP_SETS, "all"]
+    width = 0.8 / len(sets)
+    for k, s in enumerate(sets):
+        vals, lo, hi = [], [], []
+        for r in ranked:
+            c = _get(r, "metrics", "closedloop", s, "success")
+            v = 100 * c["value"] if c and c["value"] is not None else math.nan
+            vals.append(v)
+            lo.append(v - 100 * c["low"] if c and c["low"] is not None else 0.0)
+            hi.append(100 * c["high"] - v if c and c["high"] is not None else 0.0)
+        pos = x + (k - (len(sets) - 1) / 2) * width
+        axes[0].bar(pos, vals, width, label=s)
+        axes[0].errorbar(pos, vals, yerr=[lo, hi], fmt="none", ecolor="k", capsize=2, lw=0.7)
+    axes[0].set_ylabel("closed-loop success (%), 95 % Wilson CI")
+    axes[0].set_ylim(0, 105)
+    axes[0].legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=len(sets),
+                   frameon=False)
+    metrics = [("rms_now_axis_mm", "current-frame RMS"), ("ade_10_mm", "ADE 1 s"),
+               ("fde_10_mm", "FDE 1 s")]
+    width = 0.8 / len(metrics)
+    for k, (m, label) in enumerate(metrics):
+        vals = [(_get(r, "metrics", "openloop", "all", m, "value") or math.nan) for r in ranked]
+        axes[1].bar(x + (k - 1) * width, vals, width, label=label)
+    axes[1].set_ylabel("open-loop error (mm), all test episodes")
+    axes[1].legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=3,
+                   frameon=False)
+    for ax in axes:
+        ax.set_xticks(x)
+        ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
+        ax.grid(alpha=0.3, axis="y")
+    fig.suptitle(f"Leaderboard, benchmark protocol v{ranked[0]['protocol_version']}", fontsize=10)
+    fig.tight_layout()
+    return fig
+

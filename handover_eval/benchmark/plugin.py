@@ -1,0 +1,223 @@
+"""The agent a benchmark run scores: a built-in name, or a user's factory loaded from their code.
+
+``--agent`` is one of
+
+* a built-in name: a method of the open-loop evaluations (``ours``, ``iaal``, ``act``,
+  ``bc_mlp``, ``cv``; scored on both tracks), or a closed-loop-only agent (``reactive``,
+  ``null``, ``lagging``);
+* ``PKG.MODULE:FACTORY``: ``FACTORY`` of an importable module;
+* ``path/to/file.py:FACTORY``: ``FACTORY`` of a Python file anywhere (no package needed).
+
+``FACTORY(**config)`` (``--agent-config`` JSON object, default ``{}``) must return an
+:class:`agents.base.Agent`: ``fit(dataset)`` is called with the data the agent may learn from
+(Table I's training folds, or all of ``--data``), ``predict_episode`` scores it open-loop,
+``reset``/``act`` closed-loop. **Loading a plug-in runs its code**: that is what naming it asks
+for, as ``python file.py`` does. The factory is loaded again in every worker process (an
+:class:`AgentSource` holds only strings, so it pickles), and must build the same agent each time
+for the results to be reproducible.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import importlib.util
+import json
+import math
+import re
+import sys
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, is_dataclass
+from pathlib import Path
+from typing import Any
+
+from agents.base import Agent
+from handover_eval.methods import METHODS
+
+#: Built-in closed-loop-only agents (the reactive reference and the two reference agents).
+CLOSED_LOOP_ONLY: tuple[str, ...] = ("reactive", "null", "lagging")
+#: Built-in open-loop method name -> the closed-loop roster's name of the same agent.
+ROSTER_NAME = {"ours": "ours", "iaal": "iaal", "act": "act", "bc_mlp": "bc-mlp"}
+ALIASES = {"bc-mlp": "bc_mlp"}
+NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9 _.:+()\-]{0,63}$")
+IDENT_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+MAX_CONFIG_CHARS = 10_000
+
+
+@dataclass(frozen=True)
+class AgentSource:
+    """A picklable description of the scored agent.
+
+    Attributes:
+        name: the name shown in the tables and the leaderboard.
+        kind: "method" (a built-in open-loop method), "roster" (a closed-loop-only built-in) or
+            "plugin".
+        target: the method / roster name, or for a plug-in the module name or absolute file
+            path.
+        factory: a plug-in's factory name ("" for built-ins).
+        config: a plug-in's factory keyword arguments as JSON text (sorted keys).
+        spec: what ``--agent`` said.
+        source_sha256: a plug-in file's SHA-256 (module plug-ins: its file's, when it has one).
+    """
+
+    name: str
+    kind: str
+    target: str
+    factory: str = ""
+    config: str = "{}"
+    spec: str = ""
+    source_sha256: str = ""
+
+    @property
+    def tracks(self) -> tuple[str, ...]:
+        """The tracks this agent can be scored on."""
+        return ("closedloop",) if self.kind == "roster" else ("openloop", "closedloop")
+
+    def kwargs(self) -> dict[str, Any]:
+        return json.loads(self.config)
+
+
+def parse_config(text: str | None) -> str:
+    """``--agent-config``: a JSON object with identifier keys, as canonical JSON text."""
+    if text is None:
+        return "{}"
+    if len(text) > MAX_CONFIG_CHARS:
+        raise ValueError(f"--agent-config is longer than {MAX_CONFIG_CHARS} characters")
+    try:
+        obj = json.loads(text, parse_constant=_no_constant)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"--agent-config is not JSON: {exc.msg} (char {exc.pos})") from None
+    if not isinstance(obj, dict):
+        raise ValueError("--agent-config must be a JSON object of keyword arguments")
+    bad = [k for k in obj if not IDENT_RE.match(k)]
+    if bad:
+        raise ValueError(f"--agent-config keys must be Python identifiers, got {bad[:3]}")
+    return json.dumps(obj, sort_keys=True)
+
+
+def _no_constant(name: str) -> None:
+    raise ValueError(f"--agent-config: {name} is not allowed")
+
+
+def check_name(name: str) -> str:
+    if not isinstance(name, str) or not NAME_RE.match(name):
+        raise ValueError(
+            f"agent name {name!r}: 1-64 characters of letters, digits, space and _ . : + - ( ), "
+            "starting with a letter or digit"
+        )
+    return name
+
+
+def resolve(spec: str, name: str | None = None, config: str | None = None) -> AgentSource:
+    """The :class:`AgentSource` of ``--agent spec`` (a clear ValueError when it is malformed)."""
+    spec = spec.strip()
+    base = ALIASES.get(spec, spec)
+    if ":" not in spec:
+        if config not in (None, "{}"):
+            raise ValueError("--agent-config is for plug-in factories, not built-in agents")
+        if base in METHODS:
+            return AgentSource(check_name(name or base), "method", base, spec=spec)
+        if base in CLOSED_LOOP_ONLY:
+            return AgentSource(check_name(name or base), "roster", base, spec=spec)
+        raise ValueError(
+            f"--agent {spec!r}: not a built-in ({list(METHODS) + list(CLOSED_LOOP_ONLY)}) and "
+            "not MODULE:FACTORY or path/to/file.py:FACTORY"
+        )
+    target, factory = spec.rsplit(":", 1)
+    if not IDENT_RE.match(factory):
+        raise ValueError(f"--agent {spec!r}: the factory {factory!r} is not a Python name")
+    if target.endswith(".py") or "/" in target or "\\" in target:
+        path = Path(target).expanduser()
+        if not path.is_file():
+            raise ValueError(f"--agent {spec!r}: no such file {target}")
+        path = path.resolve()
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        default = f"{path.stem}:{factory}"
+        target = str(path)
+    else:
+        if not all(IDENT_RE.match(p) for p in target.split(".")):
+            raise ValueError(f"--agent {spec!r}: {target!r} is not a module name")
+        found = importlib.util.find_spec(target.split(".")[0])
+        if found is None:
+            raise ValueError(f"--agent {spec!r}: no module named {target.split('.')[0]!r}")
+        digest = ""
+        default = f"{target.rsplit('.', 1)[-1]}:{factory}"
+    return AgentSource(
+        check_name(name or default), "plugin", target, factory, parse_config(config), spec, digest
+    )
+
+
+def load_factory(source: AgentSource) -> Callable[..., Any]:
+    """The plug-in's factory (imports the module or executes the file: runs its code)."""
+    if source.kind != "plugin":
+        raise ValueError(f"{source.name} is a built-in agent, not a plug-in")
+    if source.target.endswith(".py") and Path(source.target).is_absolute():
+        mod_name = "handover_plugin_" + hashlib.sha1(source.target.encode()).hexdigest()[:12]
+        module = sys.modules.get(mod_name)
+        if module is None:
+            spec = importlib.util.spec_from_file_location(mod_name, source.target)
+            if spec is None or spec.loader is None:
+                raise ValueError(f"--agent: cannot load {source.target}")
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[mod_name] = module  # dataclasses and pickling look the module up
+            try:
+                spec.loader.exec_module(module)
+            except BaseException:
+                del sys.modules[mod_name]
+                raise
+    else:
+        module = importlib.import_module(source.target)
+    factory = getattr(module, source.factory, None)
+    if not callable(factory):
+        raise ValueError(f"--agent {source.spec}: {source.factory!r} is not a callable of it")
+    return factory
+
+
+def build_plugin(source: AgentSource) -> Agent:
+    """A fresh plug-in agent: ``FACTORY(**config)``, checked to be an :class:`Agent`."""
+    agent = load_factory(source)(**source.kwargs())
+    if not isinstance(agent, Agent):
+        raise ValueError(
+            f"--agent {source.spec}: {source.factory}() returned {type(agent).__name__}, not an "
+            "agents.base.Agent (subclass it, or agents.predictive.PredictiveAgent)"
+        )
+    horizon = getattr(agent, "horizon", None)
+    if not isinstance(horizon, int) or horizon < 1:
+        raise ValueError(f"--agent {source.spec}: agent.horizon must be a positive int")
+    return agent
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` as JSON-safe data: dataclasses as dicts, tuples as lists, non-finite floats as
+    None, anything else unknown as its type name (never its repr: no addresses)."""
+    if is_dataclass(value) and not isinstance(value, type):
+        return jsonable(asdict(value))
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return value
+    if isinstance(value, int):
+        return int(value)
+    if isinstance(value, float):
+        return float(value) if math.isfinite(value) else None
+    try:
+        import numpy as np
+
+        if isinstance(value, np.generic):
+            return jsonable(value.item())
+    except ImportError:  # pragma: no cover - numpy is a dependency
+        pass
+    return f"<{type(value).__name__}>"
+
+
+def agent_config(source: AgentSource, agent: Agent | None) -> dict:
+    """What result.json records of the agent's configuration: the factory's keyword arguments
+    and the agent's ``config`` dataclass (when it has one)."""
+    config = getattr(agent, "config", None) if agent is not None else None
+    return {
+        "kwargs": source.kwargs(),
+        "config": jsonable(config) if is_dataclass(config) else None,
+        "horizon": getattr(agent, "horizon", None) if agent is not None else None,
+    }

@@ -1,0 +1,236 @@
+"""The ``benchmark``, ``leaderboard``, ``rescore`` and ``far-pass`` commands of evaluate.py.
+
+``evaluate.py`` keeps only the dispatch; the runs are :mod:`handover_eval.benchmark`'s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from handover_env.paths import output_folder
+from handover_eval.backend import JobError, session
+from handover_eval.cli.args import (
+    EPOCHS,
+    STEPS,
+    WORKERS,
+    add_backend_arguments,
+    backend_from_args,
+)
+from handover_eval.methods import METHODS, MethodOptions, default_workers
+from handover_eval.output_lock import OutputLock
+
+COMMANDS = ("benchmark", "leaderboard", "rescore", "far-pass")
+SECURITY = (
+    "Loading a plug-in agent runs its code: naming a file or module in --agent is asking to run "
+    "it, as `python file.py` would. leaderboard and rescore run no code from the files they read "
+    "(size-bounded JSON/CSV, every field checked)."
+)
+BENCHMARK_DESCRIPTION = (
+    "Score an agent under the benchmark's protocol v1 (docs/benchmark.md): the open-loop track "
+    "(Table I's folds; current-frame and 1 s RMS, ADE/FDE at 0.5 s and 1 s) and the closed-loop "
+    "track (test-seed ID, OOD and far-pass walkers and recorded replays, against the reactive "
+    "reference). Writes result.json (protocol version, fingerprints of the data and receivers, "
+    "the agent's name and config, every metric with its CI), the per-episode CSVs and the tables "
+    "(benchmark.md, *_table.csv). " + SECURITY
+)
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    """Add the four sub-commands to evaluate.py's parser."""
+    p = sub.add_parser("benchmark", help="score any agent (built-in or your own) under protocol v1",
+                       description=BENCHMARK_DESCRIPTION)
+    p.add_argument(
+        "--agent", required=True, metavar="SPEC",
+        help=f"the agent: a built-in ({' '.join(METHODS)}, or closed-loop only: reactive null "
+        "lagging), PKG.MODULE:FACTORY, or path/to/file.py:FACTORY; FACTORY(**config) must return "
+        "an agents.base.Agent. A plug-in's code runs (it is loaded in every worker)",
+    )
+    p.add_argument("--agent-config", default=None, metavar="JSON",
+                   help="a JSON object of keyword arguments for FACTORY (default: {})")
+    p.add_argument("--name", default=None, help="the agent's name in the tables (default: the "
+                   "built-in name, or FILE_STEM:FACTORY)")
+    p.add_argument("--tracks", nargs="+", default=["openloop", "closedloop"],
+                   choices=("openloop", "closedloop"), help="tracks to score (default: both)")
+    p.add_argument("--data", default=None, metavar="PATH",
+                   help="what the agent may fit on: a public-dataset folder (whole_motions/), a "
+                   "canonical .npz, or omit for the synthetic default")
+    p.add_argument("--replay-data", default=None, metavar="PATH",
+                   help="recordings to score on that are not in --data: the agent fits on all of "
+                   "--data and meets every recording of PATH (open loop: every episode scored)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output folder (default: results/benchmark/<name>, "
+                   "results/benchmark-quick/<name> with --quick)")
+    p.add_argument("--checkpoints", default=None, metavar="DIR",
+                   help="the built-in learned methods' checkpoint cache (default: Table I's, "
+                   "results/table1/checkpoints; results/table1-quick/checkpoints with --quick)")
+    p.add_argument("--act-steps", type=STEPS, default=None,
+                   help="ACT optimisation steps of built-in ACT (default: Table I's)")
+    p.add_argument("--bc-epochs", type=EPOCHS, default=None,
+                   help="BC-MLP maximum epochs of built-in BC-MLP (default: Table I's)")
+    p.add_argument("--workers", type=WORKERS, default=None, metavar="N",
+                   help="processes running the folds and episodes (default: one per core, at "
+                   "most 2; 1 runs in this process); the results do not depend on it")
+    p.add_argument("--quick", action="store_true",
+                   help="small fast run for tests: 30 synthetic (or first) episodes, 3 folds, "
+                   "query stride 3, 1 walker per set, 2 replays, tiny built-in models; its "
+                   "fingerprints differ from a full run's; never for reported numbers")
+    p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    add_backend_arguments(p)
+
+    p = sub.add_parser("leaderboard", help="ranked Markdown table + PNG from result.json files",
+                       description="Rank result.json files of the same protocol version and "
+                       "fingerprints (refused otherwise, with the reason). " + SECURITY)
+    p.add_argument("results", nargs="+", metavar="RESULT.json")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="folder for leaderboard.md and leaderboard.png (default: "
+                   "results/leaderboard)")
+
+    p = sub.add_parser("rescore", help="rebuild the benchmark tables from per-episode CSVs",
+                       description="Rebuild benchmark.md and the *_table.csv files from the "
+                       "per-episode CSVs of a benchmark run (one per track), without running an "
+                       "episode; byte-identical to the run's tables. " + SECURITY)
+    p.add_argument("episodes", nargs="+", metavar="EPISODES.csv")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output folder (default: results/rescore)")
+
+    p = sub.add_parser("far-pass", help="derive the far-pass set's lateral range from recordings",
+                       description="Print the quantiles of the recorded pelvis y at the transfer "
+                       "and the far-pass range [q05, q25] the protocol uses "
+                       "(handover_eval/benchmark/farpass.py).")
+    p.add_argument("--data", required=True, metavar="PATH",
+                   help="a folder of public-dataset recordings (whole_motions/)")
+    p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+
+def _error(exc: BaseException) -> int:
+    print(f"evaluate.py: error: {exc}", file=sys.stderr)
+    return 2
+
+
+def main(args: argparse.Namespace, load_dataset: Callable) -> int:
+    """Run ``args.command``; 2 with a one-line error on bad input or a bad file."""
+    if args.command == "leaderboard":
+        return _leaderboard(args)
+    if args.command == "rescore":
+        return _rescore(args)
+    if args.command == "far-pass":
+        return _far_pass(args)
+    return _benchmark(args, load_dataset)
+
+
+def _leaderboard(args: argparse.Namespace) -> int:
+    from handover_eval.benchmark.leaderboard import (
+        leaderboard_figure,
+        leaderboard_markdown,
+        load_results,
+    )
+    from handover_eval.reporting import write_png, write_text
+
+    try:
+        out = output_folder(args.out or Path("results") / "leaderboard", "--out")
+        results = load_results(args.results)
+    except (ValueError, OSError) as exc:
+        return _error(exc)
+    text = leaderboard_markdown(results)
+    write_text(text, out / "leaderboard.md")
+    write_png(leaderboard_figure(results), out / "leaderboard.png")
+    print(text)
+    print(f"wrote {out}/leaderboard.md and leaderboard.png")
+    return 0
+
+
+def _rescore(args: argparse.Namespace) -> int:
+    from handover_eval.benchmark.output import rescore
+
+    try:
+        out = output_folder(args.out or Path("results") / "rescore", "--out")
+        _, files = rescore([Path(p) for p in args.episodes], out)
+    except (ValueError, OSError) as exc:
+        return _error(exc)
+    print(files[-1].read_text())
+    print("wrote " + ", ".join(str(f) for f in files))
+    return 0
+
+
+def _far_pass(args: argparse.Namespace) -> int:
+    from handover_env.data.public import list_public_files
+    from handover_eval.benchmark.farpass import derivation_text, derive_range
+
+    try:
+        if not Path(args.data).is_dir():
+            raise ValueError(f"--data {args.data}: not a folder of recordings")
+        d = derive_range(list_public_files(args.data), progress=not args.no_progress)
+    except (ValueError, OSError) as exc:
+        return _error(exc)
+    print(derivation_text(d))
+    return 0
+
+
+def _benchmark(args: argparse.Namespace, load_dataset: Callable) -> int:
+    from handover_eval.benchmark.plugin import resolve
+    from handover_eval.benchmark.protocol import BenchmarkSettings
+
+    try:
+        source = resolve(args.agent, args.name, args.agent_config)
+        tracks = tuple(dict.fromkeys(args.tracks))
+        settings = BenchmarkSettings(quick=args.quick)
+        options = MethodOptions(
+            seed=0, quick=args.quick, act_steps=args.act_steps, bc_epochs=args.bc_epochs,
+            workers=default_workers() if args.workers is None else args.workers,
+        )
+        safe = source.name.replace(" ", "_").replace(":", "-")
+        out = output_folder(
+            args.out or Path("results") / ("benchmark-quick" if args.quick else "benchmark") / safe,
+            "--out",
+        )
+        cache = output_folder(
+            args.checkpoints
+            or Path("results") / ("table1-quick" if args.quick else "table1") / "checkpoints",
+            "--checkpoints",
+        )
+        backend = backend_from_args(args)
+        lock = OutputLock(out).acquire()
+    except (ValueError, OSError, RuntimeError) as exc:
+        return _error(exc)
+    try:
+        return _run(args, load_dataset, source, tracks, settings, options, out, cache, backend)
+    finally:
+        lock.release()
+
+
+def _run(args, load_dataset, source, tracks, settings, options, out, cache, backend) -> int:
+    from handover_eval.benchmark.output import write_benchmark
+    from handover_eval.benchmark.run import run_benchmark
+
+    try:
+        dataset = load_dataset(args.data, args.quick, 0)
+        replay = None
+        if args.replay_data is not None:
+            if not Path(args.replay_data).exists():
+                raise FileNotFoundError(f"--replay-data {args.replay_data}: no such file or folder")
+            replay = load_dataset(args.replay_data, args.quick, 0)
+    except (ValueError, OSError, RuntimeError) as exc:
+        return _error(exc)
+    print(f"benchmark: {source.name} on {list(tracks)}, fit on {dataset.name} ({len(dataset)} "
+          f"episodes)" + (f", replays of {replay.name} ({len(replay)})" if replay else ""),
+          flush=True)
+    start = time.perf_counter()
+    try:
+        with session(backend, options.workers):
+            run = run_benchmark(source, tracks, settings, dataset, args.data, options, cache,
+                                replay, args.replay_data, progress=not args.no_progress)
+            result = write_benchmark(run, out)
+    except (ValueError, TypeError) as exc:
+        return _error(exc)
+    except (JobError, ConnectionError) as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 1
+    print((out / "benchmark.md").read_text())
+    fps = ", ".join(f"{t} {v['fingerprint'][:12]}" for t, v in result["fingerprints"].items())
+    print(f"protocol v{result['protocol_version']}, fingerprints {fps}")
+    print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s")
+    return 0
