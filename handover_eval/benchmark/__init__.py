@@ -5,7 +5,7 @@
 * :mod:`.plugin`: the scored agent, a built-in name or a user's factory (``PKG.MODULE:FACTORY``
   or ``path/to/file.py:FACTORY``).
 * :mod:`.outcomes`: first-failure attribution and the event flags of a closed-loop episode.
-* :mod:`.openloop_track`, :mod:`.closedloop_track`: the two tracks' runs (values, no files).
+* :mod:`.open_loop`, :mod:`.closed_loop`: the two tracks' runs (values, no files).
 * :mod:`.tables`: the metrics and tables from per-episode rows (the run and ``rescore`` share it).
 * :mod:`.files`: result.json and the per-episode CSVs, written and read back with every field
   checked (reading runs no code).

@@ -1,8 +1,8 @@
 """A benchmark run: the scored agent on the chosen tracks, returning values (no files).
 
-Open loop: :func:`.openloop_track.run_openloop`. Closed loop: the receivers of the protocol
+Open loop: :func:`.open_loop.run_openloop`. Closed loop: the receivers of the protocol
 (:func:`receivers_of`) for the agent and the reactive reference,
-:func:`.closedloop_track.run_closedloop`. The files are written by :mod:`.output`.
+:func:`.closed_loop.run_closedloop`. The files are written by :mod:`.output`.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.benchmark.closedloop_track import run_closedloop
-from handover_eval.benchmark.openloop_track import run_openloop
+from handover_eval.benchmark.closed_loop import run_closedloop
+from handover_eval.benchmark.open_loop import run_openloop
 from handover_eval.benchmark.plugin import AgentSource, agent_config, build_plugin
 from handover_eval.benchmark.protocol import (
     QUICK_FOLDS,
