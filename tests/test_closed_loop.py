@@ -23,6 +23,7 @@ from handover_eval.closedloop.receivers import (
     replays,
     walkers,
 )
+from handover_eval.closedloop.report import GROUPS, groups_of
 from handover_eval.closedloop.roster import AGENTS
 from handover_eval.closedloop.run import (
     ClosedLoopEvalConfig,
@@ -92,8 +93,13 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
         assert (r["body_contact"] == "True") == (float(r["body_contact_force"]) > 0)
         assert int(r["steps"]) >= 1 and int(r["sim_unstable"]) >= 0
     agg = _rows(quick_run / "closed_loop.csv")
-    for a in agg:  # the table's success rate is the episodes' one
-        mine = [r for r in rows if (r["agent"], r["set"]) == (a["agent"], a["set"])]
+    assert {a["set"] for a in agg} <= set(GROUPS) and {"walker-id", "walker-ood", "replay-all"} <= {
+        a["set"] for a in agg
+    }
+    n_ood = sum(r["is_ood"] == "True" for r in rows if r["set"] == "replay")
+    assert ("replay-ood" in {a["set"] for a in agg}) == (n_ood > 0)
+    for a in agg:  # the table's success rate is the episodes' one, per receiver group
+        mine = [r for r in rows if r["agent"] == a["agent"] and a["set"] in groups_of(r)]
         assert int(a["n"]) == len(mine)
         assert float(a["success_rate"]) == pytest.approx(
             sum(r["outcome"] == "success" for r in mine) / len(mine))
@@ -120,7 +126,13 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
     assert "Paired against the reactive agent" in md
     assert (quick_run / "closed_loop.png").stat().st_size > 20_000
     ghosts = _rows(quick_run / "closed_loop_ghosts.csv")
-    assert ghosts[0]["agent"] == "all" and int(ghosts[0]["n"]) == len(rows)
+    assert (ghosts[0]["agent"], ghosts[0]["set"]) == ("all", "all")
+    assert int(ghosts[0]["n"]) == len(rows)
+    by_set = {g["set"]: int(g["n"]) for g in ghosts if g["agent"] == "all"}
+    assert by_set["walker-id"] == sum(r["set"] == "id" for r in rows)
+    assert by_set["replay-all"] == sum(r["set"] == "replay" for r in rows)
+    for group in ("walker-id", "walker-ood", "replay-all"):
+        assert f"| {group} |" in md
     assert int(ghosts[0]["episodes_sim_unstable"]) == sum(int(r["sim_unstable"]) > 0 for r in rows)
     assert int(ghosts[0]["successes_release_before_grasp"]) == 0
     timing = _rows(quick_run / "closed_loop_timing.csv")
@@ -132,8 +144,15 @@ def test_lagging_agent_hands_over_later_than_reactive(quick_run: Path) -> None:
     pairs = {
         (p["agent"], p["set"], p["metric"]): p for p in _rows(quick_run / "closed_loop_paired.csv")
     }
-    diffs = [float(pairs[("lagging", s, "handover_time")]["diff"]) for s in ("id", "ood", "replay")]
-    assert all(d > 0 for d in diffs)
+    diffs = {
+        s: float(pairs[("lagging", s, "handover_time")]["diff"])
+        for s in ("walker-id", "walker-ood", "replay-all")
+        if int(pairs[("lagging", s, "handover_time")]["n_pairs"])
+    }
+    # never earlier; later where the walk leaves the lag no slack (2 quick OOD walkers: one may
+    # fail with the lag, the other wait for the robot either way)
+    assert all(d >= 0 for d in diffs.values()) and diffs["walker-id"] > 0
+    assert diffs["replay-all"] > 0
 
 
 def test_results_do_not_depend_on_the_number_of_workers(tmp_path: Path) -> None:
@@ -241,11 +260,20 @@ def test_quick_theta_sweep_f_r_moves_the_release_force(tmp_path: Path) -> None:
     assert {float(r["K"]) for r in rows if r["param"] != "stiffness"} == {114.3}
     per_value = _rows(tmp_path / "theta_sweep.csv")
     assert len({(r["param"], r["value"]) for r in per_value}) == 12
-    ext = {(r["param"], r["metric"]): r for r in _rows(tmp_path / "theta_sweep_extremes.csv")}
-    release = ext[("release_force", "release_force")]  # the gripper opens at f_r: +15 N
-    assert 12.0 < float(release["diff"]) < 18.0 and release["ci_excludes_zero"] == "True"
+    assert {r["set"] for r in per_value} == {"all", "walker-id", "walker-ood"}
+    ext = {
+        (r["param"], r["set"], r["metric"]): r
+        for r in _rows(tmp_path / "theta_sweep_extremes.csv")
+    }
+    for group in ("all", "walker-id", "walker-ood"):  # the gripper opens at f_r: +15 N
+        release = ext[("release_force", group, "release_force")]
+        assert 12.0 < float(release["diff"]) < 18.0
+    assert ext[("release_force", "all", "release_force")]["ci_excludes_zero"] == "True"
+    n_all = {r["param"]: int(r["n_pairs"]) for r in ext.values()
+             if r["set"] == "all" and r["metric"] == "success"}
+    assert set(n_all.values()) == {4}  # 2 ID + 2 OOD walkers, paired across the extremes
     md = (tmp_path / "theta_sweep.md").read_text()
-    assert "f_r (N)" in md and "beyond its noise" in md
+    assert "f_r (N)" in md and "beyond its noise" in md and "| walker-ood |" in md
     assert (tmp_path / "theta_sweep.png").stat().st_size > 20_000
 
 

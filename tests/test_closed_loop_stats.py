@@ -8,7 +8,8 @@ import random
 import numpy as np
 import pytest
 
-from handover_eval.closedloop.report import aggregate, ghosts, paired
+from handover_eval.closedloop.markdown import markdown
+from handover_eval.closedloop.report import aggregate, ghosts, groups_of, paired
 from handover_eval.closedloop.stats import (
     bootstrap_ci,
     median_iqr,
@@ -123,7 +124,7 @@ def test_paired_rows_match_receivers_not_row_order() -> None:
     shuffled = rows[:]
     random.Random(3).shuffle(shuffled)
     assert sorted(map(str, paired(shuffled, n_boot=200, metrics=metrics))) == sorted(map(str, out))
-    by = {(d["set"], d["metric"]): d for d in out}
+    by = {(d["set"].removeprefix("walker-"), d["metric"]): d for d in out}
     assert by[("id", "handover_time")]["n_pairs"] == 8
     assert by[("id", "handover_time")]["diff"] == pytest.approx(0.5)
     assert by[("id", "handover_time")]["ci_excludes_zero"]
@@ -200,8 +201,75 @@ def test_aggregate_and_ghosts_count_what_they_say() -> None:
     )
     assert agg["penetration_max"] == 0.02
     assert agg["release_before_grasp_successes"] == 0  # the premature release is not a success
-    g = {r["agent"]: r for r in ghosts(rows)}
+    g = {r["agent"]: r for r in ghosts(rows) if r["set"] == "all"}
     assert g["all"]["episodes_penetration_over_1cm"] == 1
     assert g["all"]["successes_release_before_grasp"] == 0
     assert g["x"]["episodes_with_body_contact"] == 2
     assert g["x"]["body_contact_force_max"] == 30.0 and g["x"]["body_contact_force_q50"] == 2.5
+
+
+def test_replays_are_split_by_is_ood_in_every_table() -> None:
+    """35 ID replays that all succeed and 6 OOD replays of which 2 fail: the pooled replay rate
+    (95 %) hides what replay-ood shows (67 %); the walkers stay apart too."""
+    rows = []
+    for agent, fail_ood in (("reactive", False), ("x", True)):
+        for i in range(35):
+            rows.append(_row(agent, "replay", f"n{i}", "success", is_ood=False, handover_time=3.0))
+        for i in range(6):
+            bad = fail_ood and i < 2
+            rows.append(_row(agent, "replay", f"v{i}", "missed" if bad else "success",
+                             is_ood="True", handover_time=None if bad else 3.5))
+        rows.append(_row(agent, "id", "w0", "success", is_ood=False, handover_time=2.0))
+        rows.append(_row(agent, "ood", "w1", "success", is_ood=True, handover_time=2.5))
+    assert groups_of(rows[0]) == ("replay-id", "replay-all")
+    assert groups_of(rows[35]) == ("replay-ood", "replay-all")  # is_ood read from CSV text
+    assert groups_of(rows[-1]) == ("walker-ood",)
+    with pytest.raises(ValueError, match="receiver set"):
+        groups_of({"set": "bogus"})
+    agg = {(a["agent"], a["set"]): a for a in aggregate(rows)}
+    assert [s for a, s in agg if a == "x"] == [
+        "walker-id", "walker-ood", "replay-id", "replay-ood", "replay-all"
+    ]
+    assert agg[("x", "replay-id")]["n"] == 35 and agg[("x", "replay-id")]["success_rate"] == 1.0
+    assert agg[("x", "replay-ood")]["n"] == 6
+    assert agg[("x", "replay-ood")]["success_rate"] == pytest.approx(4 / 6)
+    assert agg[("x", "replay-all")]["success_rate"] == pytest.approx(39 / 41)
+    pairs = {(d["set"], d["metric"]): d for d in paired(rows, n_boot=200)}
+    assert pairs[("replay-ood", "success")]["diff"] == pytest.approx(-2 / 6)
+    assert pairs[("replay-ood", "success")]["n_pairs"] == 6
+    assert pairs[("replay-id", "success")]["diff"] == 0.0
+    assert pairs[("replay-all", "success")]["n_pairs"] == 41
+    g = {(r["agent"], r["set"]): r for r in ghosts(rows)}
+    assert g[("all", "all")]["n"] == len(rows) and g[("x", "replay-ood")]["n"] == 6
+    assert g[("all", "walker-id")]["n"] == 2
+    text = markdown(aggregate(rows), paired(rows, n_boot=200), ghosts(rows), "# t\n")
+    for group in ("walker-id", "walker-ood", "replay-id", "replay-ood", "replay-all"):
+        assert f"| {group} |" in text
+    assert "67 % [" in text  # x on replay-ood
+
+
+def test_theta_sweep_summarises_every_receiver_group_apart() -> None:
+    from handover_eval.closedloop.theta_sweep import METRICS, summarise, sweep_groups, verdicts
+
+    blank = {column: 0.0 for column, _, _ in METRICS.values()}
+    rows = []
+    for value, release in ((5.0, 6.0), (20.0, 21.0)):
+        for i in range(4):
+            for rset, ood in (("id", False), ("replay", False), ("replay", True)):
+                # OOD replays fail at the high end: only replay-ood (and the pooled sets) move
+                bad = ood and value == 20.0
+                rows.append(_row("reactive", rset, f"{rset}{ood}{i}",
+                                 "missed" if bad else "success",
+                                 **{**blank, "release_force": release, "handover_time": 3.0},
+                                 is_ood=ood, param="release_force", value=value))
+                rows[-1]["is_success"] = not bad
+    assert sweep_groups(rows) == ["all", "walker-id", "replay-id", "replay-ood", "replay-all"]
+    per_value, extremes = summarise(rows, n_boot=200)
+    n = {(r["set"], r["value"]): r["n"] for r in per_value if r["metric"] == "release_force"}
+    assert n[("all", 5.0)] == 12 and n[("replay-ood", 5.0)] == 4 and n[("replay-all", 20.0)] == 8
+    ext = {(e["set"], e["metric"]): e for e in extremes}
+    assert ext[("replay-ood", "success")]["diff"] == -1.0
+    assert ext[("replay-id", "success")]["diff"] == 0.0
+    assert ext[("walker-id", "release_force")]["diff"] == pytest.approx(15.0)
+    moved = {(v["set"]): v["outcomes_moved"] for v in verdicts(extremes)}
+    assert "success" in moved["replay-ood"] and "success" not in moved["replay-id"]

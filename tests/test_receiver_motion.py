@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -173,3 +174,119 @@ def test_reach_moves_toward_target_and_is_clipped_to_arm_length() -> None:
     assert batch.shape == (5, 3) and np.allclose(batch[-1], near)
     with pytest.raises(ValueError, match="target"):
         trajectory.hand_position(xy, yaw, h, reach=0.5)
+
+
+# ---------------------------------------------------------------- issue 23: calibrated OOD walkers
+DATA = Path(__file__).resolve().parents[1] / "../shared/data/dynamic_handover_dataset/whole_motions"
+
+
+def test_id_walkers_are_unchanged_by_the_ood_calibration(monkeypatch) -> None:
+    # Pinned from the sampler before the OOD calibration (same seed, same fields, same draws).
+    w = rm.sample_walker(np.random.default_rng(7), "id")
+    assert w.start_xy == (2.4351281765614017, -0.8755787359151858)
+    assert (w.speed, w.pass_y) == (0.7465368361542711, -0.8708397770542492)
+    assert (w.start_turn, w.wander_amplitude) == (-0.5224211146622331, 0.302331670890105)
+    assert w.pause_duration == 0.9555425286071777
+    # The OOD tables do not reach an ID walker, and both kinds draw as many numbers (so the env's
+    # later draws, e.g. camera noise, stay where they were).
+    monkeypatch.setitem(rm.OOD_RANGES, "wander", {"wander_amplitude": (1.0, 1.0)})
+    assert rm.sample_walker(np.random.default_rng(7), "id") == w
+    a, b = np.random.default_rng(11), np.random.default_rng(11)
+    rm.sample_walker(a, "id")
+    rm.sample_walker(b, "ood")
+    assert a.random() == b.random()
+
+
+def test_ood_ranges_name_walker_fields_within_their_physical_ranges() -> None:
+    for mode, table in rm.OOD_RANGES.items():
+        assert mode in rm.OOD_MODES
+        for name, (lo, hi) in table.items():
+            assert name in rm.FIELD_RANGES and name in rm.OOD_UNIFORM and lo <= hi
+            flo, fhi, *_ = rm.FIELD_RANGES[name]
+            if name in rm.OOD_SYMMETRIC:
+                assert 0 <= lo and hi <= min(-flo, fhi), name
+            else:
+                assert flo <= lo and hi <= fhi, name
+
+
+def test_ood_walkers_draw_their_calibrated_ranges_and_keep_away_from_the_giver() -> None:
+    closest, turns = [], []
+    for seed in range(10_000, 10_120):
+        w = rm.sample_walker(np.random.default_rng(seed), "ood")
+        for name, (lo, hi) in rm.OOD_RANGES[w.ood_mode].items():
+            v = abs(getattr(w, name)) if name in rm.OOD_SYMMETRIC else getattr(w, name)
+            assert lo - 1e-12 <= v <= hi + 1e-12, name
+        turns.append(w.start_turn)
+        tr = trajectory.base_trajectory(w)
+        closest.append(np.linalg.norm(tr.xy, axis=1).min())
+        # back on the passing line for the handover: the meander is gone past wander_fade_x
+        near = tr.xy[:, 0] < w.wander_fade_x - 0.3
+        assert np.abs(tr.xy[near, 1] - w.pass_y).max() < 0.8
+        assert abs(tr.xy[-1, 1] - w.pass_y) < 0.05
+    assert min(closest) > 0.45  # the giver/robot stands at the origin
+    assert 0.3 < np.mean(np.array(turns) > 0) < 0.7  # swings out to either side
+
+
+def test_walk_statistics_of_crafted_walks() -> None:
+    from handover_env.data.transfer.walks import PAUSE_SPEED, walk_statistics
+
+    t = np.arange(0, 4.0, 1 / 30)
+    straight = np.stack([2.0 - 0.8 * t, np.full_like(t, -0.9)], axis=-1)
+    s = walk_statistics(straight)
+    assert s["heading_change"] < 1.0 and abs(s["detour"]) < 0.01 and s["pauses"] == 0
+    assert abs(s["speed_median"] - 0.8) < 0.01 and s["speed_cv"] < 0.02
+    assert s["turn_back_time"] == 0 and abs(s["duration"] - 4.0) < 0.05
+    # A 1.5 s stop in the middle: one pause of about 1.5 s (the 1 Hz low-pass rounds it off).
+    x = np.concatenate([2.0 - 0.8 * t[:60], np.full(45, 2.0 - 0.8 * t[60]),
+                        2.0 - 0.8 * t[60] - 0.8 * t[1:61]])
+    paused = walk_statistics(np.stack([x, np.full_like(x, -0.9)], axis=-1))
+    assert paused["pauses"] == 1 and 1.1 < paused.pause_durations[0] < 1.8
+    assert paused["slowest_speed"] < 0.05 < PAUSE_SPEED and paused["speed_cv"] > 0.3
+    # One full circle of radius 0.5 m on the way: about 360 deg more turning, pi m more path.
+    phi = np.linspace(0, 2 * np.pi, 120)
+    loop = np.concatenate([
+        straight[:45],
+        straight[45] + 0.5 * np.stack([-np.sin(phi), 1 - np.cos(phi)], axis=-1)[1:],
+        straight[46:],
+    ])
+    looped = walk_statistics(loop)
+    assert 300 < looped["heading_change"] < 420
+    assert abs(looped["detour"] - np.pi * 1.0 / 3.2) < 0.15  # 3.14 m more over 3.2 m net
+    assert looped["turn_back_time"] > 0.5
+    with pytest.raises(ValueError, match="nowhere"):
+        walk_statistics(np.zeros((50, 2)))
+    with pytest.raises(ValueError, match="T >= "):
+        walk_statistics(np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="NaN"):
+        walk_statistics(np.full((50, 2), np.nan))
+
+
+def test_scripted_ood_walks_differ_from_id_walks_as_the_recordings_do() -> None:
+    from handover_env.data.transfer.walks_report import measure_walkers, summary_of
+
+    ident = summary_of(measure_walkers("id", 60, progress=False)[0])
+    ood_walks, modes = measure_walkers("ood", 60, progress=False)
+    ood = summary_of(ood_walks)
+    assert set(modes) == set(rm.OOD_MODES) and sum(modes.values()) == 60
+    assert ood["heading_change"]["median"] > 2.5 * ident["heading_change"]["median"]
+    assert ood["detour"]["median"] > 5 * ident["detour"]["median"]
+    assert ood["speed_cv"]["median"] > 4 * ident["speed_cv"]["median"]
+    assert ident["pause_share"]["median"] == 0 and 0.35 < ood["pause_share"]["median"] < 0.8
+    assert 0.5 < ood["pause_duration"]["median"] < 0.9
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="public dataset copy not found at ../shared/data")
+def test_scripted_ood_walkers_match_the_recorded_ood_walks_within_20_percent(tmp_path) -> None:
+    from handover_env.data.transfer.walks_report import CHOSEN, run_walk_stats
+
+    summary, written = run_walk_stats(DATA, tmp_path, walkers=400, progress=False)
+    assert summary["recordings"] == 875 and summary["counts"]["recorded/calibration/ood"] == 40
+    table = {r["statistic"]: r for r in summary["table"]}
+    for name in CHOSEN:
+        assert table[name]["within"], (name, table[name]["ratio"])
+        rec_id = summary["groups"]["recorded/calibration/id"][name]["median"]
+        rec_ood = summary["groups"]["recorded/calibration/ood"][name]["median"]
+        assert rec_ood > 1.5 * rec_id  # chosen because the recordings separate ID and OOD
+    text = (tmp_path / "walkers.md").read_text()
+    assert "All chosen statistics within 20 %: **yes**" in text
+    assert {p.name for p in written} == {"walkers.json", "walkers.md", "walkers.png"}

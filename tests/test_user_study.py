@@ -62,6 +62,8 @@ def test_user_study_quick_end_to_end(tmp_path: Path) -> None:
     assert (out / "user_study.png").stat().st_size > 1000
     assert (out / "pooled" / "theta_hat.json").exists()
     assert "What makes the comfort difference" in text
+    episodes = json.loads((out / "summary.json").read_text())["timings"]["episodes"]
+    assert f"Walker mix: {episodes} ID and 0 OOD walks over all {episodes} episodes" in text
     # each part has its own answer-noise stream: --theta with the pooled Θ̂ reproduces H1-H3
     theta = json.loads((out / "pooled" / "theta_hat.json").read_text())["theta_hat"]
     again = tmp_path / "again"

@@ -12,6 +12,7 @@ Commands (each has ``--help``)::
     transfer-stats PUBLIC_DIR --out DIR
                                        receiver calibration: when/where the object changes hands
     sensing PUBLIC_DIR [--limit N]     camera-model figures: jitter, hand error, re-fit bursts
+    walk-stats PUBLIC_DIR --out DIR    walker calibration: scripted vs recorded walk statistics
 
 Wherever a dataset is read, PATH may be a ``.npz``, a public-dataset folder, or ``synthetic``
 for the embedded default (900 ID + 100 OOD, seed 0).
@@ -220,6 +221,19 @@ def cmd_sensing(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_walk_stats(args: argparse.Namespace) -> int:
+    from handover_env.data.transfer.walks_report import run_walk_stats
+
+    summary, written = run_walk_stats(args.public_dir, args.out, walkers=args.walkers,
+                                      skip_bad=args.skip_bad, figures=not args.no_figures)
+    bad = [r["statistic"] for r in summary["table"] if r["chosen"] and not r["within"]]
+    print(f"{summary['recordings']} recordings, {args.walkers} walkers per kind; chosen "
+          f"statistics outside 20 %: {bad or 'none'}")
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
 def _fraction(text: str) -> float:
     value = float(text)
     if not 0.0 <= value <= 1.0:
@@ -395,6 +409,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--limit", type=_positive_int, default=None,
                    help="use only the first N ID recordings (a quick look)")
     p.set_defaults(func=cmd_sensing)
+
+    p = sub.add_parser(
+        "walk-stats",
+        help="walker calibration: scripted vs recorded walk statistics",
+        description="Measure the receiver's walk (heading change, detour, speed profile, pauses, "
+        "walking back) in every recording (pelvis after the replay filter) and on seeded scripted "
+        "ID/OOD walkers with the same code; write walkers.md (the OOD calibration table), "
+        "walkers.json and walkers.png into --out. Nothing per recording is written.",
+    )
+    p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
+    p.add_argument("--out", required=True, help="output folder (e.g. docs/calibration)")
+    p.add_argument("--walkers", type=_positive_int, default=400,
+                   help="scripted walkers per kind (ID seeds 0.., OOD 10000..; default 400)")
+    p.add_argument("--skip-bad", action="store_true", help="skip files that fail to load")
+    p.add_argument("--no-figures", action="store_true", help="write only the .md and .json")
+    p.set_defaults(func=cmd_walk_stats)
     return parser
 
 

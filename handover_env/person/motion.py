@@ -83,6 +83,62 @@ KINDS = ("id", "ood")
 OOD_MODES = ("wander", "pause")
 
 # --------------------------------------------------------------------------------------------
+# OOD walkers (paper Sec. V-A: the receiver wanders or pauses), calibrated to the recorded OOD
+# walks ("motion_variation_*") of the calibration half (Table I folds 0-4) on the statistics of
+# handover_env.data.transfer.walks: total heading change, detour, speed CV, pause duration
+# (docs/calibration/walkers.md, written by `python -m handover_env.data walk-stats`). Half of the
+# OOD walkers mainly wander (a wide looping meander), half mainly pause (a short stop on a path
+# that first swings out sideways): the recorded OOD walks range from loops without a stop to
+# stops on a path with a single wide detour. Uniform ranges (low, high) per mode (a fixed value
+# where low = high); the ID walkers do not use them.
+# --------------------------------------------------------------------------------------------
+OOD_RANGES: dict[str, dict[str, tuple[float, float]]] = {
+    # Mainly wanders: leaves the start sideways (|start_turn| 46 .. 86 deg, long start tangent),
+    # then a meander of 0.5 .. 0.9 m (loops where wander_loop x amplitude is large enough) over a
+    # wavelength of 3 .. 4.5 m, faded out by x = 0.7 (the recorded
+    # OOD walks are back on the passing line by x ~ 0.5), and a larger slow speed drift.
+    "wander": {
+        "wander_amplitude": (0.5, 0.9),
+        "wander_wavelength": (3.0, 4.5),
+        "wander_loop": (0.3, 0.7),
+        "wander_fade_x": (0.7, 0.7),
+        "start_bulge": (2.0, 3.0),
+        "start_turn": (0.8, 1.5),
+        "drift_amplitude": (0.15, 0.35),
+    },
+    # Mainly pauses: a stop of 0 .. 0.6 s between 0.4 .. 0.8 s ramps (the recorded pauses below
+    # 0.25 m/s last 0.70 s, median; the ramps add ~0.4 s below that speed), after a wide sideways
+    # start (|start_turn| 57 .. 86 deg) and with at most a slight meander.
+    "pause": {
+        "pause_time": (0.8, 2.2),
+        "pause_duration": (0.0, 0.6),
+        "pause_ramp": (0.4, 0.8),
+        "wander_amplitude": (0.0, 0.15),
+        "wander_wavelength": (2.5, 4.5),
+        "wander_loop": (0.0, 1.0),
+        "wander_fade_x": (0.5, 0.5),
+        "start_bulge": (3.0, 4.5),
+        "start_turn": (1.0, 1.5),
+        "drift_amplitude": (0.05, 0.2),
+    },
+}
+#: Which of the sampler's uniforms ``g`` each OOD field is drawn from (those of the ID fields).
+OOD_UNIFORM = {
+    "drift_amplitude": 0,
+    "pause_time": 4,
+    "pause_duration": 5,
+    "pause_ramp": 6,
+    "wander_amplitude": 7,
+    "wander_wavelength": 8,
+    "wander_loop": 10,
+    "wander_fade_x": 4,
+    "start_bulge": 12,
+    "start_turn": 11,
+}
+#: OOD fields drawn with either sign: OOD_RANGES gives the range of their magnitude.
+OOD_SYMMETRIC = frozenset({"start_turn"})
+
+# --------------------------------------------------------------------------------------------
 # Physical ranges of a walker's fields. WalkerParams refuses a value outside them, naming the
 # field and the range; each range holds everything the sampler draws with a wide margin.
 # --------------------------------------------------------------------------------------------
@@ -117,8 +173,9 @@ FIELD_RANGES: dict[str, tuple[float, float, str, str]] = {
     "approach_x": (-WALK_HALF_SIZE, WALK_HALF_SIZE, "m", "on the floor (WALK_HALF_SIZE)"),
     "start_turn": (-math.pi / 2, math.pi / 2, "rad",
                    "a walker that turns more than 90 deg away starts by walking away"),
-    "start_bulge": (0.25, 3.0, "",
-                    "sampled 1.0 .. 1.6; longer start tangents swing the path far out"),
+    "start_bulge": (0.25, 5.0, "",
+                    "sampled 1.0 .. 1.6 (ID), 2.0 .. 4.5 (OOD_RANGES); longer start tangents "
+                    "swing the path far out"),
     "step_length_ratio": (0.15, 0.5, "", "step length / height of walking: shuffle to stride"),
     "sway_amplitude": (0.0, MAX_SWAY, "m", "lateral gait sway, MAX_SWAY"),
     "speed_ripple": (0.0, 0.5, "", "relative; with drift_amplitude below 0.9"),
@@ -129,8 +186,10 @@ FIELD_RANGES: dict[str, tuple[float, float, str, str]] = {
     "pause_time": (0.0, MAX_WALK_TIME, "s", "within the longest walk, MAX_WALK_TIME"),
     "pause_duration": (0.0, MAX_WALK_TIME, "s", "within the longest walk, MAX_WALK_TIME"),
     "pause_ramp": (0.3, 5.0, "s", "sampled 0.4 .. 0.8; 0.3 s brakes 1 m/s at a peak 5 m/s^2"),
-    "wander_amplitude": (0.0, 0.6, "m", "sampled 0.15 .. 0.45"),
-    "wander_wavelength": (0.5, 10.0, "m", "sampled 1.0 .. 2.2; not shorter than a step"),
+    "wander_amplitude": (0.0, 1.5, "m",
+                         "sampled 0 .. 0.9 (OOD_RANGES), with a wide margin"),
+    "wander_wavelength": (0.5, 10.0, "m",
+                          "sampled 1.0 .. 4.5; not shorter than a step"),
     "wander_phase": (-2 * math.pi, 2 * math.pi, "rad", "a phase"),
     "wander_loop": (0.0, 1.0, "", "0: a lateral meander .. 1: loops"),
     "wander_fade_x": (-WALK_HALF_SIZE, WALK_HALF_SIZE, "m", "on the floor (WALK_HALF_SIZE)"),
@@ -255,12 +314,12 @@ class WalkerParams:
         pause_time: OOD "pause": seconds after the start at which the receiver begins to stop.
         pause_duration: OOD "pause": seconds standing still.
         pause_ramp: OOD "pause": seconds to decelerate to rest (and to accelerate again).
-        wander_amplitude: OOD "wander": lateral meander amplitude, m.
-        wander_wavelength: OOD "wander": meander wavelength along x, m.
-        wander_phase: OOD "wander": meander phase, rad.
-        wander_loop: OOD "wander": how much the meander also runs along x (0: purely lateral;
+        wander_amplitude: OOD (either mode; 0: none): lateral meander amplitude, m.
+        wander_wavelength: OOD: meander wavelength along the path, m.
+        wander_phase: OOD: meander phase, rad.
+        wander_loop: OOD: how much the meander also runs along x (0: purely lateral;
             near 1 with a large amplitude the path makes loops, as some recordings do).
-        wander_fade_x: OOD "wander": the meander fades out between ``approach_x + 0.6`` and this x
+        wander_fade_x: OOD: the meander fades out over the 0.6 m of x before this x
             so the receiver is back on the passing line for the handover.
     """
 
@@ -386,5 +445,21 @@ def sample_walker(rng: np.random.Generator, kind: str = "id", **overrides: objec
         "start_bulge": 1.0 + 0.6 * float(g[12]),
         "start_turn": math.radians(float(_quantile_sample(g[11], START_TURN_DEG_Q))),
     }
+    if kind == "ood":
+        params.update(_ood_fields(str(params["ood_mode"]), g))
     params.update(overrides)
     return WalkerParams(**params)  # type: ignore[arg-type]
+
+
+def _ood_fields(mode: str, g: np.ndarray) -> dict[str, float]:
+    """An OOD walker's calibrated fields (:data:`OOD_RANGES`) from the sampler's uniforms ``g``
+    (:data:`OOD_UNIFORM`): no extra draw, so an ID walker and everything drawn after it stay as
+    they were."""
+    out = {}
+    for name, (lo, hi) in OOD_RANGES[mode].items():
+        u = float(g[OOD_UNIFORM[name]])
+        if name in OOD_SYMMETRIC:  # magnitude uniform in [lo, hi], either sign
+            out[name] = math.copysign(lo + (hi - lo) * ((2.0 * u) % 1.0), 0.5 - u)
+        else:
+            out[name] = lo + (hi - lo) * u
+    return out

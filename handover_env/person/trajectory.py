@@ -29,6 +29,7 @@ from handover_env.person.motion import (
 )
 
 WANDER_SMOOTHING = 0.15  # m, Gaussian smoothing of a wandering path (rounds off cusps)
+WANDER_FADE_LENGTH = 0.6  # m of x over which an OOD meander fades out before wander_fade_x
 MAX_TURN_RATE = 3.0  # rad/s: walkers slow down in tight curves and turn no faster than this
 FREE_CURVATURE = 1.5  # 1/m: curves gentler than this (radius > 0.67 m) are walked at full speed
 
@@ -71,9 +72,9 @@ def _path(params: WalkerParams, n: int = 1201) -> tuple[np.ndarray, np.ndarray]:
 
     A cubic Hermite curve from the start to the convergence point ``(x_conv, pass_y)``, leaving
     the start ``start_turn`` away from the straight line to that point and arriving along -x,
-    then the straight passing line to ``end_x``. OOD "wander" adds a trochoid-like offset (lateral
-    meander, with loops when ``wander_loop`` is large) that starts at zero and fades out before
-    the handover.
+    then the straight passing line to ``end_x``. An OOD walker (either mode) adds a trochoid-like
+    offset (a lateral meander, with loops when ``wander_loop`` is large) that starts at zero and
+    fades out before the handover.
     """
     x0, y0 = params.start_xy
     x_conv = max(min(params.approach_x, x0 - 1.0), params.end_x + 0.05)
@@ -96,8 +97,8 @@ def _path(params: WalkerParams, n: int = 1201) -> tuple[np.ndarray, np.ndarray]:
     line = np.stack([line_x, np.full_like(line_x, params.pass_y)], axis=-1)
     xy = np.concatenate([curve, line])
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
-    if params.ood_mode == "wander":
-        fade_start = max(params.wander_fade_x + 0.6, x0 - 0.5)
+    if params.ood_mode is not None and params.wander_amplitude > 0:
+        fade_start = params.wander_fade_x + WANDER_FADE_LENGTH
         taper = _smoothstep(
             (xy[:, 0] - params.wander_fade_x) / max(fade_start - params.wander_fade_x, 1e-6)
         )
@@ -107,6 +108,12 @@ def _path(params: WalkerParams, n: int = 1201) -> tuple[np.ndarray, np.ndarray]:
         offset = np.stack(
             [params.wander_loop * (np.cos(theta) - math.cos(phi)), np.sin(theta) - math.sin(phi)],
             axis=-1,
+        )
+        # Fade by where the meander takes the walker too (a loop swings back along x): no part of
+        # it comes nearer the giver than wander_fade_x.
+        moved = xy + envelope[:, None] * offset
+        envelope = envelope * _smoothstep(
+            (moved[:, 0] - params.wander_fade_x) / WANDER_FADE_LENGTH
         )
         xy = _smooth_polyline(xy + envelope[:, None] * offset, WANDER_SMOOTHING)
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])

@@ -13,6 +13,12 @@ NOTE_SIMULATED = (
     "These results come from the **simulated person** (an articulated, compliant body whose "
     "reaching and grasping are calibrated to the recorded human-human handovers), not from people."
 )
+NOTE_SETS = (
+    "Receiver sets, never pooled across ID and OOD: `walker-id` / `walker-ood` are the scripted "
+    "walkers, `replay-id` / `replay-ood` the replayed recordings split by `is_ood`, and "
+    "`replay-all` every replay (each replay also counts in its ID or OOD set). The per-episode "
+    "CSV has the raw `set` (id, ood, replay) and `is_ood`."
+)
 NOTE_TIME = (
     "Handover time is the paper's (Sec. V-C): from when the receiver leaves the start point to the "
     "gripper release, successes only; the static baseline's 2 s stabilisation delay is excluded "
@@ -120,7 +126,10 @@ def markdown(
             for r in agg
         ],
     )
-    text = header + "\n" + NOTE_SIMULATED + "\n\n## Success, outcomes, timing and forces\n\n" + t1
+    text = (
+        header + "\n" + NOTE_SIMULATED + "\n\n" + NOTE_SETS
+        + "\n\n## Success, outcomes, timing and forces\n\n" + t1
+    )
     text += (
         "\nMedian [25 %, 75 %]. "
         + NOTE_TIME
@@ -134,11 +143,12 @@ def markdown(
         "slowed); path deviation: how far contact pushed the pelvis off its path; pull: the "
         "largest pull while both held the object; jerk: the robot TCP's jerk at 30 Hz.\n"
     )
-    reps = [r for r in agg if r["set"] == "replay" and r.get("n_delta")]
+    reps = [r for r in agg if r["set"].startswith("replay") and r.get("n_delta")]
     if reps:
         text += "\n## Simulated vs recorded transfer (replays)\n\n" + markdown_table(
             [
                 "agent",
+                "set",
                 "recordings with a detected transfer",
                 "median |Δt| (s)",
                 "median |Δx| (m)",
@@ -148,6 +158,7 @@ def markdown(
             [
                 [
                     lab(r),
+                    r["set"],
                     r["n_delta"],
                     med_iqr(r, "abs_delta_t", 2),
                     med_iqr(r, "abs_delta_x", 2),
@@ -200,6 +211,7 @@ def markdown(
     text += "\n## No ghosts\n\n" + markdown_table(
         [
             "agent",
+            "set",
             "episodes",
             "max penetration (mm)",
             "> 1 cm",
@@ -212,6 +224,7 @@ def markdown(
         [
             [
                 LABELS.get(g["agent"], g["agent"]),
+                g["set"],
                 g["n"],
                 _f(1000 * g["max_penetration_m"], 1),
                 g["episodes_penetration_over_1cm"],

@@ -101,9 +101,10 @@ def write_closed_loop(
     ghost = rep.ghosts(run.rows)
     timing = timing_rows(run.rows)
     n_sets = {s: sum(1 for r in run.receivers if r.set == s) for s in SETS}
+    n_ood = sum(1 for r in run.receivers if r.set == "replay" and r.is_ood)
     n_rec = (
-        f"{n_sets['id']} ID + {n_sets['ood']} OOD scripted walkers, {n_sets['replay']} replays of "
-        f"folds {list(run.replay_folds)}"
+        f"{n_sets['id']} ID + {n_sets['ood']} OOD scripted walkers, {n_sets['replay']} replays "
+        f"({n_sets['replay'] - n_ood} ID + {n_ood} OOD) of folds {list(run.replay_folds)}"
     )
     worker_s = sum(t["worker_s"] for t in timing)
     footer = (
@@ -182,14 +183,20 @@ def write_theta_sweep(
     ``n_boot`` resamples (seeded by ``seed``) give the CIs; ``quick`` marks the Markdown.
     """
     from handover_eval.closedloop import theta_sweep as ts
+    from handover_eval.closedloop.report import is_ood
 
     rows, models, seconds = run.rows, run.models, run.seconds
     per_value, extremes = ts.summarise(rows, n_boot, seed)
     cfg = sweep.receivers
     n_sets = {s: len({r["receiver"] for r in rows if r["set"] == s}) for s in SETS}
+    n_ood = len({r["receiver"] for r in rows if r["set"] == "replay" and is_ood(r)})
     n_rec = (
         f"{n_sets['id']} ID + {n_sets['ood']} OOD scripted walkers"
-        + (f", {n_sets['replay']} replays" if n_sets["replay"] else "")
+        + (
+            f", {n_sets['replay']} replays ({n_sets['replay'] - n_ood} ID + {n_ood} OOD)"
+            if n_sets["replay"]
+            else ""
+        )
         + ", the same at every value"
     )
     header = _header(
@@ -210,9 +217,10 @@ def write_theta_sweep(
     print(
         "\n"
         + markdown_table(
-            ["parameter", "moves", "outcomes (high - low end, 95 % CI excludes 0)"],
+            ["parameter", "set", "moves", "outcomes (high - low end, 95 % CI excludes 0)"],
             [
-                [ts.SYMBOLS[v["param"]], "yes" if v["moves"] else "no", v["outcomes_moved"] or "-"]
+                [ts.SYMBOLS[v["param"]], v["set"], "yes" if v["moves"] else "no",
+                 v["outcomes_moved"] or "-"]
                 for v in ts.verdicts(extremes)
             ],
         )

@@ -1,5 +1,6 @@
 """``closed_loop.png``: success rate with its CI, handover-time distributions and effort measures
-per agent and receiver set (the simulated person)."""
+per agent and receiver set (the simulated person): scripted ID and OOD walkers, replayed ID and OOD
+recordings, one colour each (``replay-all`` pools the last two and is left to the tables)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,15 @@ from typing import Any
 
 import numpy as np
 
+from handover_eval.closedloop.report import groups_of
 from handover_eval.closedloop.roster import LABELS
 
-SET_COLOURS = {"id": "tab:blue", "ood": "tab:orange", "replay": "tab:green"}
+SET_COLOURS = {
+    "walker-id": "tab:blue",
+    "walker-ood": "tab:orange",
+    "replay-id": "tab:green",
+    "replay-ood": "tab:red",
+}
 PANELS = (
     ("handover_time", "handover time (s), successes"),
     ("time_lost", "time lost slowing down (s)"),
@@ -22,7 +29,8 @@ PANELS = (
 
 def _values(rows: Sequence[dict], agent: str, rset: str, col: str) -> np.ndarray:
     v = np.array(
-        [float(r[col]) for r in rows if r["agent"] == agent and r["set"] == rset], dtype=float
+        [float(r[col]) for r in rows if r["agent"] == agent and rset in groups_of(r)],
+        dtype=float,
     )
     return v[np.isfinite(v)]
 

@@ -6,7 +6,10 @@ every value (seeded scripted ID and OOD walkers, optionally replays). Per value 
 success rate (mean) or the median over receivers, with a bootstrap CI over receivers (the
 run-to-run noise: which receivers one happens to meet). Per parameter: the paired difference
 between the two extreme values on the same receivers, with its bootstrap CI; the parameter
-*moves* an outcome when that CI excludes 0.
+*moves* an outcome when that CI excludes 0. Everything is given over all receivers (set ``all``)
+and per receiver group of :data:`handover_eval.closedloop.report.GROUPS` (scripted ID / OOD
+walkers, replayed ID / OOD recordings, all replays), so that OOD receivers are never hidden in a
+pooled number.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import numpy as np
 
 from handover_env.config import THETA_RANGES, HandoverParams
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.closedloop.report import EFFORT, paired_metrics
+from handover_eval.closedloop.report import EFFORT, GROUPS, groups_of, paired_metrics
 from handover_eval.closedloop.roster import ModelRecord, check_agents, prepare_models
 from handover_eval.closedloop.run import (
     ClosedLoopEvalConfig,
@@ -56,6 +59,13 @@ METRICS: dict[str, tuple[str, str, int]] = {
     "body_contact_force": ("body_contact_force", "median", 1),
     **{m: (m, "median", 3 if m == "path_deviation" else 2) for m in EFFORT if m != "pull_force"},
     "robot_jerk_rms": ("robot_jerk_rms", "median", 0),
+}
+GROUP_COLOURS = {
+    "all": "k",
+    "walker-id": "tab:blue",
+    "walker-ood": "tab:orange",
+    "replay-id": "tab:green",
+    "replay-ood": "tab:red",
 }
 PLOTTED = (
     "success",
@@ -164,45 +174,70 @@ def _col(rows: Sequence[dict], column: str) -> np.ndarray:
     )
 
 
+def sweep_groups(rows: Sequence[dict]) -> list[str]:
+    """``all`` and the receiver groups present in ``rows``, in table order."""
+    return ["all", *(g for g in GROUPS if any(g in groups_of(r) for r in rows))]
+
+
 def summarise(
     rows: Sequence[dict], n_boot: int = N_BOOTSTRAP, seed: int = 0
 ) -> tuple[list[dict], list[dict]]:
-    """``(per-value rows, per-parameter extreme comparisons)`` (module docstring)."""
+    """``(per-value rows, per-parameter extreme comparisons)``, per receiver group (module
+    docstring)."""
     per_value, extremes = [], []
     for param in dict.fromkeys(r["param"] for r in rows):
-        mine = [r for r in rows if r["param"] == param]
-        values = sorted({r["value"] for r in mine})
-        for v in values:
-            at = [r for r in mine if r["value"] == v]
-            for metric, (column, stat, _) in METRICS.items():
-                vals = _col(at, column)
-                est, lo, hi = bootstrap_ci(
-                    vals, stat, n_boot, stable_seed(param, v, metric, base=seed)
-                )
-                per_value.append(
-                    {
-                        "param": param,
-                        "value": v,
-                        "metric": metric,
-                        "stat": stat,
-                        "n": int(np.isfinite(vals).sum()),
-                        "estimate": est,
-                        "low": lo,
-                        "high": hi,
-                    }
-                )
-        lo_rows = [r for r in mine if r["value"] == values[0]]
-        hi_rows = [r for r in mine if r["value"] == values[-1]]
-        metrics = {m: (c, s) for m, (c, s, _) in METRICS.items()}
-        extremes += paired_metrics(
-            hi_rows,
-            lo_rows,
-            {"param": param, "low_value": values[0], "high_value": values[-1]},
-            n_boot,
-            seed,
-            metrics,
-        )
+        for group in sweep_groups(rows):
+            mine = [
+                r for r in rows
+                if r["param"] == param and (group == "all" or group in groups_of(r))
+            ]
+            if mine:
+                _summarise_one(mine, param, group, n_boot, seed, per_value, extremes)
     return per_value, extremes
+
+
+def _summarise_one(
+    mine: list[dict],
+    param: str,
+    group: str,
+    n_boot: int,
+    seed: int,
+    per_value: list[dict],
+    extremes: list[dict],
+) -> None:
+    """:func:`summarise` of one parameter and receiver group, appended to the two lists."""
+    values = sorted({r["value"] for r in mine})
+    for v in values:
+        at = [r for r in mine if r["value"] == v]
+        for metric, (column, stat, _) in METRICS.items():
+            vals = _col(at, column)
+            est, lo, hi = bootstrap_ci(
+                vals, stat, n_boot, stable_seed(param, group, v, metric, base=seed)
+            )
+            per_value.append(
+                {
+                    "param": param,
+                    "set": group,
+                    "value": v,
+                    "metric": metric,
+                    "stat": stat,
+                    "n": int(np.isfinite(vals).sum()),
+                    "estimate": est,
+                    "low": lo,
+                    "high": hi,
+                }
+            )
+    lo_rows = [r for r in mine if r["value"] == values[0]]
+    hi_rows = [r for r in mine if r["value"] == values[-1]]
+    metrics = {m: (c, s) for m, (c, s, _) in METRICS.items()}
+    extremes += paired_metrics(
+        hi_rows,
+        lo_rows,
+        {"param": param, "set": group, "low_value": values[0], "high_value": values[-1]},
+        n_boot,
+        seed,
+        metrics,
+    )
 
 
 def _moved(e: dict) -> str:
@@ -218,13 +253,17 @@ def _moved(e: dict) -> str:
 
 
 def verdicts(extremes: Sequence[dict]) -> list[dict]:
-    """Per parameter: whether some outcome moves beyond its noise, and which."""
+    """Per parameter and receiver set: whether some outcome moves beyond its noise, and which."""
     out = []
-    for param in dict.fromkeys(e["param"] for e in extremes):
-        moved = [e for e in extremes if e["param"] == param and e["ci_excludes_zero"]]
+    for param, group in dict.fromkeys((e["param"], e.get("set", "all")) for e in extremes):
+        moved = [
+            e for e in extremes
+            if e["param"] == param and e.get("set", "all") == group and e["ci_excludes_zero"]
+        ]
         out.append(
             {
                 "param": param,
+                "set": group,
                 "moves": bool(moved),
                 "outcomes_moved": "; ".join(_moved(e) for e in moved),
             }
@@ -236,25 +275,37 @@ def markdown(per_value: list[dict], extremes: list[dict], header: str, footer: s
     """theta_sweep.md: the verdicts, then one table per parameter (values x outcomes)."""
     text = header + "\n## Does each parameter move an outcome beyond its noise?\n\n"
     text += markdown_table(
-        ["parameter", "moves an outcome", "outcomes whose extreme-value paired CI excludes 0"],
         [
-            [SYMBOLS[v["param"]], "yes" if v["moves"] else "no", v["outcomes_moved"] or "–"]
+            "parameter",
+            "set",
+            "moves an outcome",
+            "outcomes whose extreme-value paired CI excludes 0",
+        ],
+        [
+            [SYMBOLS[v["param"]], v["set"], "yes" if v["moves"] else "no",
+             v["outcomes_moved"] or "–"]
             for v in verdicts(extremes)
         ],
     )
     text += (
         "\nPaired difference (high end - low end of the range) on the same receivers: success as a "
-        "difference in rate, the others as the median paired difference; [95 % bootstrap CI].\n"
+        "difference in rate, the others as the median paired difference; [95 % bootstrap CI]. "
+        "Set `all`: every receiver; `walker-id` / `walker-ood`: the scripted walkers; "
+        "`replay-id` / `replay-ood` / `replay-all`: the replayed recordings by `is_ood`.\n"
     )
     shown = [m for m in METRICS if m not in ("transfer_time",)]
     for param in dict.fromkeys(r["param"] for r in per_value):
-        by = {(r["value"], r["metric"]): r for r in per_value if r["param"] == param}
-        values = sorted({v for v, _ in by})
+        by = {
+            (r.get("set", "all"), r["value"], r["metric"]): r
+            for r in per_value
+            if r["param"] == param
+        }
+        keys = list(dict.fromkeys((g, v) for g, v, _ in by))
         body = []
-        for v in values:
+        for g, v in keys:
             cells = []
             for m in shown:
-                r, d = by[(v, m)], METRICS[m][2]
+                r, d = by[(g, v, m)], METRICS[m][2]
                 scale = 100 if m == "success" else 1
                 cells.append(
                     "–"
@@ -263,9 +314,10 @@ def markdown(per_value: list[dict], extremes: list[dict], header: str, footer: s
                     f"[{scale * r['low']:.{0 if m == 'success' else d}f}, "
                     f"{scale * r['high']:.{0 if m == 'success' else d}f}]"
                 )
-            body.append([f"{v:g}", *cells])
+            body.append([g, f"{v:g}", *cells])
         text += f"\n### {SYMBOLS[param]}\n\n" + markdown_table(
             [
+                "set",
                 SYMBOLS[param],
                 *[("success %" if m == "success" else m.replace("_", " ")) for m in shown],
             ],
@@ -299,16 +351,26 @@ def sweep_figure(per_value: list[dict], title: str) -> Any:
     )
     for i, param in enumerate(params):
         for j, metric in enumerate(PLOTTED):
-            rs = sorted(
-                (r for r in per_value if r["param"] == param and r["metric"] == metric),
-                key=lambda r: r["value"],
-            )
-            scale = 100 if metric == "success" else 1
-            x = [r["value"] for r in rs]
-            y = np.array([scale * r["estimate"] for r in rs])
-            err = [y - [scale * r["low"] for r in rs], [scale * r["high"] for r in rs] - y]
             ax = axes[i, j]
-            ax.errorbar(x, y, yerr=err, marker="o", ms=3, capsize=2, lw=1)
+            scale = 100 if metric == "success" else 1
+            for group in dict.fromkeys(r.get("set", "all") for r in per_value):
+                rs = sorted(
+                    (
+                        r for r in per_value
+                        if r["param"] == param and r["metric"] == metric
+                        and r.get("set", "all") == group
+                    ),
+                    key=lambda r: r["value"],
+                )
+                if not rs or group == "replay-all":  # the tables have it; two lines pool it
+                    continue
+                x = [r["value"] for r in rs]
+                y = np.array([scale * r["estimate"] for r in rs])
+                err = [y - [scale * r["low"] for r in rs], [scale * r["high"] for r in rs] - y]
+                ax.errorbar(x, y, yerr=err, marker="o", ms=3, capsize=2, lw=1,
+                            color=GROUP_COLOURS.get(group, "k"), label=group)
+            if i == 0 and j == 0:
+                ax.legend(fontsize=6)
             ax.grid(alpha=0.3)
             ax.tick_params(labelsize=7)
             if i == 0:

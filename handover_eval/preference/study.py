@@ -124,6 +124,8 @@ class StudyResult:
     #: The pooled CoSpar run that gave ``theta_pop`` and its settings (None with ``--theta``).
     pooled: PreferenceResult | None = None
     pooled_config: PreferenceConfig | None = None
+    #: The walkers every episode met: ``"id"`` / ``"ood"`` scripted walkers or ``"replay"``.
+    receiver: str = "id"
 
 
 # ---------------------------------------------------------------------------- statistics
@@ -260,7 +262,8 @@ def run_study(config: StudyConfig, progress: bool = True,
     else:
         theta_pop = HandoverParams(*config.theta)
     timings["pooled_cospar_s"] = time.perf_counter() - t0
-    result = StudyResult(config, people, theta_pop, pooled=pooled, pooled_config=pcfg)
+    result = StudyResult(config, people, theta_pop, pooled=pooled, pooled_config=pcfg,
+                         receiver=runner.receiver)
     # 2. H1/H2
     t0 = time.perf_counter()
     _reseed(people, 11)

@@ -36,6 +36,29 @@ def _p(p: float) -> str:
     return f"{p:.2g}" if p >= 1e-4 else "< 1e-4"
 
 
+def walker_mix(result: StudyResult) -> str:
+    """Which walkers the participants walked as (ID / OOD scripted walkers or replays), how many
+    episodes, and how their walks were drawn."""
+    n = int(result.timings.get("episodes", 0))
+    kind = result.receiver
+    counts = {"id": n if kind == "id" else 0, "ood": n if kind == "ood" else 0,
+              "replay": n if kind == "replay" else 0}
+    drawn = (
+        "scripted walkers (`reset(seed)`, `handover_env.person.motion.sample_walker`) with the "
+        "participant's own body (height, walking speed, passing line); participant `pid` walks "
+        "seeds `1000 * pid + 100 * stream + k` (stream 0: the CoSpar tuning walks, 1: the H1/H2 "
+        "trials and H3 A/B tests, 2: the personalised comparison), so no two participants share "
+        "a walk, tuning never sees a trial walk, and both conditions of a trial meet the same walk"
+        if kind != "replay"
+        else "replayed dataset episodes with the participant's body height"
+    )
+    return (
+        f"Walker mix: {counts['id']} ID and {counts['ood']} OOD walks"
+        + (f" and {counts['replay']} replays" if counts["replay"] else "")
+        + f" over all {n} episodes (every part runs the `{kind}` walkers): {drawn}."
+    )
+
+
 def markdown(result: StudyResult) -> str:
     """The report's text."""
     c, cfg = result.h1_h2, result.config
@@ -54,6 +77,8 @@ def markdown(result: StudyResult) -> str:
             f"{cfg.walks} tuning walks "
             f"per Θ, agent `{cfg.agent}`."
         ),
+        "",
+        walker_mix(result),
         "",
         "## Population Θ̂ (CoSpar pooled over the participants)",
         "",
