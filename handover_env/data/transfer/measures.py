@@ -38,6 +38,7 @@ from handover_env.data.transfer.detect import (
     to_body_frame,
     walking_frame,
 )
+from handover_env.data.transfer.walks import WALK_MEASURES, walk_measures
 
 #: Slow-down window around the transfer, s (before, after).
 SLOWDOWN_WINDOW = (1.0, 0.5)
@@ -157,6 +158,7 @@ MEASURES: dict[str, tuple[str, str, str]] = {
         "",
     ),
 }
+MEASURES.update(WALK_MEASURES)
 EVENTS = ("near", "transfer", "onset", "release", "arm_back", "nearest")
 
 
@@ -311,6 +313,7 @@ def analyse_recording(
     else:
         m["fast_reach_duration"] = (k - reach.rise_frame) / rate_hz
         _onset_measures(m, out, r, walking, body_obj, body_hand, onset, k, rate_hz)
+    m.update(walk_measures(r, o, walking, k, onset, rate_hz))
     if g is not None:
         release, reason = detect_release(g, o, k, rate_hz)
         giver_d = nearest_distance(g[:, list(GIVER_HAND_JOINTS)], o)
