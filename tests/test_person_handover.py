@@ -219,3 +219,66 @@ def test_a_recorded_person_stops_on_the_static_stop_line():
     assert info["outcome"] == "success"
     assert u.receiver.at_rest and abs(u.receiver.base()[0] - STOP_XY[0]) < 0.05
     assert info["arm_extended_time"] > 2.0  # the raised hand waited for detection and delivery
+
+
+class _Timed:
+    """Holds the object at ``first`` until ``t`` s, then at ``then``."""
+
+    def __init__(self, first, then, t):
+        self.first, self.then, self.t = (np.asarray(v, dtype=np.float32) for v in (first, then, t))
+        self.n = 0
+
+    def reset(self):
+        self.n = 0
+
+    def act(self, obs):
+        self.n += 1
+        return (self.first if self.n / RATE < self.t else self.then).copy()
+
+
+def _segment(x0: float, x1: float, speed: float = 0.9) -> np.ndarray:
+    n = int(round(abs(x1 - x0) / speed * RATE))
+    return np.linspace(x0, x1, n + 1)[1:]
+
+
+def test_a_person_who_walks_past_pauses_and_turns_back_still_takes_the_object(env):
+    """Issue 23: the person walks 0.5 m past where the object will be, pauses 1 s, walks back 1 m
+    and then on. The object is presented at 2.0 s, while they stand 0.5 m past it (more than
+    give_up_behind behind their shoulder, within PASS_DISTANCE: the former rule called that a
+    miss). Their own walk brings it ahead of them again, so they wait and take it on the way."""
+    xs = np.concatenate([[2.0], _segment(2.0, 0.0), np.full(30, 0.0), _segment(0.0, 1.0, 0.6),
+                         _segment(1.0, -1.5)])
+    episode = {"receiver_xy": np.column_stack([xs, np.full_like(xs, -0.8)]),
+               "source_id": "turn_back"}
+    agent = _Timed([0.5, 0.0, 1.25, -math.pi / 2], [0.5, -0.45, 1.25, -math.pi / 2], 2.0)
+    obs, info = env.reset(seed=0, options={"receiver": "replay", "episode": episode})
+    agent.reset()
+    states = []
+    while True:
+        obs, _, term, trunc, info = env.step(agent.act(obs))
+        states.append(env.unwrapped.receiver.state)
+        if term or trunc:
+            break
+    assert info["outcome"] == "success" and "passed" not in states
+    paused = (np.flatnonzero(np.diff(xs) > 0)[0] + 1) / RATE  # the pause ends here (3.2 s)
+    turned = (np.flatnonzero(np.diff(xs) > 0)[-1] + 1) / RATE  # the walk back ends here (4.9 s)
+    # the reach starts on the way back, ahead of the meeting on the last pass, and the hand takes
+    # the object only on that pass
+    assert info["reach_onset_time"] > paused and info["transfer_time"] > turned
+    assert 0.3 < info["reach_distance"] < 0.65  # shoulder to object at the grasp
+
+
+def test_reach_distance_is_the_shoulder_object_distance_at_the_grasp_and_grows_with_the_offset(
+    env,
+):
+    """``reach_distance`` is measured as for the recordings (shoulder to the object's centre at
+    the grasp), and the person reaches farther for an object held farther from their path."""
+    reach = {}
+    for side in (0.15, 0.45):
+        y = -0.8
+        episode = _straight_walk(y)
+        info, _, _ = _run(env, _Hold([0.5, y + side, 1.25, -math.pi / 2]),
+                          options={"receiver": "replay", "episode": episode})
+        assert info["outcome"] == "success"
+        reach[side] = info["reach_distance"]
+    assert 0.3 < reach[0.15] < reach[0.45] - 0.05 and reach[0.45] < 0.7

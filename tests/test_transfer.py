@@ -8,6 +8,7 @@ it is absent).
 from __future__ import annotations
 
 import json
+import math
 import pickle
 from pathlib import Path
 
@@ -343,3 +344,21 @@ def test_real_recordings_mostly_get_a_transfer() -> None:
     assert med["d15_transfer"] < 0.3
     assign_halves(results, folds=2, calibration_folds=1)
     assert {r.calibration for r in results} == {True, False}
+
+
+@pytest.mark.skipif(
+    not REAL.is_dir(), reason="the development copy of the public dataset is absent"
+)
+def test_the_left_behind_rule_never_fires_before_a_recorded_transfer() -> None:
+    """Issue 23: the simulated person's left-behind rule, run on recorded OOD walks (the recorded
+    shoulder path as the person's remaining walk), never declares an object left behind before
+    the recorded transfer; the pause/turn-back measures see the OOD walks' pauses and turns."""
+    from handover_env.data.public import list_public_files
+
+    ood = [p for p in list_public_files(REAL) if p.name.startswith("motion_variation_")][:20]
+    results = [analyse_file(p) for p in ood]
+    detected = [r.analysis.measures for r in results if r.analysis.events["transfer"] is not None]
+    assert len(detected) >= 18
+    assert all(math.isnan(m["left_behind"]) for m in detected)
+    assert max(m["max_turn"] for m in detected) > 90.0  # some OOD receivers turn round
+    assert np.median([m["path_closest_onset"] for m in detected]) < 0.6

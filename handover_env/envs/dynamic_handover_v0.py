@@ -83,7 +83,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | transfer_time, transfer_pelvis_xy, transfer_object_pos | the person's grasp: when, where they were, where the bottle was |
     | release_time, release_force, pull_force | the release; N, wrist force then; N, peak grip force while both held |
     | peak_contact_force, peak_wrist_force | N, max external wrist force or body contact force so far |
-    | reach_distance, arm_extended_time | m, farthest grip-shoulder distance; s, the arm out (reaching, raised, holding) |
+    | reach_distance, arm_extended_time | m, right shoulder to the object's centre when the person took it (0 before; as the recordings' `object_shoulder_transfer`); s, the arm out (reaching, raised, holding) |
     | time_lost, min_speed_factor, path_deviation | s behind the nominal walk; slowest speed factor; m pushed off the path |
     | contact_force_<segment>, body_contact_force, penetration | N per body segment, N max; m, deepest |
     | body_contact_robot, body_contact_object | whether the robot / the bottle touched the person |

@@ -1,7 +1,14 @@
-"""What a handover costs the simulated person: how far and how long the arm is out, and how far
-contact pushed them off their path (``info`` keys ``reach_distance``, ``arm_extended_time``,
-``path_deviation``; :class:`handover_env.person.receiver.Receiver` adds the time lost to slowing
-down and the slowest speed factor)."""
+"""What a handover costs the simulated person: how far they reached, how long the arm was out, and
+how far contact pushed them off their path (``info`` keys ``reach_distance``,
+``arm_extended_time``, ``path_deviation``; :class:`handover_env.person.receiver.Receiver` adds the
+time lost to slowing down and the slowest speed factor).
+
+``reach_distance`` is the one reach statistic of the project, defined as for the recordings
+(:func:`handover_env.data.transfer.measures.analyse_recording`'s ``object_shoulder_transfer``): the
+distance from the right shoulder joint to the object's centre at the moment the person takes the
+object. The recordings' median is 0.50 m, IQR 0.44-0.56 m
+(``docs/calibration/receiver_calibration.md``).
+"""
 
 from __future__ import annotations
 
@@ -19,7 +26,9 @@ class Effort:
         body: the person's indices in the compiled scene.
 
     Attributes:
-        reach_distance: m, the largest grip-shoulder distance while the arm was out.
+        reach_distance: m, right shoulder to the object's centre when the person took the object
+            (0 until they take it).
+        reach_max: m, the largest grip-shoulder distance while the arm was out.
         arm_out_time: s, how long the arm was out (reaching, raised, or holding before the
             release).
         path_deviation: m, the largest horizontal distance of the pelvis from its nominal target.
@@ -32,6 +41,7 @@ class Effort:
     def reset(self) -> None:
         """Nothing measured yet (a new episode)."""
         self.reach_distance = 0.0
+        self.reach_max = 0.0
         self.arm_out_time = 0.0
         self.path_deviation = 0.0
 
@@ -44,8 +54,14 @@ class Effort:
             self.arm_out_time += dt
             shoulder = data.xpos[b.bodies[RIGHT_ARM[0]]]
             grip = data.site_xpos[b.grip_site]
-            self.reach_distance = max(self.reach_distance, float(np.linalg.norm(grip - shoulder)))
+            self.reach_max = max(self.reach_max, float(np.linalg.norm(grip - shoulder)))
         pelvis = data.xpos[b.bodies[0]]
         self.path_deviation = max(
             self.path_deviation, float(np.hypot(*(pelvis[:2] - pelvis_target[:2])))
         )
+
+    def took(self, data: mujoco.MjData, object_pos: np.ndarray) -> None:
+        """The person took the object now: record the shoulder-object distance
+        (``reach_distance``)."""
+        shoulder = data.xpos[self.body.bodies[RIGHT_ARM[0]]]
+        self.reach_distance = float(np.linalg.norm(np.asarray(object_pos) - shoulder))

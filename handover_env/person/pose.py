@@ -91,6 +91,22 @@ class MotionPose:
         u = np.array([math.cos(h), math.sin(h), 0.0])
         return shoulder, u, float(interp(m.speed, tau)) * rho
 
+    def shoulder_track(self) -> tuple[np.ndarray, np.ndarray]:
+        """The right shoulder (T, 3) and the horizontal walking direction (T, 3) at every frame of
+        the nominal motion (as :meth:`body_frame` at integer frames, vectorised)."""
+        m = self.motion
+        q = m.quat[:, SEG["torso"]]
+        w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+        rot = np.stack([
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ], axis=1)
+        rot_s = rot @ self.shoulder_local
+        h = np.asarray(m.heading, dtype=np.float64)
+        forward = np.stack([np.cos(h), np.sin(h), np.zeros_like(h)], axis=1)
+        return m.origin[:, SEG["torso"]] + rot_s, forward
+
     def pelvis(self, tau: float, rho: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Nominal pelvis position, rotation and velocity at tau."""
         m = self.motion

@@ -9,13 +9,23 @@ it by :mod:`~handover_env.person.pose` and moved by :mod:`~handover_env.person.t
   waiting for an object they cannot reach yet slows down (rho falls at ``slow_rate`` per second, not
   below ``min_speed_factor``) and speeds up again once it is within reach; the camera sees the
   pelvis of this played-back walk.
-* **Reaching** (``hand_mode="reach"``, the modelled hand): the person reaches when the object
-  will be at a comfortable place along their own path soon: its grasp point is predicted to come
-  within ``comfort_reach`` of the right shoulder when it is ``meet_forward`` ahead of it, in at
-  most ``reach_lead_time``. The hand then moves on a minimum-jerk path re-planned every step
-  toward the moving grasp point (Hoff & Arbib 1993), with a nominal duration ``reach_duration``.
-  The arm follows by two-link inverse kinematics (:func:`handover_env.person.gait.arm_pose`). If the
-  object falls behind the shoulder by ``give_up_behind`` unheld, the person walks on (a miss).
+* **Reaching** (``hand_mode="reach"``, the modelled hand): the decisions look along the
+  person's own remaining walk (:mod:`handover_env.person.receiver_rules`: pauses, loops and
+  turn-backs included). The person reaches when they will meet the object within
+  ``reach_lead_time``: when its grasp point (moving on at its velocity) comes within their take
+  distance of the right shoulder, not behind it. The take distance grows with how far the object
+  is held from their path (its closest approach; fitted to the recordings), so a person reaches
+  as far as they need to, not always to full extension; it is fixed at the reach onset. The hand
+  then moves on a minimum-jerk path re-planned every step toward the moving grasp point (Hoff &
+  Arbib 1993), planned to arrive at the meeting (at most ``reach_duration`` after the onset; put
+  off only when the meeting comes over ``REPLAN_SLACK`` later, brought forward whenever it comes
+  earlier). The arm follows by two-link inverse kinematics
+  (:func:`handover_env.person.gait.arm_pose`).
+* **Left behind** (``passed``, the env's ``missed``): the unheld object is ``give_up_behind``
+  behind the shoulder within ``PASS_DISTANCE``, and at no later point of the remaining walk is it
+  ahead of them again (:func:`~handover_env.person.receiver_rules.left_behind`); run on the
+  recordings, this never fires before a recorded transfer
+  (``docs/calibration/receiver_calibration.md``).
 * **Recorded hand** (``hand_mode="recorded"``): the right arm is the recorded one; when the
   recorded grip point comes within ``close_radius`` of the object's grasp point, the hand closes
   onto it on a minimum-jerk path of ``close_time`` (the last few cm a hand travels when it
@@ -30,8 +40,13 @@ it by :mod:`~handover_env.person.pose` and moved by :mod:`~handover_env.person.t
   shoulder in ``present_time`` and waits until the robot brings the object within
   ``present_reach``; then takes it.
 
-Effort (``effort()``): :class:`handover_env.person.effort.Effort`'s measures, plus the time lost
-to slowing down and the slowest speed factor.
+Effort (``effort()``): :class:`handover_env.person.effort.Effort`'s measures (``reach_distance``:
+the shoulder-object distance when the person took the object, defined as for the recordings),
+plus the time lost to slowing down and the slowest speed factor.
+
+The module is over 500 lines because the decisions, the hand's path and the grasp read and write
+one person's per-step state (playback position, speed factor, hand state); the decision rules
+themselves are the pure functions of :mod:`handover_env.person.receiver_rules`.
 """
 
 from __future__ import annotations
@@ -49,6 +64,7 @@ from handover_env.person.grip import ArmGrip
 from handover_env.person.min_jerk import min_jerk_step
 from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
 from handover_env.person.pose import STRAIGHT_ARM, TRUNK_MAX_TURN, MotionPose, interp
+from handover_env.person.receiver_rules import Meeting, PathAhead, left_behind, meet
 from handover_env.person.settings import (
     HEIGHT_OPTION_RANGE,
     PASS_DISTANCE,
@@ -61,6 +77,9 @@ from handover_env.robot.scene import SceneIds
 
 CAMERA_RATE = RATE
 STATES = ("walking", "reaching", "holding", "presenting", "presented", "passed")
+#: A reaching hand's planned arrival is put off only if the meeting comes later than planned by
+#: more than this, s (about the recorded receivers' median |Δt| of the simulated transfer, 0.2 s).
+REPLAN_SLACK = 0.2
 #: Shortest re-planning horizon of a hand that holds a point fixed to the body, s.
 HOLD_TRACKING = 0.3
 #: A hand drawing an object out keeps it this far from the pelvis axis (horizontally), m: the
@@ -164,6 +183,7 @@ class Receiver:
         self._max_reach = (STRAIGHT_ARM * self.pose.arm_reach
                            + float(np.linalg.norm(self.pose.shoulder_local))
                            * math.sin(TRUNK_MAX_TURN))
+        self._shoulder_track, self._forward_track = self.pose.shoulder_track()
         self._reset_state()
 
     def _reset_state(self) -> None:
@@ -176,6 +196,7 @@ class Receiver:
         self.rho = 1.0
         self.t_grasp = math.nan
         self.t_reach = math.nan
+        self.reach_plan: Meeting | None = None
         self.t_hand_raised = math.nan
         self.grasp_pelvis_xy = None
         self._hand: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -253,6 +274,7 @@ class Receiver:
         )
         self._object_axis = object_rot[:, 2].copy()
         grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
+        self._ahead = self._path_ahead()
         # ---- how fast to walk on
         slow = False
         if object_free and self.state in ("walking", "reaching"):
@@ -270,52 +292,51 @@ class Receiver:
         self._t = t1
         self._dt = dt
 
-    def _meeting(
-        self, grasp_point: np.ndarray, object_vel: np.ndarray
-    ) -> tuple[float, float, float]:
-        """Where the object is along the person's walk and when they would meet it.
+    def _path_ahead(self) -> PathAhead:
+        """The person's remaining nominal path from the playback position on, timed at the
+        current speed factor (the shoulder now first, then every later frame)."""
+        f0 = int(math.floor(self.tau)) + 1
+        shoulder = np.vstack([interp(self._shoulder_track, self.tau), self._shoulder_track[f0:]])
+        forward = np.vstack([interp(self._forward_track, self.tau), self._forward_track[f0:]])
+        frames = np.concatenate([[self.tau], np.arange(f0, self.motion.frames, dtype=np.float64)])
+        rate = RATE * max(self.rho, self.config.min_speed_factor)
+        return PathAhead((frames - self.tau) / rate, shoulder, forward)
 
-        Returns:
-            (forward offset of the grasp point from the right shoulder; time until it is
-            ``meet_forward`` ahead of the pelvis if both keep their velocities along the walk;
-            its distance from the shoulder then, with its current offset across the walk
-            (sideways and up) and the meeting point's offset along it).
-        """
-        shoulder, u, v = self.pose.body_frame(self.tau, self.rho)
-        pelvis = interp(self.motion.origin[:, 0], self.tau)
-        rel = grasp_point - shoulder
-        fwd = float(rel @ u)
-        across = float(np.linalg.norm(rel - fwd * u))
-        gap = float((grasp_point - pelvis) @ u) - self.config.meet_forward
-        if gap <= 0.0:
-            return fwd, 0.0, float(np.linalg.norm(rel))
-        closing = v - float(object_vel @ u)
-        if closing <= 1e-3:
-            return fwd, math.inf, math.inf
-        return fwd, gap / closing, math.hypot(across, fwd - gap)
+    def _meeting(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> Meeting:
+        """When and how far from the shoulder the person will meet the object on their own path
+        (:func:`~handover_env.person.receiver_rules.meet`, the object extrapolated over the reach
+        lead time; a reaching person keeps the closest approach of their reach onset)."""
+        closest = take = None
+        if self.state == "reaching" and self.reach_plan is not None:
+            closest, take = self.reach_plan.closest, self.reach_plan.take
+        return meet(grasp_point, object_vel, self._ahead, self._max_reach,
+                    self.config.reach_lead_time, self._comfort, closest, take)
 
-    def _left_behind(self, fwd: float, dist: float) -> bool:
-        """The person has walked past the object: it is ``give_up_behind`` behind the shoulder
-        and they are beside it (not just heading elsewhere far from it)."""
-        return fwd < -self.config.give_up_behind and dist < PASS_DISTANCE
+    def _left_behind(self, grasp_point: np.ndarray) -> bool:
+        """The person has walked past the object for good
+        (:func:`~handover_env.person.receiver_rules.left_behind`): it is ``give_up_behind``
+        behind the shoulder within ``PASS_DISTANCE``, and the rest of their walk never brings it
+        ahead of them again."""
+        return left_behind(grasp_point, self._ahead, self.config.give_up_behind, PASS_DISTANCE)
 
     def _should_slow(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> bool:
-        cfg = self.config
-        if self.present_after_walk:
+        """Slow down: the person is about to meet the object (within the reach lead time) farther
+        than is comfortable, or to pass it out of reach."""
+        if self.present_after_walk or self._left_behind(grasp_point):
             return False
-        fwd, t_meet, dist = self._meeting(grasp_point, object_vel)
-        if self._left_behind(fwd, dist):
-            return False
-        return t_meet <= cfg.reach_lead_time and dist > self._comfort
+        m = self._meeting(grasp_point, object_vel)
+        return m.time <= self.config.reach_lead_time and m.distance > self._comfort
 
     def _decide(self, t: float, grasp_point: np.ndarray, object_vel: np.ndarray) -> None:
         cfg = self.config
         if self.state == "walking" and not self.present_after_walk and self.hand_mode == "reach":
-            fwd, t_meet, dist = self._meeting(grasp_point, object_vel)
-            if self._left_behind(fwd, dist):
+            if self._left_behind(grasp_point):
                 self._pass(t)
-            elif t_meet <= cfg.reach_lead_time and dist <= self._max_reach:
-                self._begin_reach(t, cfg.reach_duration)
+                return
+            m = self._meeting(grasp_point, object_vel)
+            if m.reachable and m.time <= cfg.reach_lead_time:
+                self._begin_reach(t, min(max(m.time, cfg.close_time), cfg.reach_duration))
+                self.reach_plan = m
         elif (
             self.state == "walking" and self.hand_mode == "recorded" and not self.present_after_walk
         ):
@@ -340,9 +361,20 @@ class Receiver:
         ):
             self._begin_reach(t, cfg.close_time)
         elif self.state == "reaching" and self.hand_mode == "reach" and not self.present_after_walk:
-            fwd, _, dist = self._meeting(grasp_point, object_vel)
-            if self._left_behind(fwd, dist):
+            if self._left_behind(grasp_point):
                 self._pass(t)
+                return
+            # Re-plan the hand's arrival for the meeting: earlier as soon as it comes earlier,
+            # later only when it is put off by more than REPLAN_SLACK (the person pauses or turns
+            # away, or the object is taken back), not for the last centimetres of an object that
+            # moves on with the walk.
+            m = self._meeting(grasp_point, object_vel)
+            goal = t + m.time
+            if m.reachable and (goal < self._hand_goal_time
+                                or goal > self._hand_goal_time + REPLAN_SLACK):
+                self._hand_goal_time = goal
+                self.reach_plan = Meeting(m.time, m.distance, self.reach_plan.closest, m.take,
+                                          True) if self.reach_plan is not None else m
 
     def _pass(self, t: float) -> None:
         """The object is left behind: the person walks on (the arm returns to its swing)."""
@@ -481,6 +513,7 @@ class Receiver:
         self.state = "holding"
         self.t_grasp = float(data.time)
         self.grasp_pelvis_xy = data.xpos[self.body.bodies[0], :2].copy()
+        self.measured.took(data, data.xpos[self.ids.object_body])
         pelvis, rot, _ = self.pose.pelvis(self.tau, self.rho)
         self._hold_rel = (
             rot.T @ (self._hand[0] - pelvis) if self._hand is not None else rot.T @ (grip - pelvis)

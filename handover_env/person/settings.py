@@ -38,7 +38,6 @@ OBJECT_HALF_HEIGHT = 0.1
 SETTING_RANGES: dict[str, tuple[float, float, str, str]] = {
     "reach_duration": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
     "reach_lead_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
-    "meet_forward": (0.0, LONGEST_REACH, "m", "ahead of the pelvis within the longest reach"),
     "comfort_fraction": (0.1, 2.0, "", "of the arm's length"),
     "min_speed_factor": (0.05, 1.0, "", "a waiting person walks at least 1/20 of their speed"),
     "slow_rate": (1.0 / LONGEST_EPISODE, RATE, "1/s",
@@ -70,10 +69,12 @@ class ReceiverConfig:
     (``docs/calibration/receiver_calibration.md``; medians unless said otherwise):
 
     Args:
-        reach_duration: onset to grasp of a reach, s (0.63).
-        reach_lead_time: the reach starts when the object will be at the meeting point within
-            this time, s (the onset leads the transfer by the reach duration, 0.63).
-        meet_forward: how far ahead of the pelvis, along the walk, people take the object, m (0.35).
+        reach_duration: the longest the hand's first plan takes from the reach onset to the
+            grasp, s (onset to transfer, 0.63; re-planned while the person pauses or turns).
+        reach_lead_time: the reach starts when the person will meet the object (within their take
+            distance, :mod:`handover_env.person.receiver_rules`) within this time, s (the onset
+            leads the transfer by the reach duration, 0.63); the object's motion is extrapolated
+            over it.
         comfort_fraction: the farthest people take the object from, as a fraction of their arm
             length (shoulder-elbow-wrist-hand joints): p95 of the object-shoulder distance over
             the arm length at transfer, 1.10 (median 0.86; the grip centre lies beyond the hand
@@ -86,7 +87,8 @@ class ReceiverConfig:
             window without a handover, 0.75: people do not slow down for a handover that is on
             time). ``slow_rate``: how fast the speed factor changes, 1/s.
         give_up_behind: an unheld object this far behind the shoulder (along the walk) is left
-            behind: the person walks past, m.
+            behind, if the rest of the person's walk never brings it ahead of them again: the
+            person walks past, m.
         hold_time: after the grasp the arm stays out, moving with the body, for this long before
             drawing back, s (arm-extended time 1.30 s minus the reach, 0.67; the hand is drawn
             back 0.37 s before the giver lets go, 1.0 s after the grasp: 0.63).
@@ -115,7 +117,6 @@ class ReceiverConfig:
 
     reach_duration: float = 0.63
     reach_lead_time: float = 0.63
-    meet_forward: float = 0.35
     comfort_fraction: float = 1.10
     min_speed_factor: float = 0.82
     slow_rate: float = 1.5

@@ -22,7 +22,7 @@ def _label(group: str) -> str:
 def _num(value: float | None, unit: str = "") -> str:
     if value is None:
         return "–"
-    digits = 2 if unit in ("s", "m/s", "") else 3
+    digits = 1 if unit == "deg" else 2 if unit in ("s", "m/s", "") else 3
     return f"{value:.{digits}f}"
 
 
@@ -127,6 +127,68 @@ def _grasp(summary: dict) -> list[str]:
     return lines
 
 
+def _walks(summary: dict) -> list[str]:
+    """The left-behind rules run on the recorded walks (issue 23)."""
+    rules = summary["rules"]
+    lines = [
+        "Each frame before the recorded transfer is judged as the simulated person judges it, "
+        "with the object where it was then and the recorded right shoulder's path from there on "
+        "as the person's remaining walk. **Former rule**: the object more than "
+        f"{rules['decisions.GIVE_UP_BEHIND']} m behind the shoulder along the walk and within "
+        "1.2 m of it. **Current rule** (`handover_env.person.receiver_rules.left_behind`, what "
+        "`missed` now rests on): the same, and at no later frame of the remaining walk is the "
+        "object again less than that far behind the shoulder within 1.2 m (the person does not "
+        "turn back to it). A firing before the transfer is a false `missed`: the recorded person "
+        "did take the object later.",
+        "",
+        *_header(["group", "recordings with a transfer", "former rule fires before the transfer",
+                  "earliest (s before it)", "current rule fires before the transfer",
+                  "earliest"]),
+    ]
+    for g in (*COLUMNS, "all/all"):
+        c = summary["left_behind_check"][g]
+        old, new = c["old_left_behind_earliest"], c["left_behind_earliest"]
+        lines.append(
+            f"| {_label(g)} | {c['recordings']} | {c['old_left_behind_count']} | "
+            f"{'–' if old is None else f'{-old:.2f}'} | {c['left_behind_count']} | "
+            f"{'–' if new is None else f'{-new:.2f}'} |"
+        )
+    return lines
+
+
+def _reach(summary: dict) -> list[str]:
+    """What the reach extent and the arm-out time depend on (issue 23)."""
+    reach = summary["reach"]
+    names = list(next(iter(next(iter(reach["correlations"].values())).values())))
+    lines = [
+        "Pearson r over recordings, per half, of the reach statistic (`object_shoulder_transfer`: "
+        "right shoulder to object at the transfer, the one the env reports as `reach_distance`) "
+        "and of the arm-out time (`arm_extended`) with how the object is presented and how the "
+        "receiver walks.",
+        "",
+        *_header(["response", "half"] + [f"`{n}`" for n in names]),
+    ]
+    for half, table in reach["correlations"].items():
+        for resp, row in table.items():
+            cells = " | ".join("–" if v is None else f"{v:+.2f}" for v in row.values())
+            lines.append(f"| `{resp}` | {HALF_LABEL[half]} | {cells} |")
+    f = reach["fit"]
+    if "rma_b" in f:
+        lines += [
+            "",
+            f"Fit on the calibration half (n = {f['n']}, r = {f['r']:.2f}) of the reach on the "
+            "closest approach `path_closest_onset`: least squares "
+            f"{f['ls_a']:.3f} + {f['ls_b']:.3f} x; reduced major axis (the fitted reaches "
+            f"spread as the recorded ones) {f['rma_a']:.3f} + {f['rma_b']:.3f} x. On the "
+            f"held-out half (n = {f.get('held_out_n', 0)}) the line predicts the recorded reach "
+            f"at r = {f.get('held_out_r', float('nan')):.2f}; SD of the predictions "
+            f"{f.get('held_out_sd_rma', float('nan')):.3f} m (reduced major axis) / "
+            f"{f.get('held_out_sd_ls', float('nan')):.3f} m (least squares) against the "
+            f"recorded {f.get('held_out_sd', float('nan')):.3f} m.",
+        ]
+    return lines
+
+
 def write_markdown(
     summary: dict,
     path: str | os.PathLike,
@@ -144,7 +206,8 @@ def write_markdown(
         + (f", first {summary['limit']} of each kind only" if summary.get("limit") else "")
         + f", {summary['skipped_files']} skipped). Statistics over recordings only; no recording's "
         "own values are stored. Code: `handover_env/data/transfer/detect.py` (rules), "
-        "`transfer/measures.py` (quantities), `data/filtering.py` (the track filter).",
+        "`transfer/measures.py` and `transfer/decisions.py` (quantities), `data/filtering.py` (the "
+        "track filter).",
         "",
         "## Split",
         "",
@@ -218,6 +281,14 @@ def write_markdown(
         "it is never on the object.",
         "",
         *_grasp(summary),
+        "",
+        "## Walks that are not straight: when is an object left behind?",
+        "",
+        *_walks(summary),
+        "",
+        "## Reach: how far the receiver reaches, against how the object is presented",
+        "",
+        *_reach(summary),
         "",
         "## Track noise, recorded and after `smooth_track`",
         "",

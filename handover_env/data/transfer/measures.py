@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from handover_env.data.filtering import lowpass, smooth_track
+from handover_env.data.transfer.decisions import WALK_MEASURES, walk_measures
 from handover_env.data.transfer.detect import (
     GIVER_HAND_JOINTS,
     HEADING_CUTOFF_HZ,
@@ -157,6 +158,7 @@ MEASURES: dict[str, tuple[str, str, str]] = {
         "",
     ),
 }
+MEASURES.update(WALK_MEASURES)
 EVENTS = ("near", "transfer", "onset", "release", "arm_back", "nearest")
 
 
@@ -311,6 +313,7 @@ def analyse_recording(
     else:
         m["fast_reach_duration"] = (k - reach.rise_frame) / rate_hz
         _onset_measures(m, out, r, walking, body_obj, body_hand, onset, k, rate_hz)
+    m.update(walk_measures(r, o, walking, k, onset, rate_hz))
     if g is not None:
         release, reason = detect_release(g, o, k, rate_hz)
         giver_d = nearest_distance(g[:, list(GIVER_HAND_JOINTS)], o)

@@ -39,7 +39,7 @@ from handover_env.data.public import (
     safe_load_pickle,
     validate_record,
 )
-from handover_env.data.transfer import detect
+from handover_env.data.transfer import decisions, detect
 from handover_env.data.transfer.measures import (
     HAND_JUMP,
     MEASURES,
@@ -258,6 +258,9 @@ def rules() -> dict[str, float | int | str]:
     for n in ("CUTOFF_HZ", "ORDER", "HAMPEL_HALF_WINDOW", "HAMPEL_SIGMAS", "HAMPEL_MIN_DEVIATION"):
         out[f"filtering.{n}"] = getattr(filtering, n)
     out["hand joints"] = "nearest of " + ", ".join(map(str, detect.HAND_JOINTS))
+    out["decisions.PAUSE_SPEED"] = decisions.PAUSE_SPEED
+    out["decisions.GIVE_UP_BEHIND"] = decisions.GIVE_UP_BEHIND
+    out["decisions.TOWARD_WINDOW"] = decisions.TOWARD_WINDOW
     return out
 
 
@@ -302,6 +305,15 @@ def summarise(
         },
         "noise": {g: _noise(v) for g, v in groups.items() if g.endswith("/all")},
         "grasp_radius": {g: grasp_radius(v) for g, v in groups.items()},
+        "left_behind_check": {
+            g: decisions.rule_check([r.analysis.measures for r in v if r.analysis.events["transfer"]
+                                 is not None])
+            for g, v in groups.items()
+        },
+        "reach": decisions.reach_summary(
+            [r.analysis.measures for r in groups["calibration/all"]],
+            [r.analysis.measures for r in groups["held_out/all"]],
+        ),
     }
 
 
