@@ -217,6 +217,15 @@ def _common(p: argparse.ArgumentParser) -> None:
         "--bc-epochs", type=int, default=None, help="BC-MLP maximum epochs (default: Table I's)"
     )
     p.add_argument(
+        "--rl-checkpoint",
+        nargs="+",
+        default=None,
+        metavar="DIR",
+        help="checkpoint folders of train.py rl for the rl-residual / rl-scratch agents (each "
+        "matched by its policy form; with --quick a missing one is trained for a few hundred "
+        "steps into the checkpoint cache)",
+    )
+    p.add_argument(
         "--bootstrap",
         type=int,
         default=N_BOOTSTRAP,
@@ -266,6 +275,8 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             act_steps=args.act_steps,
             bc_epochs=args.bc_epochs,
             workers=workers,
+            rl_checkpoints=tuple(str(Path(d))
+                                 for d in args.rl_checkpoint or ()),
         )
         check_counts(args, COUNTS)
         quick = args.quick

@@ -46,6 +46,7 @@ from handover_eval.closedloop.roster import (
     LEARNING,
     ModelRecord,
     check_agents,
+    check_rl_receivers,
     prepare_models,
 )
 from handover_eval.closedloop.worker import (  # noqa: F401 - episode_row re-exported
@@ -226,6 +227,7 @@ def run_closed_loop(
 ) -> ClosedLoopRun:
     """Receivers, fold models, then every agent's episodes (module docstring)."""
     specs, replay_folds = build_receivers(config, dataset, data)
+    check_rl_receivers(config.agents, specs, options, cache_dir)
     splits = dataset.stratified_kfold(config.folds, config.seed)
     walker_folds = {config.walker_fold} if any(s.set != "replay" for s in specs) else set()
     needed = sorted(walker_folds | {s.fold for s in specs if s.fold is not None})
