@@ -34,7 +34,7 @@ from handover_eval.cli.args import (
 )
 from handover_eval.closedloop.output import write_closed_loop, write_theta_sweep
 from handover_eval.closedloop.receivers import SETS
-from handover_eval.closedloop.roster import AGENTS
+from handover_eval.closedloop.roster import AGENTS, default_agents
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, run_closed_loop
 from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers
@@ -85,9 +85,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--agents",
         nargs="+",
-        default=list(AGENTS),
+        default=None,
         metavar="NAME",
-        help=f"agents, any of {list(AGENTS)} (default: all). giver-replay meets replays only; "
+        help=f"agents, any of {list(AGENTS)} (default: all; rl-residual / rl-scratch only with "
+        "--quick or a --rl-checkpoint of their form). giver-replay meets replays only; "
         "static runs in StaticHandover-v0 on the same receivers",
     )
     p.add_argument(
@@ -287,7 +288,11 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             else (QUICK_REPLAYS if quick else None)
         )
         receivers = ClosedLoopEvalConfig(
-            agents=tuple(getattr(args, "agents", ["reactive"])),
+            agents=tuple(
+                default_agents(args.quick, options.rl_checkpoints)
+                if getattr(args, "agents", ["reactive"]) is None
+                else getattr(args, "agents", ["reactive"])
+            ),
             sets=tuple(getattr(args, "sets", SETS)),
             walkers=args.walkers
             if args.walkers is not None

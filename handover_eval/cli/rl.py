@@ -78,13 +78,14 @@ def add_rl_arguments(p: argparse.ArgumentParser) -> None:
                    "at most 2)")
     p.add_argument("--data", default=None, help="the dataset whose training folds are replayed: "
                    "a canonical .npz, a public-dataset folder, or omit for the synthetic default")
-    p.add_argument("--folds", type=int_in_range(2, 100), default=10,
-                   help="k of Table I's split; replays come from folds 0..k//2-1 only (default 10)")
+    p.add_argument("--folds", type=int_in_range(2, 100), default=None,
+                   help="k of Table I's split; replays come from folds 0..k//2-1 only (default 10; "
+                   "3 with --quick, as evaluate.py --quick)")
     p.add_argument("--split-seed", type=SEEDS, default=0,
                    help="seed of Table I's split (default 0, as evaluate.py)")
-    p.add_argument("--p-replay", type=float, default=0.2,
-                   help="probability that a training episode is a replay (default 0.2; the rest "
-                   "ID 0.6 : OOD 0.2 walkers)")
+    p.add_argument("--p-replay", type=float, default=None,
+                   help="probability that a training episode is a replay (default 0.2, 0 with "
+                   "--quick; the rest ID 0.6 : OOD 0.2 walkers)")
     p.add_argument("--p-ood", type=float, default=0.2,
                    help="probability of an OOD walker (default 0.2; ID gets the rest)")
     p.add_argument("--lr", type=positive_float, default=3e-4, help="learning rate (default 3e-4)")
@@ -115,17 +116,19 @@ def config_from_args(args: argparse.Namespace):
     """The :class:`baselines.rl.config.RLConfig` of the flags."""
     from baselines.rl.config import RLConfig
 
-    if not (0 <= args.p_replay <= 1 and 0 <= args.p_ood <= 1 and args.p_replay + args.p_ood <= 1):
+    p_replay = args.p_replay if args.p_replay is not None else (0.0 if args.quick else 0.2)
+    if not (0 <= p_replay <= 1 and 0 <= args.p_ood <= 1 and p_replay + args.p_ood <= 1):
         raise ValueError("--p-replay and --p-ood must be in [0, 1] with a sum <= 1")
     kw: dict = dict(algo=args.algo, form=args.form, base=args.base if args.form == "residual"
                     else "", residual_xyz=args.residual_xyz, residual_yaw=args.residual_yaw,
                     n_envs=2, learning_rate=args.lr, shaping=args.shaping,
-                    sensing=args.sensing, folds=args.folds, split_seed=args.split_seed,
+                    sensing=args.sensing, folds=args.folds or (3 if args.quick else 10),
+                    split_seed=args.split_seed,
                     curve_episodes=args.curve_episodes, p_ood=args.p_ood,
-                    p_replay=args.p_replay, p_id=1.0 - args.p_ood - args.p_replay,
+                    p_replay=p_replay, p_id=1.0 - args.p_ood - p_replay,
                     steps=DEFAULT_STEPS, eval_every=DEFAULT_EVAL_EVERY)
     if args.quick:
-        kw.update(QUICK)
+        kw.update({k: v for k, v in QUICK.items() if k != "p_replay"})
     if args.net_arch is not None:
         kw["net_arch"] = tuple(args.net_arch)
     if args.steps is not None:

@@ -78,6 +78,15 @@ def check_agents(names: list[str] | tuple[str, ...]) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def default_agents(quick: bool, rl_checkpoints: tuple[str, ...] = ()) -> list[str]:
+    """``--agents``' default: every agent; an RL one only with ``quick`` (trained on the spot) or
+    an ``rl_checkpoints`` folder of its form."""
+    from baselines.rl.files import read_record
+
+    forms = {read_record(f)[1].form for f in rl_checkpoints}
+    return [a for a in AGENTS if a not in RL_AGENTS or quick or RL_AGENTS[a] in forms]
+
+
 def env_kind(agent: str) -> str:
     """``"static"`` for the static baseline (StaticHandover-v0), else ``"dynamic"``."""
     return "static" if agent == "static" else "dynamic"
@@ -259,6 +268,9 @@ def rl_model(agent: str, dataset: HandoverDataset, options: MethodOptions, cache
     saved, config = read_record(folder)
     fit = None
     if config.form == "residual" and config.base == "ours":
+        if saved["receivers"]["dataset"] != dataset.name:
+            raise ValueError(f"{agent} ({folder}): its SPGP base was fitted on "
+                             f"{saved['receivers']['dataset']}; evaluate with that --data")
         ids = set(saved["receivers"]["base_fit_ids"])
         fit = dataset.subset(np.array([i for i, ep in enumerate(dataset) if ep.source_id in ids],
                                       dtype=np.int64))
