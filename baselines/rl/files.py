@@ -41,7 +41,7 @@ from baselines.checkpoint_io import (
     write_json,
 )
 from baselines.rl.config import RLConfig
-from baselines.rl.envs import PolicyIO, normalisation
+from baselines.rl.envs import PART_SCALES, PolicyIO, normalisation
 from baselines.rl.policy import build_policy
 
 KIND = "rl"
@@ -90,16 +90,11 @@ def record_of(config: RLConfig, io: PolicyIO, reward: dict, receivers: dict,
 
     from handover_env.envs.observation import ObsLayout
 
-    parts = {}
-    start = 0
-    for name, shape, _ in ObsLayout(config.history).fields:
-        n = int(np.prod(shape))
-        parts[name] = {"offset": io.offset[start:start + n].tolist()[: 3],
-                       "scale": float(io.scale[start])}
-        start += n
+    parts = {name: {"offset": list(off), "scale": scale}
+             for name, (off, scale) in PART_SCALES.items()}
     if config.form == "residual":
-        parts["base_target"] = {"offset": io.offset[start:].tolist(),
-                                "scale": io.scale[start:].tolist()}
+        n = ObsLayout(config.history).size
+        parts["base_target"] = {"offset": io.offset[n:].tolist(), "scale": io.scale[n:].tolist()}
     return {
         "type": KIND,
         "format": FORMAT,

@@ -4,7 +4,7 @@
     python train.py rl --out runs/rl-scratch --form scratch
     python train.py rl --out runs/rl-sac --algo sac --base ours --data PATH
     python train.py rl --out runs/rl3 --seeds 0 1 2         # seeds in parallel (--backend ray)
-    python train.py rl --out runs/rl --resume --steps 600000
+    python train.py rl --out runs/rl --resume --steps 1500000 # extend a finished run
     python train.py rl --out /tmp/rl --quick                # a few hundred steps, for tests
 
 The policy trains against the simulated person: scripted ID/OOD walkers with seeds from the
@@ -38,8 +38,8 @@ from handover_eval.cli.args import (
 from handover_eval.output_lock import OutputLock
 from handover_eval.rl.run import QUICK
 
-#: The default budget: ~60 min of the 2-core machine at the measured PPO rate with 2 envs
-#: (README, "RL agent": measured steps/s at 1 and 2 envs).
+#: The default budget: 58 min of the 2-core machine at the PPO rate measured with 2 envs, 287
+#: env steps/s (229 with 1 env; README, "RL agent").
 DEFAULT_STEPS = 1_000_000
 DEFAULT_EVAL_EVERY = 50_000
 ENVS = int_in_range(1, 64)

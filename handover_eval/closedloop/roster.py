@@ -81,9 +81,11 @@ def check_agents(names: list[str] | tuple[str, ...]) -> list[str]:
 def default_agents(quick: bool, rl_checkpoints: tuple[str, ...] = ()) -> list[str]:
     """``--agents``' default: every agent; an RL one only with ``quick`` (trained on the spot) or
     an ``rl_checkpoints`` folder of its form."""
-    from baselines.rl.files import read_record
+    forms = set()
+    if rl_checkpoints:
+        from baselines.rl.files import read_record
 
-    forms = {read_record(f)[1].form for f in rl_checkpoints}
+        forms = {read_record(f)[1].form for f in rl_checkpoints}
     return [a for a in AGENTS if a not in RL_AGENTS or quick or RL_AGENTS[a] in forms]
 
 
