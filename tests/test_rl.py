@@ -5,7 +5,8 @@ folds disjoint by construction), the policy's observation/action mapping and the
 (numbers), ``train.py rl --quick`` (checkpoint, curve CSV/PNG, resume, refusals), the safe
 checkpoint (tampered JSON/safetensors and a pickled SB3 zip: one named error, nothing runs; the
 symlink/staging attack of test_security_recovery), bit-identical weights from two processes, and
-``evaluate.py closed-loop --quick`` with the RL agents paired against reactive.
+``evaluate.py closed-loop --quick`` with the RL agents paired against reactive. Over 500 lines
+because it is the one test file of the issue, and its checks share the quick checkpoint fixture.
 """
 
 from __future__ import annotations
