@@ -387,6 +387,8 @@ CHECKPOINT_FILES = {
         "train_summary.json",
         "train_log.jsonl",
     ),
+    "rl": ("config.json", "model.safetensors", "training_state", "train_summary.json",
+           "train_log.csv", "learning_curve.png"),
 }
 _ACT_STATE_FILE = re.compile(
     r"policy_(pre|post)processor_step_[0-9]+_[a-z_]+\.safetensors", re.ASCII
@@ -397,9 +399,8 @@ _HARMLESS = {"lerobot_dataset", STAGING, OUTPUT_LOCK}
 
 
 def checkpoint_kind(folder: str | os.PathLike) -> str | None:
-    """``"act"`` or ``"bc_mlp"`` for a checkpoint folder of this project, else None.
-
-    An interrupted commit counts (a kill during the first checkpoint's commit leaves only
+    """``"act"``, ``"bc_mlp"`` or ``"rl"`` for a checkpoint folder of this project, else None. An
+    interrupted commit counts (a kill during the first checkpoint's commit leaves only
     ``.staging``): its files are looked for where they will be once ``--resume`` finishes it,
     after :func:`pending_commit` checked its entries (an unsafe one raises CheckpointError).
     """
@@ -418,8 +419,8 @@ def checkpoint_kind(folder: str | os.PathLike) -> str | None:
             saved = read_json(config)
         except CheckpointError:
             return None
-        if isinstance(saved, dict) and saved.get("type") == "bc_mlp":
-            return "bc_mlp"
+        if isinstance(saved, dict) and saved.get("type") in ("bc_mlp", "rl"):
+            return saved["type"]
     return None
 
 
@@ -459,7 +460,7 @@ def check_out_dir(out: str | os.PathLike, kind: str, resume: bool, overwrite: bo
         out = output_folder(out, "--out")
     except UnsafePathError as exc:
         raise CheckpointError(str(exc)) from None
-    label = {"act": "ACT", "bc_mlp": "BC-MLP"}
+    label = {"act": "ACT", "bc_mlp": "BC-MLP", "rl": "RL"}
     if not out.is_dir():
         if resume:
             raise CheckpointError(f"cannot resume: no checkpoint folder at {out}")

@@ -63,6 +63,8 @@ class MethodOptions:
             one per core, at most 2. 1 runs everything in this process. Either way every ACT
             fold trains on its episodes of one shared LeRobot export
             (:mod:`handover_eval.act_folds`), and the results are the same.
+        rl_checkpoints: RL checkpoint folders (``train.py rl``) of the ``rl-*`` closed-loop
+            agents, matched to them by their policy form.
     """
 
     seed: int = 0
@@ -73,6 +75,7 @@ class MethodOptions:
     horizon: int = 30
     giver_state: bool = False
     workers: int = field(default_factory=default_workers)
+    rl_checkpoints: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.workers, (int, np.integer)) or self.workers < 1:

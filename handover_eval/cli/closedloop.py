@@ -34,7 +34,7 @@ from handover_eval.cli.args import (
 )
 from handover_eval.closedloop.output import write_closed_loop, write_theta_sweep
 from handover_eval.closedloop.receivers import SETS
-from handover_eval.closedloop.roster import AGENTS
+from handover_eval.closedloop.roster import AGENTS, default_agents
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, run_closed_loop
 from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers, with_test_data
@@ -85,9 +85,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--agents",
         nargs="+",
-        default=list(AGENTS),
+        default=None,
         metavar="NAME",
-        help=f"agents, any of {list(AGENTS)} (default: all). giver-replay meets replays only; "
+        help=f"agents, any of {list(AGENTS)} (default: all; rl-residual / rl-scratch only with "
+        "--quick or a --rl-checkpoint of their form). giver-replay meets replays only; "
         "static runs in StaticHandover-v0 on the same receivers",
     )
     p.add_argument(
@@ -225,6 +226,15 @@ def _common(p: argparse.ArgumentParser) -> None:
         "--bc-epochs", type=int, default=None, help="BC-MLP maximum epochs (default: Table I's)"
     )
     p.add_argument(
+        "--rl-checkpoint",
+        nargs="+",
+        default=None,
+        metavar="DIR",
+        help="checkpoint folders of train.py rl for the rl-residual / rl-scratch agents (each "
+        "matched by its policy form; with --quick a missing one is trained for a few hundred "
+        "steps into the checkpoint cache)",
+    )
+    p.add_argument(
         "--bootstrap",
         type=int,
         default=N_BOOTSTRAP,
@@ -274,6 +284,8 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             act_steps=args.act_steps,
             bc_epochs=args.bc_epochs,
             workers=workers,
+            rl_checkpoints=tuple(str(Path(d))
+                                 for d in args.rl_checkpoint or ()),
         )
         check_counts(args, COUNTS)
         quick = args.quick
@@ -284,7 +296,11 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             else (QUICK_REPLAYS if quick and getattr(args, "replay_data", None) is None else None)
         )  # --replay-data: every episode of it, unless capped
         receivers = ClosedLoopEvalConfig(
-            agents=tuple(getattr(args, "agents", ["reactive"])),
+            agents=tuple(
+                default_agents(args.quick, options.rl_checkpoints)
+                if getattr(args, "agents", ["reactive"]) is None
+                else getattr(args, "agents", ["reactive"])
+            ),
             sets=tuple(getattr(args, "sets", SETS)),
             walkers=args.walkers
             if args.walkers is not None

@@ -7,6 +7,7 @@
     simulated participant
     python train.py preference --participants 8                  # ... pooled over 8 participants
     python train.py preference-check                             # CoSpar vs a brute-forced optimum
+    python train.py rl --out runs/rl                             # SB3 PPO in the env (residual)
 
 PATH is a canonical ``.npz`` (``python -m handover_env.data convert``/``synth``), a folder of the
 public dataset's pickles, or omitted for the embedded synthetic default. The checkpoint folder
@@ -208,7 +209,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="train.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     sub = p.add_subparsers(
-        dest="method", required=True, metavar="{bc-mlp,act,preference,preference-check}"
+        dest="method", required=True, metavar="{bc-mlp,act,preference,preference-check,rl}"
     )
 
     def common(sp: argparse.ArgumentParser) -> None:
@@ -371,6 +372,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pref.add_check_arguments(sc)
     sc.set_defaults(func=pref.run_check_command, threads=1, device="cpu")
+
+    from handover_eval.cli import rl
+
+    rl.add_rl_parser(sub, load_data)
     return p
 
 

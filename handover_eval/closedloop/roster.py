@@ -2,8 +2,11 @@
 
 Names (``--agents``): ``reactive``, ``static`` (in ``StaticHandover-v0``), ``ours`` (the SPGP
 planner), ``iaal``, ``bc-mlp``, ``act``, ``giver-replay`` (replays only: the recorded giver's
-object path), ``null`` (holds the object at the ready pose) and ``lagging`` (the reactive agent
-acting 0.5 s late).
+object path), ``null`` (holds the object at the ready pose), ``lagging`` (the reactive agent
+acting 0.5 s late), ``rl-residual`` and ``rl-scratch`` (RL policies of ``train.py rl``, loaded
+from ``--rl-checkpoint`` folders by their form, or with ``--quick`` trained for a few hundred
+steps into the cache; their model record's fold is -1, the folds they trained on are in the
+checkpoint, and they refuse any receiver they trained on: :func:`check_rl_receivers`).
 
 The agents that learn from data (ours, iaal, bc-mlp, act) use Table I's fold models: a replay of
 fold f runs with the model trained on the other folds (Table I's fold-f training set); the
@@ -44,7 +47,11 @@ AGENTS: tuple[str, ...] = (
     "giver-replay",
     "null",
     "lagging",
+    "rl-residual",
+    "rl-scratch",
 )
+#: closed-loop RL agent -> its policy form (``--rl-checkpoint``; ``--quick`` trains a tiny one).
+RL_AGENTS: dict[str, str] = {"rl-residual": "residual", "rl-scratch": "scratch"}
 #: closed-loop agent name -> Table I method name, for the agents that learn from data.
 LEARNING: dict[str, str] = {"ours": "ours", "iaal": "iaal", "bc-mlp": "bc_mlp", "act": "act"}
 ALIASES = {"bc_mlp": "bc-mlp", "giver_replay": "giver-replay"}
@@ -59,6 +66,8 @@ LABELS = {
     "giver-replay": "Giver replay (ref.)",
     "null": "Null (holds still)",
     "lagging": "Lagging (reactive +0.5 s)",
+    "rl-residual": "RL residual",
+    "rl-scratch": "RL from scratch",
 }
 MODEL_CACHE_SIZE = 4  # fitted fold models kept per worker (~150 MB each for ours / IAAL)
 
@@ -72,6 +81,17 @@ def check_agents(names: list[str] | tuple[str, ...]) -> list[str]:
     if not names:
         raise ValueError(f"no agent selected; choose from {list(AGENTS)}")
     return list(dict.fromkeys(names))
+
+
+def default_agents(quick: bool, rl_checkpoints: tuple[str, ...] = ()) -> list[str]:
+    """``--agents``' default: every agent; an RL one only with ``quick`` (trained on the spot) or
+    an ``rl_checkpoints`` folder of its form."""
+    forms = set()
+    if rl_checkpoints:
+        from baselines.rl.files import read_record
+
+        forms = {read_record(f)[1].form for f in rl_checkpoints}
+    return [a for a in AGENTS if a not in RL_AGENTS or quick or RL_AGENTS[a] in forms]
 
 
 def env_kind(agent: str) -> str:
@@ -157,7 +177,115 @@ def prepare_models(
             ModelRecord("bc-mlp", job.fold, "trained", s, len(job.train_idx))
             for job, s in zip(todo, done, strict=True)
         ]
+    records += prepare_rl(agents, options, cache_dir, progress)
     return sorted(records, key=lambda r: (r.agent, r.fold))
+
+
+# ------------------------------------------------------------------------ RL policies
+def rl_checkpoint(agent: str, options: MethodOptions, cache_dir: Path) -> Path:
+    """The checkpoint folder of an RL agent: the ``--rl-checkpoint`` of its form, or with
+    ``--quick`` the cache's quick one; a ValueError saying how to get one otherwise."""
+    from baselines.rl.files import read_record
+
+    form = RL_AGENTS[agent]
+    for folder in options.rl_checkpoints:
+        if read_record(folder)[1].form == form:
+            return Path(folder)
+    if options.quick:
+        return Path(cache_dir) / f"rl-quick-{form}"
+    raise ValueError(f"{agent} needs --rl-checkpoint DIR holding a {form} policy (train one with "
+                     f"python train.py rl --form {form} --out DIR)")
+
+
+def quick_rl_config(form: str, seed: int):
+    """The tiny RL run of ``--quick`` (train.py rl --quick's budget, walkers only)."""
+    from baselines.rl.config import RLConfig
+    from handover_eval.rl.run import QUICK
+
+    return RLConfig(form=form, base="reactive" if form == "residual" else "", seed=seed, **QUICK)
+
+
+def prepare_rl(agents: list[str], options: MethodOptions, cache_dir: Path,
+               progress: bool) -> list[ModelRecord]:
+    """Check each RL agent's checkpoint loads; with ``--quick`` train the missing quick ones."""
+    from dataclasses import asdict
+
+    from baselines.checkpoint_io import CheckpointError, remove_checkpoint
+    from baselines.rl.files import read_checkpoint, read_record
+    from baselines.rl.train import train_policy
+
+    records = []
+    for agent in (a for a in agents if a in RL_AGENTS):
+        folder = rl_checkpoint(agent, options, cache_dir)
+        t0, how = time.perf_counter(), "checkpoint"
+        if options.quick and folder.name.startswith("rl-quick-"):
+            want = quick_rl_config(RL_AGENTS[agent], options.seed)
+            try:
+                fresh = asdict(read_record(folder)[1]) != asdict(want)
+            except CheckpointError:
+                fresh = True
+            if fresh:
+                if folder.is_dir():
+                    remove_checkpoint(folder, "rl")
+                train_policy(want, folder, progress=progress)
+                how = "trained"
+        record = read_checkpoint(folder).record
+        records.append(ModelRecord(agent, -1, how, time.perf_counter() - t0,
+                                   int(record["training"].get("episodes", 0))))
+    return records
+
+
+def check_rl_receivers(agents: tuple[str, ...], receivers: list, options: MethodOptions,
+                       cache_dir: Path) -> None:
+    """A ValueError before any episode runs if an RL agent would meet a receiver it trained on
+    (a replayed recording of its training folds, a walker seed of its training range)."""
+    from baselines.rl.config import TRAIN_SEED_START
+    from baselines.rl.files import read_record
+
+    for agent in (a for a in agents if a in RL_AGENTS):
+        folder = rl_checkpoint(agent, options, cache_dir)
+        if not folder.is_dir():  # a --quick one not trained yet: walkers only, none of these
+            continue
+        trained = set(read_record(folder)[0]["receivers"]["replay_ids"])
+        seen = sorted(s.key for s in receivers if s.set == "replay" and s.key in trained)
+        high = sorted(s.key for s in receivers if s.set != "replay" and s.seed >= TRAIN_SEED_START)
+        if seen or high:
+            raise ValueError(
+                f"{agent} ({folder}) trained on {len(seen) + len(high)} of these receivers "
+                f"({', '.join((seen + high)[:3])}...): score it on held-out folds only "
+                "(--replay-folds of the held-out half, the default)")
+
+
+def rl_model(agent: str, dataset: HandoverDataset, options: MethodOptions, cache_dir: Path,
+             token: str) -> tuple[Agent, ModelRecord | None]:
+    """The RL agent's policy, loaded once per worker (a residual on ``ours`` refits its SPGP
+    base on the training-fold episodes the checkpoint names)."""
+    from baselines.rl.agent import RLAgent
+    from baselines.rl.files import read_record
+
+    if token != _TOKEN[0]:
+        clear_models()
+        _TOKEN[0] = token
+    key = (agent, -1)
+    if key in _MODELS:
+        _MODELS.move_to_end(key)
+        return _MODELS[key], None
+    t0 = time.perf_counter()
+    folder = rl_checkpoint(agent, options, cache_dir)
+    saved, config = read_record(folder)
+    fit = None
+    if config.form == "residual" and config.base == "ours":
+        if saved["receivers"]["dataset"] != dataset.name:
+            raise ValueError(f"{agent} ({folder}): its SPGP base was fitted on "
+                             f"{saved['receivers']['dataset']}; evaluate with that --data")
+        ids = set(saved["receivers"]["base_fit_ids"])
+        fit = dataset.subset(np.array([i for i, ep in enumerate(dataset) if ep.source_id in ids],
+                                      dtype=np.int64))
+    model = RLAgent.load(folder, fit_data=fit)
+    _MODELS[key] = model
+    while len(_MODELS) > MODEL_CACHE_SIZE:
+        _MODELS.popitem(last=False)
+    return model, ModelRecord(agent, -1, "loaded in worker", time.perf_counter() - t0, 0)
 
 
 @dataclass(frozen=True)
@@ -236,8 +364,8 @@ def make_agent(name: str | Agent, params: HandoverParams, model: Agent | None = 
         if isinstance(getattr(name, "params", None), HandoverParams):
             name.params = params  # type: ignore[attr-defined]
         return name
-    if name in LEARNING:
-        assert model is not None, f"{name} needs its fold model"
+    if name in LEARNING or name in RL_AGENTS:
+        assert model is not None, f"{name} needs its fold model or policy"
         model.params = params  # type: ignore[attr-defined]
         return model
     if name == "reactive":

@@ -55,6 +55,7 @@ from handover_eval.closedloop.roster import (
     LEARNING,
     ModelRecord,
     check_agents,
+    check_rl_receivers,
     prepare_models,
 )
 from handover_eval.closedloop.worker import (  # noqa: F401 - episode_row re-exported
@@ -261,6 +262,7 @@ def run_closed_loop(
     fitted on all of ``dataset`` (``--replay-data``).
     """
     specs, replay_folds = build_receivers(config, dataset, data, replay, replay_data)
+    check_rl_receivers(config.agents, specs, options, cache_dir)
     splits: dict[int, tuple[np.ndarray, np.ndarray]]
     if replay is None:
         splits = dict(enumerate(dataset.stratified_kfold(config.folds, config.seed)))

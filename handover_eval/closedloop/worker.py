@@ -22,11 +22,13 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval.closedloop.receivers import ReceiverSpec, replay_source
 from handover_eval.closedloop.roster import (
     LEARNING,
+    RL_AGENTS,
     ModelRecord,
     clear_models,
     env_kind,
     fold_model,
     make_agent,
+    rl_model,
 )
 from handover_eval.methods import MethodOptions
 
@@ -119,10 +121,15 @@ def run_job(dataset: HandoverDataset, job: EpisodeJob) -> tuple[list[dict], list
             job.agent, job.model_fold, dataset, job.train_idx, job.options, job.cache_dir, job.token
         )
         fits += [record] if record is not None else []
+    elif job.agent in RL_AGENTS:
+        model, record = rl_model(job.agent, dataset, job.options, job.cache_dir, job.token)
+        fits += [record] if record is not None else []
     agent = make_agent(job.agent, job.params, model)
     env = _env(env_kind(job.agent), job.params)
     rows = []
     for spec in job.receivers:
+        if job.agent in RL_AGENTS:  # never a receiver the policy trained on
+            agent.check_receiver(spec.set, spec.key, spec.seed)  # type: ignore[attr-defined]
         options: dict[str, Any] = {"receiver": spec.set}
         if spec.set == "replay":
             source = replay_source(spec, dataset)

@@ -1,0 +1,167 @@
+"""What an RL training run of the handover policy is: :class:`RLConfig`, and the receivers it may
+meet (seed ranges disjoint from the closed-loop evaluation's, by construction).
+
+**Seeds.** The closed-loop evaluation (``handover_eval/closedloop/receivers.py``) resets its
+scripted walkers with seeds ``0 .. N-1`` (ID) and ``10000 .. 10000+N-1`` (OOD), N at most 10 000
+(``evaluate.py``'s ``--walkers`` bound), so every evaluation seed is below
+:data:`EVAL_SEED_LIMIT`. Every training episode is reset with its own explicit seed from
+:func:`episode_seed`, and the fixed learning-curve set from :func:`curve_seed`; both are at least
+:data:`TRAIN_SEED_START` > :data:`EVAL_SEED_LIMIT`. No walker an evaluation scores on is ever
+trained on (``tests/test_rl.py`` checks both bounds against the evaluation's constants).
+
+**Replays.** Training replays come only from the folds :func:`training_folds` of Table I's
+stratified split: the complement of the evaluation's held-out half (folds ``k//2 .. k-1``). The
+checkpoint lists the recordings it trained on, and the RL agent refuses to be scored on any of
+them (:meth:`baselines.rl.agent.RLAgent.check_receiver`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+#: Every closed-loop evaluation seed is below this (ID 0.., OOD 10000.., at most 10 000 each).
+EVAL_SEED_LIMIT = 100_000
+#: The first seed of any training receiver (the learning-curve set, then the training episodes).
+TRAIN_SEED_START = 1_000_000
+#: Seeds reserved for the fixed learning-curve set, from TRAIN_SEED_START on.
+CURVE_SEEDS = 1_000
+#: Training episode seeds of one run seed (and env): a run never reaches the next run's block.
+RUN_STRIDE = 1_000_000_000
+
+ALGOS = ("ppo", "sac")
+FORMS = ("residual", "scratch")
+BASES = ("reactive", "ours")
+RECEIVER_KINDS = ("id", "ood", "replay")
+
+
+def training_folds(folds: int) -> tuple[int, ...]:
+    """The folds of a ``folds``-fold split RL may train on: ``0 .. k//2 - 1``, the complement of
+    the closed-loop evaluation's held-out half (``closedloop.receivers.held_out_folds``)."""
+    if folds < 2:
+        raise ValueError(f"folds must be >= 2, got {folds}")
+    return tuple(range(folds // 2))
+
+
+def episode_seed(run_seed: int, n_envs: int, env_index: int, episode: int) -> int:
+    """The reset seed of training episode ``episode`` of env ``env_index`` (always >=
+    :data:`TRAIN_SEED_START` + :data:`CURVE_SEEDS`, distinct across envs, episodes and run
+    seeds)."""
+    if not 0 <= env_index < n_envs or episode < 0 or run_seed < 0:
+        raise ValueError("episode_seed needs 0 <= env_index < n_envs, episode >= 0, run_seed >= 0")
+    if episode * n_envs + env_index >= RUN_STRIDE:
+        raise ValueError(f"more than {RUN_STRIDE} training episodes in one run")
+    return TRAIN_SEED_START + CURVE_SEEDS + run_seed * RUN_STRIDE + episode * n_envs + env_index
+
+
+def curve_seed(k: int) -> int:
+    """The reset seed of the ``k``-th receiver of the fixed learning-curve set."""
+    if not 0 <= k < CURVE_SEEDS:
+        raise ValueError(f"the learning-curve set has at most {CURVE_SEEDS} receivers")
+    return TRAIN_SEED_START + k
+
+
+@dataclass(frozen=True)
+class RLConfig:
+    """One RL training run (recorded in the checkpoint's ``config.json``).
+
+    Args:
+        algo: ``"ppo"`` (default) or ``"sac"``, Stable-Baselines3's implementations.
+        form: ``"residual"``: the policy's action in [-1, 1]^4 times (residual_xyz, residual_yaw)
+            is added to the base agent's Cartesian target; ``"scratch"``: the action maps affinely
+            onto the env's whole action box.
+        base: the residual's base agent, ``"reactive"`` or ``"ours"`` (SPGP, fitted on the
+            training folds); ignored (``""``) for ``scratch``.
+        residual_xyz: m, bound of the correction of x, y and z (default ±0.15 m).
+        residual_yaw: rad, bound of the correction of the yaw (default ±0.3 rad).
+        net_arch: hidden widths of the policy and value (critic) networks.
+        steps: env steps of training (all envs together).
+        n_envs: parallel envs (SubprocVecEnv when > 1).
+        seed: seeds the policy's initialisation, the sampling and the training receivers.
+        learning_rate, gamma: the optimiser's step size and the discount.
+        n_steps, batch_size, n_epochs: PPO's rollout length per env, minibatch and epochs;
+            for SAC ``batch_size`` is its minibatch and ``n_steps`` its ``learning_starts``.
+        log_std_init: initial log standard deviation of the Gaussian policy (PPO; small for the
+            residual, so the first rollouts stay near the base agent).
+        ent_coef: PPO's entropy bonus.
+        shaping: weight (reward per metre) of the potential-based shaping term
+            ``gamma * phi(s') - phi(s)`` with ``phi = -shaping * |bottle - person's hand|`` while
+            the robot holds the bottle (:mod:`baselines.rl.envs`); 0 disables it.
+        p_id, p_ood, p_replay: the probabilities of a training episode's receiver: an ID walker,
+            an OOD walker or a replay of the training folds (dropped when there are none).
+        folds, split_seed: the stratified split whose :func:`training_folds` give the replays.
+        curve_episodes: receivers of the fixed learning-curve set (ID, OOD, and replays if any).
+        eval_every: env steps between learning-curve evaluations and checkpoints.
+        sensing: the env's sensing profile (e.g. ``"randomized"``); ``""`` keeps the env's
+            default, and the option is passed to the env only if it accepts it.
+        history: camera frames of receiver history in the observation (the env's ``history``).
+    """
+
+    algo: str = "ppo"
+    form: str = "residual"
+    base: str = "reactive"
+    residual_xyz: float = 0.15
+    residual_yaw: float = 0.3
+    net_arch: tuple[int, ...] = (64, 64)
+    steps: int = 200_000
+    n_envs: int = 2
+    seed: int = 0
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    n_steps: int = 512
+    batch_size: int = 128
+    n_epochs: int = 10
+    log_std_init: float = -1.0
+    ent_coef: float = 0.0
+    shaping: float = 1.0
+    p_id: float = 0.6
+    p_ood: float = 0.2
+    p_replay: float = 0.2
+    folds: int = 10
+    split_seed: int = 0
+    curve_episodes: int = 10
+    eval_every: int = 20_000
+    sensing: str = ""
+    history: int = 30
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGOS:
+            raise ValueError(f"algo must be one of {list(ALGOS)}, got {self.algo!r}")
+        if self.form not in FORMS:
+            raise ValueError(f"form must be one of {list(FORMS)}, got {self.form!r}")
+        if self.form == "residual" and self.base not in BASES:
+            raise ValueError(f"base must be one of {list(BASES)}, got {self.base!r}")
+        if self.form == "scratch" and self.base != "":
+            object.__setattr__(self, "base", "")
+        for name in ("residual_xyz", "residual_yaw", "learning_rate"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
+        if not (0 < self.gamma < 1) or not math.isfinite(self.shaping) or self.shaping < 0:
+            raise ValueError("gamma must be in (0, 1) and shaping a finite number >= 0")
+        if not math.isfinite(self.log_std_init) or not math.isfinite(self.ent_coef):
+            raise ValueError("log_std_init and ent_coef must be finite")
+        if not self.net_arch or any(w < 1 for w in self.net_arch):
+            raise ValueError(f"net_arch must be positive widths, got {self.net_arch!r}")
+        for name in ("steps", "n_envs", "n_steps", "batch_size", "n_epochs", "eval_every",
+                     "curve_episodes", "history"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.seed < 0 or self.split_seed < 0:
+            raise ValueError("seeds must be >= 0")
+        training_folds(self.folds)
+        probs = (self.p_id, self.p_ood, self.p_replay)
+        if any(not (math.isfinite(p) and p >= 0) for p in probs) or sum(probs) <= 0:
+            raise ValueError(f"p_id, p_ood, p_replay must be >= 0 and not all 0, got {probs}")
+        if self.curve_episodes > CURVE_SEEDS:
+            raise ValueError(f"curve_episodes must be <= {CURVE_SEEDS}")
+
+    def probabilities(self, with_replays: bool) -> dict[str, float]:
+        """Each receiver kind's probability (normalised; ``replay`` dropped without replays)."""
+        p = {"id": self.p_id, "ood": self.p_ood}
+        if with_replays:
+            p["replay"] = self.p_replay
+        total = sum(p.values())
+        if total <= 0:
+            raise ValueError("no training receivers: every kind left has probability 0")
+        return {k: v / total for k, v in p.items()}

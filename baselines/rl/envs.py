@@ -1,0 +1,244 @@
+"""The RL policy's view of the handover env, and the env wrapper it is trained in.
+
+**Observation** (:class:`PolicyIO`). The env's flat observation (``ObsLayout``), each part
+shifted and scaled by fixed constants of the task (:func:`normalisation`: positions about the
+robot's ready pose in units of 0.5-2 m, forces in 20 N, torques in 5 N m, time in 15 s) and
+clipped to ±10; the residual policy also sees its base agent's target (about the ready pose).
+The constants are stored in the checkpoint and checked on loading; no running statistics, so a
+seed gives the same policy whatever the number of evaluations.
+
+**Action.** The policy acts in [-1, 1]^4. Residual: the target is the base agent's target plus
+``(a_x, a_y, a_z) * residual_xyz`` and ``a_yaw * residual_yaw`` (default ±0.15 m, ±0.3 rad);
+scratch: the action maps affinely onto the env's action box. Both are clipped to that box.
+
+**Training env** (:class:`HandoverTrainingEnv`). Every reset draws the receiver from the
+training receivers only: its kind (ID walker, OOD walker, a replay of the training folds) from a
+generator of (run seed, env index), and its reset seed from
+:func:`baselines.rl.config.episode_seed` (never an evaluation seed); the seed SB3 passes is
+ignored. The reward is the env's :class:`~handover_env.envs.tasks.base.HandoverReward` plus,
+with ``shaping > 0``, the potential-based term ``F = gamma * phi(s') - phi(s)`` (Ng, Harada and
+Russell 1999: it leaves the optimal policy unchanged) with ``phi(s) = -shaping * min(d, 2 m)``,
+``d`` the distance between the bottle and the person's right hand as the camera sees it, while
+the gripper holds the bottle (0 otherwise and at the end). A handover happens only where the
+bottle meets the hand, so ``phi`` says how far the task is from its precondition; it names no
+agent's target (the residual is the place for that). ``info["reward_shaping"]`` holds ``F``
+beside the env's ``reward_time``, ``reward_force`` and ``reward_outcome``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from baselines.rl.config import RLConfig, episode_seed
+from handover_env.envs.observation import ObsLayout
+
+ENV_ID = "handover_env/DynamicHandover-v0"
+READY = (0.3, -0.4, 1.15, -math.pi / 2)
+OBS_CLIP = 10.0
+MAX_HAND_DISTANCE = 2.0
+#: (offset, scale) of each observation part; a 2-/3-vector offset is a position.
+PART_SCALES: dict[str, tuple[tuple[float, ...], float]] = {
+    "receiver_xy_history": ((0.3, -0.5), 2.0),
+    "receiver_frames_seen": ((0.0,), 450.0),
+    "ee_pos": (READY[:3], 0.5),
+    "ee_quat": ((0.0,), 1.0),
+    "ee_linvel": ((0.0,), 1.0),
+    "ee_angvel": ((0.0,), 5.0),
+    "object_pos": (READY[:3], 0.5),
+    "object_held": ((0.0,), 1.0),
+    "wrist_force": ((0.0,), 20.0),
+    "wrist_torque": ((0.0,), 5.0),
+    "gripper_open": ((0.0,), 1.0),
+    "time": ((0.0,), 15.0),
+    "receiver_hand_xyz": ((0.3, -0.5, 1.0), 1.0),
+    "robot_enabled": ((0.0,), 1.0),
+}
+TARGET_SCALE = (0.5, 0.5, 0.5, math.pi / 2)
+
+
+def normalisation(history: int, form: str) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed ``(offset, scale)`` float32 vectors of the policy's observation."""
+    layout = ObsLayout(history)
+    offset, scale = [], []
+    for name, shape, _ in layout.fields:
+        n = int(np.prod(shape))
+        off, s = PART_SCALES[name]
+        width = len(off)
+        offset.append(np.tile(np.asarray(off, dtype=np.float64), n // width))
+        scale.append(np.full(n, s))
+    if form == "residual":
+        offset.append(np.asarray(READY))
+        scale.append(np.asarray(TARGET_SCALE))
+    return (np.concatenate(offset).astype(np.float32), np.concatenate(scale).astype(np.float32))
+
+
+@dataclass
+class PolicyIO:
+    """The policy's observation and the env action of its output (module docstring).
+
+    Args:
+        config: the run's config (form, residual bounds, history).
+        low, high: the env's action box.
+        offset, scale: the observation normalisation (:func:`normalisation`).
+    """
+
+    config: RLConfig
+    low: np.ndarray
+    high: np.ndarray
+    offset: np.ndarray
+    scale: np.ndarray
+
+    @classmethod
+    def for_env(cls, config: RLConfig, action_space: gym.spaces.Box) -> PolicyIO:
+        offset, scale = normalisation(config.history, config.form)
+        return cls(config, action_space.low.astype(np.float64),
+                   action_space.high.astype(np.float64), offset, scale)
+
+    @property
+    def observation_space(self) -> gym.spaces.Box:
+        n = self.offset.shape[0]
+        return gym.spaces.Box(-OBS_CLIP, OBS_CLIP, (n,), np.float32)
+
+    @property
+    def action_space(self) -> gym.spaces.Box:
+        return gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
+
+    def observation(self, obs: np.ndarray, base_target: np.ndarray | None) -> np.ndarray:
+        """The normalised policy observation of an env observation (and the base target)."""
+        x = np.asarray(obs, dtype=np.float64)
+        if self.config.form == "residual":
+            x = np.concatenate([x, np.asarray(base_target, dtype=np.float64)])
+        if x.shape != self.offset.shape:
+            raise ValueError(f"observation has {x.shape[0]} values, the policy expects "
+                             f"{self.offset.shape[0]}")
+        z = (x - self.offset) / self.scale
+        return np.clip(np.nan_to_num(z, nan=0.0), -OBS_CLIP, OBS_CLIP).astype(np.float32)
+
+    def target(self, action: np.ndarray, base_target: np.ndarray | None) -> np.ndarray:
+        """The env's Cartesian target (x, y, z, yaw) for the policy's action in [-1, 1]^4."""
+        a = np.clip(np.asarray(action, dtype=np.float64).reshape(4), -1.0, 1.0)
+        if self.config.form == "residual":
+            c = self.config
+            t = np.asarray(base_target, dtype=np.float64) + a * np.array(
+                [c.residual_xyz] * 3 + [c.residual_yaw])
+        else:
+            t = self.low + (a + 1.0) * 0.5 * (self.high - self.low)
+        return np.clip(t, self.low, self.high).astype(np.float32)
+
+
+def make_handover_env(config: RLConfig, **kwargs: Any) -> gym.Env:
+    """The dynamic handover env with the run's history and, if the env accepts it, its sensing
+    profile (``config.sensing``; ``""`` = the env's default)."""
+    import handover_env  # noqa: F401 - registers the envs
+
+    if config.sensing:
+        cls = gym.spec(ENV_ID).entry_point
+        if isinstance(cls, str):
+            module, name = cls.split(":")
+            cls = getattr(__import__(module, fromlist=[name]), name)
+        if "sensing" not in inspect.signature(cls.__init__).parameters:
+            raise ValueError(f"sensing={config.sensing!r}: this {ENV_ID} has no sensing "
+                             "profiles; leave the option at the env's default")
+        kwargs["sensing"] = config.sensing
+    return gym.make(ENV_ID, history=config.history, **kwargs)
+
+
+class HandoverShaping:
+    """The potential ``phi`` of the shaping term (module docstring), read from env observations."""
+
+    def __init__(self, history: int, weight: float, gamma: float) -> None:
+        sl = ObsLayout(history).slices()
+        self.obj, self.hand = sl["object_pos"][0], sl["receiver_hand_xyz"][0]
+        self.held, self.open = sl["object_held"][0], sl["gripper_open"][0]
+        self.weight, self.gamma = weight, gamma
+
+    def potential(self, obs: np.ndarray) -> float:
+        if self.weight == 0 or obs[self.held][0] < 0.5 or obs[self.open][0] > 0.5:
+            return 0.0
+        d = float(np.linalg.norm(obs[self.obj] - obs[self.hand]))
+        return -self.weight * min(d if math.isfinite(d) else MAX_HAND_DISTANCE, MAX_HAND_DISTANCE)
+
+    def term(self, phi: float, obs_next: np.ndarray, terminated: bool) -> tuple[float, float]:
+        """``(F, phi(s'))``: the shaping reward of a step and the next potential (0 at the end)."""
+        nxt = 0.0 if terminated else self.potential(obs_next)
+        return self.gamma * nxt - phi, nxt
+
+
+class HandoverTrainingEnv(gym.Wrapper):
+    """The handover env as the policy trains in it (module docstring).
+
+    Args:
+        env: a dynamic handover env (:func:`make_handover_env`).
+        config: the run's config.
+        env_index: this env's index among ``config.n_envs``.
+        base: the residual's base agent (None for scratch); reset with every episode.
+        replays: the training folds' episodes (or recordings) a replay episode draws from.
+    """
+
+    def __init__(self, env: gym.Env, config: RLConfig, env_index: int = 0,
+                 base: Any = None, replays: list | tuple = ()) -> None:
+        super().__init__(env)
+        if (config.form == "residual") != (base is not None):
+            raise ValueError("a residual policy needs its base agent (and scratch none)")
+        self.config, self.env_index, self.base = config, env_index, base
+        self.replays = list(replays)
+        self.io = PolicyIO.for_env(config, env.action_space)
+        self.observation_space = self.io.observation_space
+        self.action_space = self.io.action_space
+        self.shaping = HandoverShaping(config.history, config.shaping, config.gamma)
+        probs = config.probabilities(bool(self.replays))
+        self._kinds, self._p = list(probs), np.array(list(probs.values()))
+        self.restart(0)
+        self._target: np.ndarray | None = None
+        self._phi = 0.0
+
+    def restart(self, episodes: int) -> None:
+        """Continue the receiver stream at episode ``episodes`` (a fresh run: 0; a resumed one:
+        its saved count, so no training seed is drawn twice); the kind generator is reseeded from
+        (run seed, env index, episodes)."""
+        self.episodes = int(episodes)
+        self._rng = np.random.default_rng([self.config.seed, self.env_index, 0x51, self.episodes])
+
+    def next_receiver(self) -> tuple[str, int, dict]:
+        """The next training episode's (kind, reset seed, reset options); advances the stream."""
+        kind = self._kinds[int(self._rng.choice(len(self._kinds), p=self._p))]
+        seed = episode_seed(self.config.seed, self.config.n_envs, self.env_index, self.episodes)
+        options: dict[str, Any] = {"receiver": kind}
+        if kind == "replay":
+            options["episode"] = self.replays[int(self._rng.integers(len(self.replays)))]
+        self.episodes += 1
+        return kind, seed, options
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        kind, s, opts = self.next_receiver()  # SB3's seed is ignored: see the module docstring
+        obs, info = self.env.reset(seed=s, options=opts)
+        if self.base is not None:
+            self.base.reset()
+            self._target = np.asarray(self.base.act(obs), dtype=np.float64)
+        self._phi = self.shaping.potential(obs)
+        info = {**info, "train_receiver": kind, "train_seed": s}
+        return self.io.observation(obs, self._target), info
+
+    def step(self, action):
+        target = self.io.target(action, self._target)
+        obs, reward, terminated, truncated, info = self.env.step(target)
+        shaping, self._phi = self.shaping.term(self._phi, obs, terminated)
+        info = {**info, "reward_shaping": shaping}
+        if self.base is not None and not (terminated or truncated):
+            self._target = np.asarray(self.base.act(obs), dtype=np.float64)
+        return (self.io.observation(obs, self._target), float(reward) + shaping, terminated,
+                truncated, info)
+
+
+def training_env(config: RLConfig, env_index: int, base: Any, replays: list | tuple) -> gym.Env:
+    """One training env (module-level, so SubprocVecEnv's workers can build it)."""
+    import copy
+
+    base = copy.deepcopy(base)  # each env its own base agent state
+    return HandoverTrainingEnv(make_handover_env(config), config, env_index, base, replays)
