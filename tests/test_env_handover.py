@@ -49,7 +49,7 @@ def _record_ticks(env):
 
 
 def test_reactive_handover_to_an_id_walker_under_physics():
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, sensing="ideal")  # exact sensors: no spurious force
     u = env.unwrapped
     ticks = _record_ticks(env)
     info, steps, term, trunc = _run(env, ReactiveAgent(), seed=0)
