@@ -236,3 +236,38 @@ def test_static_env_runs_on_the_paper_profile():
     _, info, _ = _episode(gym.make(STAT), seed=0, agent=StaticAgent(), steps=600)
     assert info["sensing"] == "paper"
     assert info["outcome"] in ("success", "premature_release", "running", "dropped")
+
+
+def test_sensing_sweep_quick_writes_the_paired_tables(tmp_path):
+    """``evaluate.py sensing-sweep --quick``: the points, the shared paper run, the pairing."""
+    import csv
+
+    import evaluate
+    from handover_eval.closedloop.sensing_sweep import FACTORS, points
+
+    pts = points(tuple(FACTORS))
+    assert sum(1 for _, _, ov in pts if not ov) == 3  # the paper point of each factor, one run
+    assert ("camera_latency", 300.0, {"camera": {"latency": 0.3}}) in pts
+    assert ("ft_noise", 2.0, {"wrist": {"precision": 7.0}}) in pts
+    assert ("controller", 0.0, {"controller": {"inertia": 0.0}}) in pts
+    out = tmp_path / "ss"
+    argv = ["sensing-sweep", "--quick", "--no-progress", "--workers", "1", "--agents", "reactive",
+            "ours", "--factors", "controller", "ft_noise", "--walkers", "1", "--out", str(out),
+            "--checkpoints", str(tmp_path / "ck")]
+    assert evaluate.main(argv) == 0
+    for name in ("sensing_sweep.md", "sensing_sweep.csv", "sensing_sweep.png",
+                 "sensing_sweep_paired.csv", "sensing_sweep_episodes.csv"):
+        assert (out / name).stat().st_size > 0
+    rows = list(csv.DictReader(open(out / "sensing_sweep.csv")))
+    # 2 controller points + 4 noise points, 2 agents, 2 receivers each
+    assert len(rows) == 12 and all(r["n"] == "2" for r in rows)
+    eps = list(csv.DictReader(open(out / "sensing_sweep_episodes.csv")))
+    paper = [e for e in eps if (e["factor"], e["value"]) == ("controller", "4.7")]
+    same = [e for e in eps if (e["factor"], e["value"]) == ("ft_noise", "1")]
+    assert [e["outcome"] for e in paper] == [e["outcome"] for e in same]  # one shared run
+    pairs = list(csv.DictReader(open(out / "sensing_sweep_paired.csv")))
+    assert {p["agent"] for p in pairs} == {"ours"}
+    assert {p["metric"] for p in pairs} == {"success", "handover_time", "premature_release"}
+    text = (out / "sensing_sweep.md").read_text()
+    assert "Δ success pp vs reactive" in text and "4.7 (paper)" in text
+    assert evaluate.main(argv[:-4] + ["--factors", "wind", "--out", str(out)]) == 2
