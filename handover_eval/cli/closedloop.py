@@ -286,6 +286,14 @@ def _common(p: argparse.ArgumentParser) -> None:
         "never for reported numbers",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    if p.prog.split()[-1] != "sensing-sweep":  # the sensing sweep varies the paper profile
+        p.add_argument(
+            "--sensing",
+            choices=("paper", "ideal", "randomized"),
+            default="paper",
+            help="the env's sensor profile (docs/sensing.md): the paper's camera, wrist F/T and "
+            "controller; the exact world; or drawn per episode (default: paper)",
+        )
     add_backend_arguments(p)
 
 
@@ -335,6 +343,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             folds=QUICK_FOLDS if quick else args.folds,
             seed=args.seed,
             workers=workers,
+            sensing=getattr(args, "sensing", "paper"),
         )
         sweep = None
         if args.command == "sensing-sweep":
@@ -344,7 +353,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
                 agents=tuple(args.agents),
                 factors=tuple(args.factors),
                 walkers=receivers.walkers,
-                replays_per_fold=args.replays_per_fold or 0,
+                replays_per_fold=per_fold or 0,  # --quick: a few replays, for giver-replay
                 receivers=dataclasses.replace(receivers, agents=("reactive",)),
             )
         if args.command == "theta-sweep":
