@@ -259,8 +259,8 @@ def test_sensing_sweep_quick_writes_the_paired_tables(tmp_path):
                  "sensing_sweep_paired.csv", "sensing_sweep_episodes.csv"):
         assert (out / name).stat().st_size > 0
     rows = list(csv.DictReader(open(out / "sensing_sweep.csv")))
-    # 2 controller points + 4 noise points, 2 agents, 2 receivers each
-    assert len(rows) == 12 and all(r["n"] == "2" for r in rows)
+    # 2 controller points + 4 noise points, 2 agents, 1 ID + 1 OOD walker + 3 replays (--quick)
+    assert len(rows) == 12 and all(r["n"] == "5" for r in rows)
     eps = list(csv.DictReader(open(out / "sensing_sweep_episodes.csv")))
     paper = [e for e in eps if (e["factor"], e["value"]) == ("controller", "4.7")]
     same = [e for e in eps if (e["factor"], e["value"]) == ("ft_noise", "1")]
