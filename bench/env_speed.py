@@ -7,7 +7,9 @@ time excluded),
 and ``mj_step`` on the env's own ``MjModel``/``MjData`` from the same states. Target: env cost
 <= 2x raw physics.
 
-Usage: ``python bench/env_speed.py [--quick]``
+Usage: ``python bench/env_speed.py [--quick] [--sensing both|paper|ideal|randomized]``: by default
+the "paper" and "ideal" sensor profiles side by side (issue 24: the camera, wrist F/T and controller
+models run in the step).
 """
 
 from __future__ import annotations
@@ -24,12 +26,9 @@ from agents.reactive import ReactiveAgent
 from handover_env.envs.base_handover import FRAME_SKIP
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--quick", action="store_true")
-    args = parser.parse_args(argv)
-    rounds = 3 if args.quick else 10
-    env = gym.make("handover_env/DynamicHandover-v0").unwrapped
+def measure(sensing: str, rounds: int) -> dict[str, float]:
+    """CPU and wall time of env steps and of raw ``mj_step`` from the same states."""
+    env = gym.make("handover_env/DynamicHandover-v0", sensing=sensing).unwrapped
     agent = ReactiveAgent()
     m = env.model
     scratch = mujoco.MjData(m)
@@ -38,6 +37,7 @@ def main(argv: list[str] | None = None) -> None:
     env_steps = 0
     for r in range(rounds):
         obs, _ = env.reset(seed=r, options={"receiver": "id"})
+        agent.reset()
         while True:
             action = agent.act(obs)
             mujoco.mj_getState(m, env.data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
@@ -54,21 +54,36 @@ def main(argv: list[str] | None = None) -> None:
             raw_wall += time.perf_counter() - w
             if term or trunc or env_steps % 400 == 0:
                 break
-    sim = env_steps * env.dt
-    print(f"env steps: {env_steps} ({sim:.1f} simulated s, {FRAME_SKIP} physics steps each)")
-    print(
-        f"env real-time factor:      {sim / env_time:8.1f}x  ({1e3 * env_time / env_steps:.3f} ms "
-        "per env step)"
+    return {"steps": env_steps, "sim": env_steps * env.dt, "env": env_time, "raw": raw_time,
+            "env_wall": env_wall, "raw_wall": raw_wall}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--quick", action="store_true", help="3 episodes per profile, not 10")
+    parser.add_argument(
+        "--sensing", choices=("both", "paper", "ideal", "randomized"), default="both",
+        help="sensor profile of the env (gym.make(..., sensing=...)); 'both': paper and ideal "
+        "side by side (default)",
     )
-    print(
-        f"raw mj_step real-time fac: {sim / raw_time:8.1f}x  ({1e3 * raw_time / env_steps:.3f} ms "
-        "per 20 steps)"
-    )
-    print(f"env cost / raw physics:    {env_time / raw_time:8.2f}x  (target <= 2x; CPU time)")
-    print(
-        f"  (wall clock: env {sim / env_wall:.1f}x real time, raw {sim / raw_wall:.1f}x, ratio "
-        f"{env_wall / raw_wall:.2f}x)"
-    )
+    args = parser.parse_args(argv)
+    rounds = 3 if args.quick else 10
+    names = ["paper", "ideal"] if args.sensing == "both" else [args.sensing]
+    res = {name: measure(name, rounds) for name in names}
+    print("profile       " + "".join(f"{n:>14}" for n in names))
+    rows = [
+        ("env steps", lambda r: f"{r['steps']:d}"),
+        ("simulated s", lambda r: f"{r['sim']:.1f}"),
+        ("env RTF", lambda r: f"{r['sim'] / r['env']:.1f}x"),
+        ("env ms/step", lambda r: f"{1e3 * r['env'] / r['steps']:.3f}"),
+        ("raw RTF", lambda r: f"{r['sim'] / r['raw']:.1f}x"),
+        ("raw ms/20 st", lambda r: f"{1e3 * r['raw'] / r['steps']:.3f}"),
+        ("env / raw", lambda r: f"{r['env'] / r['raw']:.2f}x"),
+        ("wall env/raw", lambda r: f"{r['env_wall'] / r['raw_wall']:.2f}x"),
+    ]
+    for label, fmt in rows:
+        print(f"{label:<14}" + "".join(f"{fmt(res[n]):>14}" for n in names))
+    print("target: env / raw <= 2x (CPU time of this thread; the wall clock row for reference)")
 
 
 if __name__ == "__main__":

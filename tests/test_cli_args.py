@@ -45,7 +45,7 @@ def test_every_integer_option_is_bounded() -> None:
     closed-loop commands, whose bad values are one-line errors of the command) in COUNTS."""
     checked_later = {"table1": evaluate_cli.COUNTS, "sample-efficiency": evaluate_cli.COUNTS,
                      "tradeoff": evaluate_cli.COUNTS, "closed-loop": cli_closedloop.COUNTS,
-                     "theta-sweep": cli_closedloop.COUNTS}
+                     "theta-sweep": cli_closedloop.COUNTS, "sensing-sweep": cli_closedloop.COUNTS}
     seen = 0
     for parser in (train_cli.build_parser(), evaluate_cli.build_parser()):
         for name, sub in _subcommands(parser).items():

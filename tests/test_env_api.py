@@ -103,7 +103,7 @@ def test_options_unknown_ignored_bad_rejected():
 
 
 def test_replay_from_arrays():
-    env = gym.make(IDS[0])
+    env = gym.make(IDS[0], sensing="ideal")  # the exact camera: sees the replayed track
     t = np.arange(150) / 30.0
     xy = np.stack([2.0 - 0.8 * t, np.full_like(t, -0.9)], axis=1)
     obs, info = env.reset(seed=0, options={"receiver": "replay", "episode": {"receiver_xy": xy}})

@@ -16,7 +16,7 @@ ENV_ID = "handover_env/StaticHandover-v0"
 
 
 def test_robot_does_not_move_before_hand_detection_and_delay():
-    env = gym.make(ENV_ID)
+    env = gym.make(ENV_ID, sensing="ideal")  # the timing, without sensor noise
     u = env.unwrapped
     sl = u.layout.slices()["robot_enabled"][0]
     obs, _ = env.reset(seed=0, options={"receiver": "id"})

@@ -71,6 +71,8 @@ from handover_env.robot.scene import (
     place_object_in_gripper,
     scene_ids,
 )
+from handover_env.sensors import Camera, SensorProfile, make_profile
+from handover_env.sensors.profiles import profile_summary, sensing_settings
 
 CLEAR_DISTANCE = 0.06  # m, object centre to TCP: the 6.6 cm bottle is out from between the pads
 FRAME_SKIP = 20  # physics steps per env step (1/30 s at dt = 1/600 s)
@@ -123,19 +125,21 @@ class HandoverEnvBase(gym.Env, EzPickle):
         release_force: float = 7.1,
         safety_force: float = 140.0,
         history: int = 30,
-        obs_noise: float = 0.0,
-        obs_latency: int = 0,
+        obs_noise: float | None = None,
+        obs_latency: int | None = None,
         default_receiver: str = "id",
         stabilisation_delay: float = 2.0,
         object_mass: float = 0.4,
         miss_distance: float = 0.35,
-        force_filter_tau: float = 0.015,
+        force_filter_tau: float | None = None,
         width: int = 640,
         height: int = 480,
         camera: str = "overview",
         person: dict[str, float] | None = None,
         task: HandoverTask | None = None,
         reward: HandoverReward | dict[str, float] | None = None,
+        sensing: str = "paper",
+        sensors: dict[str, dict[str, float]] | None = None,
     ) -> None:
         EzPickle.__init__(
             self,
@@ -159,6 +163,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
             person,
             task,
             reward,
+            sensing,
+            sensors,
         )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
@@ -178,16 +184,22 @@ class HandoverEnvBase(gym.Env, EzPickle):
             raise ValueError(f"default_receiver must be 'id' or 'ood', got {default_receiver!r}")
         for name, v in (
             ("safety_force", safety_force),
-            ("obs_noise", obs_noise),
             ("stabilisation_delay", stabilisation_delay),
             ("miss_distance", miss_distance),
-            ("force_filter_tau", force_filter_tau),
         ):
             if not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
-        if int(obs_latency) != obs_latency or obs_latency < 0:
+        self.sensing, self.sensor_overrides = sensing_settings(
+            sensing, sensors, obs_noise, obs_latency, force_filter_tau
+        )
+        # "paper" and "ideal" are fixed; "randomized" is drawn at each reset (checked here).
+        self.sensor_profile: SensorProfile = make_profile(
+            "paper" if sensing == "randomized" else sensing, self.sensor_overrides
+        )
+        rate = self.sensor_profile.camera.rate_hz
+        if rate != CAMERA_RATE:
             raise ValueError(
-                f"obs_latency must be a whole number of frames >= 0, got {obs_latency!r}"
+                f"camera rate_hz must be the env's {CAMERA_RATE:g} Hz step, got {rate:g}"
             )
         if isinstance(history, bool) or int(history) != history:
             raise ValueError(f"history must be a whole number of frames, got {history!r}")
@@ -212,8 +224,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.task = task if task is not None else self.default_task(reward or HandoverReward())
         self.render_mode = render_mode
         self.safety_force = float(safety_force)
-        self.obs_noise = float(obs_noise)
-        self.obs_latency = int(obs_latency)
         self.default_receiver = default_receiver
         self.miss_distance = float(miss_distance)
         self.clear_distance = CLEAR_DISTANCE
@@ -223,7 +233,16 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.data = mujoco.MjData(self.model)
         self.ids = scene_ids(self.model)
         self.layout = ObsLayout(history=int(history))
-        self.controller = ImpedanceController(self.model, self.ids, self.params, ControllerConfig())
+        ctrl_rate, dt_phys = self.sensor_profile.controller.control_rate_hz, self.model.opt.timestep
+        ticks = round(1.0 / (dt_phys * ctrl_rate))
+        if ticks < 1 or abs(ticks * dt_phys * ctrl_rate - 1.0) > 1e-9:
+            raise ValueError(
+                f"controller control_rate_hz must divide the {1 / dt_phys:g} Hz physics rate "
+                f"(600, 300, 200, 150, 120, 100, ... Hz), got {ctrl_rate:g}"
+            )
+        self.controller = ImpedanceController(
+            self.model, self.ids, self.params, ControllerConfig(ticks=ticks)
+        )
         self.receiver = Receiver(
             self.model, self.ids, person_config(person, miss_distance=self.miss_distance)
         )
@@ -242,7 +261,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._segments.append(
                 [(lo in starts, hi - lo) for lo, hi in zip(bounds[:-1], bounds[1:])]
             )
-        self.wrist = WristSensor(self.model, self.data, self.ids, self._ticks, force_filter_tau)
+        self.wrist = WristSensor(
+            self.model, self.data, self.ids, self._ticks, self.sensor_profile.wrist.filter_tau
+        )
 
         low, high = self.layout.bounds()
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
@@ -252,7 +273,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._obs = np.zeros(self.layout.size, dtype=np.float64)
 
         self.contacts = ContactMonitor(
-            self.model, self.ids, tick=self.model.opt.timestep * ControllerConfig().ticks
+            self.model, self.ids, tick=self.model.opt.timestep * self._ticks
         )
         self._gripper_qpos = self.ids.gripper_driver_qpos
         self._object_body = self.ids.object_body
@@ -335,10 +356,15 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._last_held_z = float(READY_POS[2])
         self.t_enabled = 0.0
         self.t_detect = math.nan
-        self._receiver_frames: list[tuple[float, float]] = []
-        # the same frames as an array (rows [0, len(_receiver_frames))) for the observation
+        # the camera's delivered pelvis frames (rows [0, _n_hist)), oldest first, and how many
+        # it has delivered (0 until the first frame is available: _n_hist is then 1, the
+        # earliest capture, as the camera reports it)
         self._frames_buf = np.zeros((1024, 2))
-        self._hand_frames: list[np.ndarray] = []
+        self._n_hist = 0
+        self._frames_seen = 0
+        self._n_captured = 0
+        self._hand_obs: list[float] = [0.0, 0.0, 0.0]
+        self._pending: list[tuple[float, tuple[float, float, float], float]] = []
         self._step_count = 0
         self.contacts.reset()
         self._tcp_hist: list[list[float]] = []
@@ -380,36 +406,65 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.controller.reset(d, rest_qpos=self._ready_q)
         self.controller.payload_mass = float(m.body_mass[ids.object_body])
         self.wrist.update_payload(self._gripper_holds)
-        # Camera noise is drawn once per frame from np_random (frames are made as the person
-        # walks: a person who slows down is seen slowing down).
-        n_noise = (
-            int(self.spec.max_episode_steps if self.spec and self.spec.max_episode_steps else 900)
-            + 2
-        )
-        self._camera_noise = (self.np_random.normal(0.0, self.obs_noise, size=(n_noise, 2))
-                              if self.obs_noise > 0 else None)
-        self._hand_noise = (self.np_random.normal(0.0, self.obs_noise, size=(n_noise, 3))
-                            if self.obs_noise > 0 else None)
+        self._start_sensors()
         self._record_camera_frame()
-        self._hand_frames = [self._grip_v.copy()]
         self._tcp_hist.append(self._tcp_pos_v.tolist())
         self.t_enabled = self.task.enabled_time(self)
         self._ready = True
         if self.render_mode == "human":
             self.render()
-        return self._observation(), self._info()
+        info = self._info()
+        info["sensing_params"] = profile_summary(self.sensor_profile)
+        return self._observation(), info
+
+    def _sensor_rng(self) -> np.random.Generator:
+        """The episode's sensor Generator: a child of ``np_random`` (``Generator.spawn``), so the
+        sensors draw nothing from the person's stream and a seed fixes both."""
+        try:
+            return self.np_random.spawn(1)[0]
+        except (TypeError, AttributeError, ValueError):  # a generator without a SeedSequence
+            return np.random.default_rng(int(self.np_random.integers(2**63)))
+
+    def _start_sensors(self) -> None:
+        """The episode's sensor profile (drawn for "randomized"), camera, wrist model and
+        controller settings (docs/sensing.md); the wrist is zeroed here, the arm settled at the
+        ready pose holding the object, as a UR program would before moving toward the person."""
+        rng = self._sensor_rng()
+        if self.sensing == "randomized":
+            self.sensor_profile = make_profile("randomized", self.sensor_overrides, rng=rng)
+        prof = self.sensor_profile
+        c = prof.controller
+        default_speed = ControllerConfig().max_linear_speed
+        self.controller.set_limits(
+            inertia=c.inertia, joint_speed_limit=c.joint_speed_limit,
+            joint_accel_limit=c.joint_accel_limit,
+            max_linear_speed=min(default_speed, c.tcp_speed_limit) if c.tcp_speed_limit > 0
+            else default_speed,
+        )
+        self._cmd_delay = c.command_delay
+        self._pending.clear()
+        self.camera_model = Camera(prof.camera).reset(rng)
+        self._camera_delay = self.camera_model.delay_frames
+        self.wrist.start(prof.wrist, rng)
 
     def _record_camera_frame(self) -> None:
+        """One 30 Hz camera frame of the person: pelvis xy and right hand (the grip site)."""
         x, y = self.receiver.camera_xy().tolist()
-        k = len(self._receiver_frames)
-        if self._camera_noise is not None:
-            nx, ny = self._camera_noise[min(k, self._camera_noise.shape[0] - 1)].tolist()
-            x, y = x + nx, y + ny
-        self._receiver_frames.append((x, y))
+        (pel, hand), _, _ = self.camera_model.frame_fast(
+            float(self.data.time), [x, y], self._grip_v.tolist()
+        )
+        self._n_captured += 1
         buf = self._frames_buf
-        if k >= buf.shape[0]:  # an env stepped past its TimeLimit (or without one)
-            buf = self._frames_buf = np.concatenate([buf, np.zeros_like(buf)])
-        buf[k, 0], buf[k, 1] = x, y
+        if self._n_captured <= self._camera_delay:  # nothing delivered yet: the first capture
+            buf[0, 0], buf[0, 1] = pel
+            self._n_hist = 1
+        else:
+            k = self._frames_seen
+            if k >= buf.shape[0]:  # an env stepped past its TimeLimit (or without one)
+                buf = self._frames_buf = np.concatenate([buf, np.zeros_like(buf)])
+            buf[k, 0], buf[k, 1] = pel
+            self._frames_seen = self._n_hist = k + 1
+        self._hand_obs = hand
 
     def step(self, action: np.ndarray):
         if not getattr(self, "_ready", False):
@@ -433,7 +488,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         yaw = min(max(yaw, lo[3]), hi[3])
         m, d = self.model, self.data
         t0 = d.time
-        if t0 >= self.t_enabled:
+        if t0 < self.t_enabled:
+            x, y, z = READY_POS.tolist()
+            yaw = READY_YAW
+        if self._cmd_delay > 0.0:  # the command reaches the controller command_delay later
+            self._pending.append((t0 + self._cmd_delay - 1e-9, (x, y, z), yaw))
+        elif t0 >= self.t_enabled:
             self.controller.set_target((x, y, z), yaw)
         else:
             self.controller.set_target(READY_POS, READY_YAW)
@@ -452,9 +512,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         apply_tick, tick = self.receiver.targets.apply_tick, self._tick
         mj_step = mujoco.mj_step
         contacts = self.contacts
+        pending = self._pending
         for is_tick, n in self._segments[self._global_step % self._ticks]:
             if is_tick:
                 apply_tick(d)
+                if pending and pending[0][0] <= d.time:
+                    self._apply_command()
                 tick()
                 if contacts.unsafe_segment >= 0:
                     # the episode ends at the unsafe contact, not pressed on to the step's end
@@ -465,7 +528,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.receiver.end_step(d)
         self._step_count += 1
         self._record_camera_frame()
-        self._hand_frames.append(self._grip_v.copy())
         self._track_jerk()
         self._after_step()
         self.reward_terms = self.task.reward_terms(self)
@@ -478,6 +540,16 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return self._observation(), reward, terminated, False, self._info()
 
     # ------------------------------------------------------------------ internals
+    def _apply_command(self) -> None:
+        """Hand the controller the newest command that has arrived by now (command_delay)."""
+        pending, t = self._pending, self.data.time
+        k = 0
+        while k < len(pending) and pending[k][0] <= t:
+            k += 1
+        _, pos, yaw = pending[k - 1]
+        del pending[:k]
+        self.controller.set_target(pos, yaw)
+
     @property
     def _receiver_holds(self) -> bool:
         return self.receiver.grip.active
@@ -503,12 +575,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return self._object_pos_v
 
     def wrist_force_magnitude(self) -> float:
-        """N, the filtered external wrist force (what the release compares with f_r)."""
+        """N, the measured wrist force's magnitude (what the release compares with f_r)."""
         return self.wrist.magnitude()
 
     @property
     def f_ext(self) -> np.ndarray:
-        """(3,) N, the filtered external wrist force (world frame)."""
+        """(3,) N, the measured external wrist force (world frame): the wrist F/T model's reading
+        (:mod:`handover_env.envs.wrist`); the exact one is ``wrist.f_true``."""
         return self.wrist.f_ext
 
     def clear_of_gripper(self, ox: float, oy: float, oz: float) -> bool:
@@ -587,14 +660,13 @@ class HandoverEnvBase(gym.Env, EzPickle):
     def _observation(self) -> np.ndarray:
         d, v = self.data, self._obs_views
         t = float(d.time)
-        n_true = len(self._receiver_frames)
-        n = max(1, n_true - self.obs_latency)
+        n = self._n_hist
         w = self.layout.history
         frames = self._frames_buf[max(0, n - w):n]
         hist = v["receiver_xy_history"].reshape(w, 2)
         hist[w - frames.shape[0]:] = frames
         hist[: w - frames.shape[0]] = frames[0]
-        v["receiver_frames_seen"][0] = n if t * CAMERA_RATE + 1e-6 >= self.obs_latency else 0
+        v["receiver_frames_seen"][0] = self._frames_seen
         v["ee_pos"][...] = self._tcp_pos_v
         mujoco.mju_mat2Quat(v["ee_quat"], self._tcp_xmat_v)
         vel = self._vel6
@@ -607,11 +679,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         v["wrist_torque"][...] = self.wrist.torque()
         v["gripper_open"][0] = 1.0 if self.released else 0.0
         v["time"][0] = t
-        k = max(0, len(self._hand_frames) - 1 - self.obs_latency)
-        hand = self._hand_frames[k]
-        if self._hand_noise is not None:
-            hand = hand + self._hand_noise[min(k, self._hand_noise.shape[0] - 1)]
-        v["receiver_hand_xyz"][...] = hand
+        v["receiver_hand_xyz"][...] = self._hand_obs
         v["robot_enabled"][0] = 1.0 if t >= self.t_enabled else 0.0
         out = self._obs_out  # np.clip to the Box bounds (float64 copies of them), then float32
         np.minimum(self._obs, self._obs_high64, out=out)
@@ -663,6 +731,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
             "robot_jerk_rms": math.sqrt(self._jerk_sq / self._jerk_n) if self._jerk_n else 0.0,
             "robot_jerk_peak": math.sqrt(self._jerk_peak_sq),
             "time": float(self.data.time),
+            "sensing": self.sensor_profile.name,
         }
         for term, value in self.reward_terms.items():
             info[f"reward_{term}"] = value

@@ -35,17 +35,33 @@ class DynamicHandoverEnv(HandoverEnvBase):
 
     | Part | Size | Meaning |
     |---|---|---|
-    | receiver_xy_history | 2 W | receiver pelvis xy seen by a 30 Hz camera, oldest first (noise, latency) |
-    | receiver_frames_seen | 1 | frames seen so far |
+    | receiver_xy_history | 2 W | receiver pelvis xy seen by the 30 Hz camera model, oldest first |
+    | receiver_frames_seen | 1 | frames delivered so far (0 until the first arrives, latency) |
     | ee_pos, ee_quat | 3 + 4 | gripper TCP pose |
     | ee_linvel, ee_angvel | 3 + 3 | TCP velocity |
     | object_pos | 3 | bottle position |
     | object_held | 1 | 1 while the gripper holds the bottle |
-    | wrist_force, wrist_torque | 3 + 3 | external wrench at the wrist F/T sensor (static load removed) |
+    | wrist_force, wrist_torque | 3 + 3 | wrist F/T: the force as the sensor model measures it; torque exact |
     | gripper_open | 1 | 1 once released |
     | time | 1 | s since reset |
-    | receiver_hand_xyz | 3 | camera estimate of the receiver's right hand |
+    | receiver_hand_xyz | 3 | camera model's estimate of the receiver's right hand |
     | robot_enabled | 1 | 1 when the robot may move (always here) |
+
+    ## Sensing (issue 24; every number's source: docs/sensing.md)
+    ``sensing="paper"`` (default) is the robot the paper had; ``"ideal"`` the exact world (no
+    latency, noise or payload error; the Λ(q) controller); ``"randomized"`` draws each field per
+    episode from its documented range (seeded through ``np_random``). ``sensors={"camera": {...},
+    "wrist": {...}, "controller": {...}}`` overrides any field (:mod:`handover_env.sensors`).
+
+    | Part | "paper" | "ideal" | Source |
+    |---|---|---|---|
+    | camera (ZED 2i, body tracking) | 30 Hz, 100 ms latency, pelvis 5.1 mm / hand 62.5 mm noise (ρ 0.954), 0.125 % lost frames | exact, no delay | paper Sec. V-B; Stereolabs; the recordings |
+    | wrist F/T (UR5e) | precision 3.5 N (3σ), accuracy 4.0 N, drift 0.24 N/√s, payload error 0.136 kg / 7.7 mm, zeroed at reset, 15 ms filter | exact estimate, 15 ms filter | UR5e datasheet; UR ROS driver issues |
+    | controller | constant M = 4.7 kg (Eq. 1), command delay 5 ms, joints ≤ 180°/s, TCP reference ≤ 1 m/s | M = Λ(q), no delay or limits | paper Sec. III-A; ``constant_inertia``; UR5e datasheet |
+
+    The release compares f_r with the *measured* force; the exact one is
+    ``env.unwrapped.wrist.f_true``. ``info["sensing"]`` names the profile; the reset's ``info``
+    also has ``sensing_params`` (every field in force).
 
     ## Rewards
     Per step: ``-dt`` (time), ``-dt * max(0, |F_ext| - 2 f_r) / 10 N`` (excess wrist force);
@@ -82,12 +98,13 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | handover_time | s from when the receiver leaves the start point to the release (paper Sec. V-C) |
     | transfer_time, transfer_pelvis_xy, transfer_object_pos | the person's grasp: when, where they were, where the bottle was |
     | release_time, release_force, pull_force | the release; N, wrist force then; N, peak grip force while both held |
-    | peak_contact_force, peak_wrist_force | N, max external wrist force or body contact force so far |
+    | peak_contact_force, peak_wrist_force | N, max measured wrist force or body contact force so far |
     | reach_distance, arm_extended_time | m, right shoulder to the object's centre when the person took it (0 before; as the recordings' `object_shoulder_transfer`); s, the arm out (reaching, raised, holding) |
     | time_lost, min_speed_factor, path_deviation | s behind the nominal walk; slowest speed factor; m pushed off the path |
     | contact_force_<segment>, body_contact_force, penetration | N per body segment, N max; m, deepest |
     | body_contact_robot, body_contact_object | whether the robot / the bottle touched the person |
     | robot_jerk_rms, robot_jerk_peak | m/s^3, TCP jerk |
+    | sensing (reset: sensing_params) | the sensor profile's name (reset: all its fields) |
     | receiver_id, receiver_state, reach_onset_time, departure_time | which person; their state |
 
     Values not yet defined (no release, no grasp) are ``None``.
@@ -98,8 +115,10 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | stiffness, damping, forecast_time, release_force | 114.3, 17.1, 0.14, 7.1 | Θ (paper's Θ-hat) |
     | safety_force | 140.0 | N, ISO/TS 15066 quasi-static hand limit |
     | history | 30 | camera frames of receiver history |
-    | obs_noise | 0.0 | m, std of Gaussian noise on camera positions |
-    | obs_latency | 0 | camera latency in frames |
+    | sensing | "paper" | sensor profile: "paper", "ideal" or "randomized" (see Sensing) |
+    | sensors | None | ``{"camera": {...}, "wrist": {...}, "controller": {...}}`` field overrides |
+    | obs_noise, obs_latency | None | camera overrides: white noise (m) on both keypoints; latency in frames |
+    | force_filter_tau | None | wrist override: the force filter's time constant (s; the profile's 15 ms) |
     | default_receiver | "id" | receiver when reset() gets no option |
     | object_mass | 0.4 | kg |
     | miss_distance | 0.35 | m behind the shoulder at which an unheld bottle is walked past |
@@ -116,5 +135,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
       scripted ID or OOD walker, or a replayed recording with a modelled or the recorded hand,
       who reaches, grasps and pulls. The gripper opens when the filtered wrist force exceeds
       f_r. Outcomes success, premature_release, dropped, unsafe_force, missed and unstable;
-      TimeLimit 450 steps (15 s).
+      TimeLimit 450 steps (15 s). Sensing (issue 24): the camera, wrist F/T and controller of
+      the paper's robot by default (``sensing="paper"``); ``sensing="ideal"`` is the env before
+      it, same-seed rollouts byte for byte.
     """

@@ -40,6 +40,12 @@ class StaticHandoverEnv(HandoverEnvBase):
     :class:`handover_env.envs.tasks.static.StaticHandover` (receiver set-up, the robot's start,
     no ``missed``, the reward).
 
+    ## Sensing
+    As the dynamic env (``sensing="paper"`` by default: the camera model's latency and hand
+    noise reach the agent's view of the raised hand, the release uses the measured wrist force;
+    ``sensing="ideal"``: the exact world). The hand counts as detected when fully raised (the
+    task's rule, on the true hand).
+
     ## Arguments
     As the dynamic env, plus ``stabilisation_delay`` (s, default 2.0).
 

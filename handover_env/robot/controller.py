@@ -43,7 +43,7 @@ the other. :func:`inverse_kinematics` (the ready pose) shares :func:`target_rota
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -70,6 +70,11 @@ class ControllerConfig:
         max_linear_speed: the reference filter's speed limit, m/s.
         max_linear_accel: the reference filter's initial-acceleration limit, m/s^2.
         plan_ticks: ticks between replans of the reference toward the goal.
+        inertia: M of Eq. 1 for translation, kg: 0 = the arm's own Λ(q) (the ``"lambda"``
+            controller), > 0 = the paper's constant M (the ``"constant_m"`` controller; see
+            :func:`constant_inertia`).
+        joint_speed_limit: rad/s on every arm joint, 0 = none (UR5e datasheet: 180 deg/s).
+        joint_accel_limit: rad/s^2 on every arm joint, 0 = none.
     """
 
     ticks: int = 3
@@ -82,9 +87,20 @@ class ControllerConfig:
     max_linear_speed: float = 1.5
     max_linear_accel: float = 25.0
     plan_ticks: int = 7
+    inertia: float = 0.0
+    joint_speed_limit: float = 0.0
+    joint_accel_limit: float = 0.0
+
+    @property
+    def mode(self) -> str:
+        """``"lambda"`` (M = Λ(q)) or ``"constant_m"`` (M = ``inertia`` I)."""
+        return "constant_m" if self.inertia > 0 else "lambda"
 
     def __post_init__(self) -> None:
         vals = (
+            self.inertia,
+            self.joint_speed_limit,
+            self.joint_accel_limit,
             self.rot_omega,
             self.rot_zeta,
             self.ref_omega,
@@ -254,6 +270,17 @@ class ImpedanceController:
         self._lam_rows = [(self._lam[k], self._eye6[k]) for k in range(6)]
         self._limits = TORQUE_LIMITS.copy()
         self._neg_limits = -self._limits
+        # Joint speed / acceleration limiter (see _limit_joint_motion).
+        self._arm_rows = np.zeros((6, nv))
+        self._arm_rows[np.arange(6), np.asarray(ids.arm_dof)] = 1.0
+        self._minv_rows = np.zeros((6, nv))
+        self._minv_aa = np.zeros((6, 6))
+        self._m_aa = np.zeros((6, 6))
+        self._acc = np.zeros(6)
+        self._lim_tmp = np.zeros(6)
+        self._lim_static = np.zeros(6)
+        self.limited_ticks = 0  # ticks at which the limiter reduced the torque (since reset)
+        self._minv_age = 2  # 2: M^-1 stale, 1: M^-1 fresh and M stale, 0: both fresh
         # Reference filter state and target.
         self._x_start = np.zeros(3)  # reference state at the start of the current plan
         self.v_d = np.zeros(3)
@@ -281,10 +308,7 @@ class ImpedanceController:
         self._static_views = isinstance(self._dof, slice) and isinstance(self._qpos_adr, slice)
         self.dt = model.opt.timestep * self.config.ticks
         self._inv_dt = 1.0 / self.dt
-        w = self.config.ref_omega
-        self._max_step = min(
-            self.config.max_linear_speed * math.e / w, self.config.max_linear_accel / w**2
-        )
+        self._set_limit_values()
         # Discrete critically damped filter on e = x_d - target: [e, v]_{k+1} = A [e, v]_k
         # (semi-implicit Euler), a_k = -w^2 e_k - 2 w v_k evaluated before the update.
         w, dt = self.config.ref_omega, self.dt
@@ -367,6 +391,10 @@ class ImpedanceController:
         c_g[:, 0:6] = np.diag(self._kvec)
         c_g[:, 6:12] = np.diag(self._bvec)
         c_g[0:3, 12:15] = self._payload_mass * np.eye(3)
+        if self.config.inertia > 0.0:
+            # constant M (paper Eq. 1): the translational acceleration columns are M I, not Λ's
+            p_g[:, 12:15] = 0.0
+            c_g[0:3, 12:15] += self.config.inertia * np.eye(3)
         sel = np.zeros((19, _B_SIZE))  # column 18 of [G | 0] is the zero pad
         for k in range(6):
             if k < 3:
@@ -381,6 +409,76 @@ class ImpedanceController:
         self._p_gain = p_g @ sel
         self._c_gain = c_g @ sel
         self._c_gain[0:3, _Z_CONST] = -self._payload_mass * GRAVITY
+
+    def _set_limit_values(self) -> None:
+        c = self.config
+        w = c.ref_omega
+        self._max_step = min(c.max_linear_speed * math.e / w, c.max_linear_accel / w**2)
+        self._vlim, self._alim = c.joint_speed_limit, c.joint_accel_limit
+        self._limit_motion = self._vlim > 0.0 or self._alim > 0.0
+        if self._vlim <= 0.0:
+            self._vlim = math.inf
+
+    def set_limits(self, inertia: float | None = None, joint_speed_limit: float | None = None,
+                   joint_accel_limit: float | None = None,
+                   max_linear_speed: float | None = None) -> None:
+        """Change the controller's M and its limits (e.g. per episode); ``None`` keeps a value.
+
+        Args:
+            inertia: M, kg (0 = Λ(q)); see :class:`ControllerConfig`.
+            joint_speed_limit, joint_accel_limit: rad/s, rad/s^2 (0 = none).
+            max_linear_speed: the reference filter's speed limit, m/s (the TCP speed limit).
+        """
+        changes = {k: float(v) for k, v in (
+            ("inertia", inertia), ("joint_speed_limit", joint_speed_limit),
+            ("joint_accel_limit", joint_accel_limit), ("max_linear_speed", max_linear_speed),
+        ) if v is not None}
+        self.config = replace(self.config, **changes)
+        self._set_limit_values()
+        self._gain_maps()
+        self._stale = True
+
+    def _limit_joint_motion(self, tau: np.ndarray) -> None:
+        """Reduce the commanded torque so that no arm joint exceeds its speed (or acceleration)
+        limit at the next tick.
+
+        With M of the arm joints (at the last replan, as Λ) the command's joint acceleration is
+        ``q̈ = M^-1 (τ - c)``, c the static part (the bias forces and the held object's weight,
+        which the grasp carries). Each joint's admissible acceleration over one tick h is
+        ``[(-v_max - q̇_i) / h, (v_max - q̇_i) / h]`` (intersected with ``±a_max``). A joint
+        whose q̈ leaves its interval is clamped to it, and the torque becomes
+        ``τ + M (clip(q̈) - q̈)``: the other joints keep their commanded acceleration, and a joint
+        already too fast (e.g. pushed) is brought back to the limit within the tick. A joint
+        speed limit thus acts like the UR's own: the arm moves no faster, the Cartesian path
+        bends while a joint is at its limit. The torque limits are applied afterwards.
+        """
+        if self._minv_age:  # M^-1 and M of the arm joints, with this replan's M(q)
+            mujoco.mj_solveM(self.model, self._bound, self._minv_rows, self._arm_rows)
+            self._minv_aa[...] = self._minv_rows[:, self._dof]
+            self._minv_age = 1  # M itself is inverted only if a correction needs it
+        static = self._lim_static
+        np.multiply(self._jacp[2, self._dof], -GRAVITY[2] * self._payload_mass, out=static)
+        static += self._bias_v
+        d = self._lim_tmp
+        np.subtract(tau, static, out=d)
+        mujoco.mju_mulMatVec(self._acc, self._minv_aa, d)
+        v, amax, inv_h = self._vlim, self._alim, self._inv_dt
+        corr = None
+        for i, (a_i, w_i) in enumerate(zip(self._acc.tolist(), self._qvel_v.tolist())):
+            lo, hi = (-v - w_i) * inv_h, (v - w_i) * inv_h
+            if amax > 0.0:
+                lo, hi = max(lo, -amax), min(hi, amax)
+            if a_i < lo or a_i > hi:
+                if corr is None:
+                    corr = [0.0] * 6
+                corr[i] = (lo if a_i < lo else hi) - a_i
+        if corr is None:
+            return
+        if self._minv_age:
+            self._m_aa[...] = np.linalg.inv(self._minv_aa)
+            self._minv_age = 0
+        tau += self._m_aa @ np.array(corr)
+        self.limited_ticks += 1
 
     def reset(self, data: mujoco.MjData, rest_qpos: np.ndarray | None = None) -> None:
         """Start the reference at the current TCP pose with zero velocity."""
@@ -398,6 +496,7 @@ class ImpedanceController:
         self.set_target(pos, self.yaw_d)
         self.last_torque[:] = 0.0
         self._have_prev = False
+        self.limited_ticks = 0
 
     def set_target(self, pos: np.ndarray, yaw: float) -> None:
         """New Cartesian goal (30 Hz): position (3,) in m and gripper yaw in rad."""
@@ -477,6 +576,7 @@ class ImpedanceController:
         w_plan[:, :6, _Z_FF] = self._ff_w.T
         np.dot(b[:, _B_ROT], self._rot_l, out=self._rot_w)
         w_plan[:, :6, _Z_ROT:] = self._rot_w.reshape(6, 9, n).transpose(2, 0, 1)
+        self._minv_age = 2  # the limiter's M^-1 and M of the arm are refreshed when used
         # Null-space posture term, N = I - Jᵀ J̄ᵀ with J̄ᵀ = Λ J M^-1.
         if self._posture:
             tau0, tmp = self._tau0, self._tmp6
@@ -548,9 +648,44 @@ class ImpedanceController:
         arm = self._tau_arm if self._tau_arm is not None else self._tau_full[self._dof]
         np.add(arm, self._bias_v, out=tau)
         tau += self._tau_posture
+        if self._limit_motion:
+            self._limit_joint_motion(tau)
         np.minimum(tau, self._limits, out=self.last_torque)
         np.maximum(self.last_torque, self._neg_limits, out=self.last_torque)
         return self.last_torque
+
+
+def translational_inertia(model: mujoco.MjModel, ids: SceneIds, qpos: np.ndarray) -> np.ndarray:
+    """The TCP's translational operational-space inertia ``Λ_t(q) = (J_p M(q)^-1 J_pᵀ)^-1``, kg.
+
+    ``qpos`` sets the arm joints of a fresh ``MjData`` (everything else at the model's defaults);
+    M from ``mj_fullM``, J_p from ``mj_jacSite`` at the TCP site. The held object is not part of
+    M (it is a separate body held by a weld; the controller adds its mass itself).
+    """
+    q = np.asarray(qpos, dtype=np.float64)
+    if q.shape != (len(ids.arm_qpos),) or not np.isfinite(q).all():
+        raise ValueError(f"qpos must be {len(ids.arm_qpos)} finite joint angles, got {qpos!r}")
+    data = mujoco.MjData(model)
+    data.qpos[ids.arm_qpos] = q
+    mujoco.mj_forward(model, data)
+    jp = np.zeros((3, model.nv))
+    mujoco.mj_jacSite(model, data, jp, None, ids.tcp_site)
+    m_full = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, m_full)
+    return np.linalg.inv(jp @ np.linalg.solve(m_full, jp.T))
+
+
+def constant_inertia(model: mujoco.MjModel, ids: SceneIds, qpos: np.ndarray) -> float:
+    """The constant M of paper Eq. 1 for the ``"constant_m"`` controller: trace(Λ_t(q)) / 3, kg.
+
+    The paper sets M "to a constant value due to the system limitation" and gives no value; the
+    mean of Λ_t's eigenvalues at the ready pose (``qpos``, the arm holding the bottle there) is the
+    one constant that matches the arm's own translational inertia on average over directions
+    (the scene's UR5e at ``READY_POS``: eigenvalues 1.5 / 3.8 / 8.7 kg, M = 4.66 kg; the
+    profiles round it to 4.7 kg, docs/sensing.md). With the orientation held (the 6x6 Λ's
+    translational block) the same pose gives 8.7 kg.
+    """
+    return float(np.trace(translational_inertia(model, ids, qpos)) / 3.0)
 
 
 def inverse_kinematics(

@@ -285,3 +285,57 @@ def make_profile(name: str, overrides: object = None,
         base = SensorProfile("randomized", drawn["camera"], drawn["wrist"], drawn["controller"])
     parts = {g: replace(getattr(base, g), **checked.get(g, {})) for g in _GROUPS}
     return SensorProfile(name, parts["camera"], parts["wrist"], parts["controller"])
+
+
+def sensing_settings(sensing: object, sensors: object = None, obs_noise: object = None,
+                     obs_latency: object = None, force_filter_tau: object = None,
+                     frame_rate: float = 30.0) -> tuple[str, dict[str, dict[str, object]]]:
+    """The env's sensing kwargs as ``(profile name, checked overrides)``.
+
+    ``sensors`` is ``{"camera": {...}, "wrist": {...}, "controller": {...}}``. The env's older
+    kwargs are camera / wrist overrides: ``obs_noise`` (m) sets both keypoints' white noise
+    (``pelvis_sigma = hand_sigma = obs_noise``, ``pelvis_rho = hand_rho = 0``), ``obs_latency``
+    (whole frames) sets ``latency = obs_latency / frame_rate``, ``force_filter_tau`` (s) sets the
+    wrist ``filter_tau``. Giving a field both ways is an error.
+
+    Raises:
+        ValueError: unknown profile, a bad override (naming the field), or a field given twice.
+    """
+    if not isinstance(sensing, str) or sensing not in PROFILES:
+        raise ValueError(f"sensing must be one of {list(PROFILES)}, got {sensing!r}")
+    checked = check_overrides(sensors) if sensors is not None else {}
+    legacy: dict[str, dict[str, object]] = {}
+    if obs_noise is not None:
+        if not _is_number(obs_noise) or not math.isfinite(float(obs_noise)) or obs_noise < 0:
+            raise ValueError(f"obs_noise must be a finite number >= 0 (m), got {obs_noise!r}")
+        legacy.setdefault("camera", {}).update(
+            pelvis_sigma=float(obs_noise), hand_sigma=float(obs_noise), pelvis_rho=0.0,
+            hand_rho=0.0)
+    if obs_latency is not None:
+        if (not _is_number(obs_latency) or not math.isfinite(float(obs_latency))
+                or int(obs_latency) != obs_latency or obs_latency < 0):
+            raise ValueError(
+                f"obs_latency must be a whole number of frames >= 0, got {obs_latency!r}")
+        legacy.setdefault("camera", {})["latency"] = int(obs_latency) / frame_rate
+    if force_filter_tau is not None:
+        legacy.setdefault("wrist", {})["filter_tau"] = force_filter_tau
+    legacy = check_overrides(legacy)
+    out = {g: dict(v) for g, v in checked.items()}
+    for group, values in legacy.items():
+        both = sorted(set(values) & set(out.get(group, {})))
+        if both:
+            raise ValueError(
+                f"{group} field(s) {both} given both in sensors= and by obs_noise / obs_latency / "
+                "force_filter_tau; give each once")
+        out.setdefault(group, {}).update(values)
+    return sensing, out
+
+
+def profile_summary(profile: SensorProfile) -> dict[str, object]:
+    """The profile as a JSON-serialisable dict: ``{"name", "camera": {...}, "wrist": {...},
+    "controller": {...}}`` (every field; the env reports it in the reset's ``info``)."""
+    out: dict[str, object] = {"name": profile.name}
+    for group in _GROUPS:
+        params = getattr(profile, group)
+        out[group] = {f.name: getattr(params, f.name) for f in fields(params)}
+    return out

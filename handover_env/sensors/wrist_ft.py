@@ -22,8 +22,15 @@ the sensor reading less the *configured* payload, with the sensor's own errors. 
    white noise is scaled so that the *filtered* reading's per-axis standard deviation is
    ``precision / 3`` (the datasheet's precision read as 3 sigma).
 
-Deterministic given the Generator passed to :meth:`reset`; the "ideal" profile (no errors, no
-zeroing) returns the env's filtered force exactly and draws no random numbers.
+Deterministic given the Generator passed to :meth:`reset` (normals drawn in blocks of 256 ticks);
+the "ideal" profile (no errors, no zeroing) draws no random numbers and returns the filtered input
+(the env then bypasses the model altogether: its own exact path).
+
+Two entry points: :meth:`WristFT.measure` (checked arrays; it adds the payload error of step 1
+itself) and :meth:`WristFT.sense`, the env's 200 Hz path in plain floats without checks, which
+takes the force already compensated with the configured payload (the env computes it with
+:attr:`WristFT.configured_mass` / :attr:`WristFT.configured_com` in the same formula as the exact
+estimate); validation is at :meth:`WristFT.reset` and :meth:`WristFT.set_tick`.
 """
 
 from __future__ import annotations
@@ -33,6 +40,8 @@ import math
 import numpy as np
 
 from handover_env.sensors.profiles import WristFTParams
+
+_BLOCK = 256  # ticks of random numbers drawn from the Generator at a time
 
 
 def _vec3(x: object, name: str) -> np.ndarray:
@@ -61,13 +70,14 @@ class WristFT:
         self._rng: np.random.Generator | None = None
 
     def reset(self, rng: np.random.Generator, payload_mass: float = 0.0,
-              payload_com: object = (0.0, 0.0, 0.0)) -> WristFT:
+              payload_com: object = (0.0, 0.0, 0.0), dt: float = 0.005) -> WristFT:
         """Start an episode: draw the payload errors and the sensor offset from ``rng``.
 
         Args:
             rng: the episode's Generator (all randomness comes from it).
             payload_mass: true mass below the sensor, kg (gripper + held object).
             payload_com: its true centre of mass in the sensor frame, m.
+            dt: the tick interval of :meth:`sense` (see :meth:`set_tick`), s.
         """
         if not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
@@ -75,10 +85,15 @@ class WristFT:
         self._rng = rng
         self.mass_error = float(rng.normal(0.0, p.mass_error)) if p.mass_error > 0 else 0.0
         self.com_error = (rng.normal(0.0, p.com_error, 3) if p.com_error > 0 else np.zeros(3))
-        self._bias = (rng.normal(0.0, p.accuracy / 3.0, 3) if p.accuracy > 0 else np.zeros(3))
-        self._offset = np.zeros(3)
-        self._filt = np.zeros(3)
+        self._bias = (tuple(rng.normal(0.0, p.accuracy / 3.0, 3).tolist()) if p.accuracy > 0
+                      else (0.0, 0.0, 0.0))
+        self._offset = (0.0, 0.0, 0.0)
+        self._filt = (0.0, 0.0, 0.0)
+        self._clean = (0.0, 0.0, 0.0)
         self._started = False
+        self._z: list[float] = []
+        self._zi = 0
+        self.set_tick(dt)
         self.set_payload(payload_mass, payload_com)
         return self
 
@@ -97,14 +112,71 @@ class WristFT:
         """(mass kg, centre of mass in the sensor frame m) a UR program would have set."""
         return self.configured_mass, self.configured_com.copy()
 
-    def _alpha(self, dt: float) -> float:
-        tau = self.params.filter_tau
-        return 1.0 if tau <= 0 else dt / (tau + dt)
+    def set_tick(self, dt: float) -> None:
+        """Fix the tick interval of :meth:`sense` (s, > 0): the filter gain, the white-noise scale
+        that gives the filtered reading ``precision / 3`` per axis, and the drift step."""
+        if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
+        p = self.params
+        dt = float(dt)
+        tau = p.filter_tau
+        a = 1.0 if tau <= 0 else dt / (tau + dt)
+        self._dt, self._a = dt, a
+        self._noise_scale = p.precision / 3.0 * math.sqrt((2.0 - a) / a)
+        self._drift_step = p.drift * math.sqrt(dt)
+        self._draws = p.drift > 0 or p.precision > 0
+
+    def _normals(self) -> list[float]:
+        """Six standard normals (noise x, y, z; drift x, y, z), drawn in blocks from the rng."""
+        i = self._zi
+        if i >= len(self._z):
+            self._z = self._rng.standard_normal(6 * _BLOCK).tolist()  # type: ignore[union-attr]
+            i = 0
+        self._zi = i + 6
+        return self._z[i:i + 6]
+
+    def sense(self, gx: float, gy: float, gz: float, r: list[float]) -> tuple[float, float, float]:
+        """The fast path, one tick: the filtered reading (world frame, N) from the force the robot
+        computes with its *configured* payload (``gx, gy, gz``: the external force estimate
+        ``R (m_c a_s - F_s) + m_c (α × c_c + ω × (ω × c_c))``, world frame) and the sensor-to-world
+        rotation ``r`` (9 floats, row-major).
+
+        Plain floats, no checks: :meth:`reset` and :meth:`set_tick` validated everything. Steps 2-4
+        of the module docstring: offset + drift + white noise in the sensor frame, the tare, the
+        filter. Uses the tick interval of :meth:`set_tick`.
+        """
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = r
+        b0, b1, b2 = self._bias
+        # sensor frame: Rᵀ g + bias (the noise-free reading a tare would see)
+        c0 = r00 * gx + r10 * gy + r20 * gz + b0
+        c1 = r01 * gx + r11 * gy + r21 * gz + b1
+        c2 = r02 * gx + r12 * gy + r22 * gz + b2
+        self._clean = (c0, c1, c2)
+        if self._draws:
+            z0, z1, z2, z3, z4, z5 = self._normals()
+            k = self._drift_step
+            self._bias = (b0 + k * z3, b1 + k * z4, b2 + k * z5)
+            k = self._noise_scale
+            c0, c1, c2 = c0 + k * z0, c1 + k * z1, c2 + k * z2
+        o0, o1, o2 = self._offset
+        c0, c1, c2 = c0 - o0, c1 - o1, c2 - o2
+        mx = r00 * c0 + r01 * c1 + r02 * c2
+        my = r10 * c0 + r11 * c1 + r12 * c2
+        mz = r20 * c0 + r21 * c1 + r22 * c2
+        if not self._started:
+            self._started = True
+            self._filt = (mx, my, mz)
+            return self._filt
+        a = self._a
+        fx, fy, fz = self._filt
+        f = (fx + a * (mx - fx), fy + a * (my - fy), fz + a * (mz - fz))
+        self._filt = f
+        return f
 
     def measure(self, true_force_world: object, payload_accel_world: object,
                 gripper_rotation: object, dt: float, omega_world: object = None,
                 alpha_world: object = None) -> np.ndarray:
-        """One tick: the force estimate (world frame, N) the release compares with f_r.
+        """One tick, checked: the force estimate (world frame, N) the release compares with f_r.
 
         Args:
             true_force_world: exact external force at the wrist (the env's estimate), N.
@@ -113,12 +185,14 @@ class WristFT:
             dt: time since the previous tick, s (> 0).
             omega_world, alpha_world: gripper angular velocity / acceleration, rad/s, rad/s^2
                 (optional: with them the centre-of-mass error's inertial force is included).
+
+        Adds the configured payload's error (step 1 of the module docstring) and calls
+        :meth:`sense`.
         """
         if self._rng is None:
             raise RuntimeError("WristFT.measure() called before reset(rng)")
         if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt!r}")
-        p = self.params
         f = _vec3(true_force_world, "true_force_world")
         sf = _vec3(payload_accel_world, "payload_accel_world")
         rot = _rotation(gripper_rotation)
@@ -130,33 +204,22 @@ class WristFT:
                                                  + np.cross(w, np.cross(w, c_conf)))
                          - self.payload_mass * (np.cross(al, c_true)
                                                 + np.cross(w, np.cross(w, c_true))))
-        a = self._alpha(float(dt))
-        raw_s = rot.T @ (f + err) + self._bias
-        self._clean_s = raw_s
-        if p.drift > 0 or p.precision > 0:
-            z = self._rng.standard_normal(6)
-            self._bias = self._bias + p.drift * math.sqrt(dt) * z[3:]
-            sigma_out = p.precision / 3.0
-            raw_s = raw_s + sigma_out * math.sqrt((2.0 - a) / a) * z[:3]
-        meas = rot @ (raw_s - self._offset)
-        if not self._started:
-            self._filt, self._started = meas, True
-        else:
-            self._filt = self._filt + a * (meas - self._filt)
-        self._rot = rot
-        return self._filt.copy()
+        if float(dt) != self._dt:
+            self.set_tick(float(dt))
+        g = (f + err).tolist()
+        return np.array(self.sense(g[0], g[1], g[2], rot.reshape(9).tolist()))
 
     def zero(self) -> None:
         """Tare the sensor at the current reading (URScript ``zero_ftsensor()``).
 
-        The tare is taken as the reading's noise-free value at the last :meth:`measure` (offset,
+        The tare is taken as the reading's noise-free value at the last :meth:`sense` (offset,
         drift so far, payload error and whatever force acts then), i.e. a tare averaged long enough
         that its own noise is negligible; the filtered output restarts at 0. A no-op when
-        ``params.zeroing`` is False (the "ideal" profile) or before the first :meth:`measure`.
+        ``params.zeroing`` is False (the "ideal" profile) or before the first :meth:`sense`.
         """
         if self._rng is None:
             raise RuntimeError("WristFT.zero() called before reset(rng)")
         if not self.params.zeroing or not self._started:
             return
-        self._offset = self._clean_s.copy()
-        self._filt = np.zeros(3)
+        self._offset = self._clean
+        self._filt = (0.0, 0.0, 0.0)

@@ -1,4 +1,5 @@
-"""The ``closed-loop`` and ``theta-sweep`` commands of evaluate.py: their flags and their runs.
+"""The ``closed-loop``, ``theta-sweep`` and ``sensing-sweep`` commands of evaluate.py: their flags
+and their runs.
 
 ``evaluate.py`` keeps only the dispatch; the runs are
 :func:`handover_eval.closedloop.run.run_closed_loop` and
@@ -9,6 +10,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -40,7 +42,7 @@ from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers, with_test_data
 from handover_eval.output_lock import OutputLock
 
-COMMANDS = ("closed-loop", "theta-sweep")
+COMMANDS = ("closed-loop", "theta-sweep", "sensing-sweep")
 QUICK_WALKERS = 2
 QUICK_REPLAYS = 3
 QUICK_FOLDS = 3
@@ -147,6 +149,51 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         default=None,
         metavar="N",
         help=f"scripted walkers per set (ID, OOD), the same at every value (default: 20; "
+        f"{QUICK_WALKERS} with --quick)",
+    )
+    add_sensing_parser(sub)
+
+
+SENSING_SWEEP_DESCRIPTION = (
+    "One factor at a time around the paper's sensor profile (docs/sensing.md): camera latency "
+    "0-300 ms, wrist F/T noise 0-2x the UR5e datasheet, the constant-M vs Λ(q) controller; every "
+    "agent on the same receivers at every point: success, handover time and premature releases, "
+    "paired against the reactive agent. Writes sensing_sweep.md/.csv/.png."
+)
+
+
+def add_sensing_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``sensing-sweep`` sub-command (issue 24)."""
+    from handover_eval.closedloop.sensing_sweep import AGENTS as SENSING_AGENTS
+    from handover_eval.closedloop.sensing_sweep import FACTORS
+
+    p = sub.add_parser(
+        "sensing-sweep",
+        help="camera latency, F/T noise and the controller's M, one at a time (md/csv/png)",
+        description=SENSING_SWEEP_DESCRIPTION,
+    )
+    _common(p)
+    p.add_argument(
+        "--agents",
+        nargs="+",
+        default=list(SENSING_AGENTS),
+        metavar="NAME",
+        help=f"agents (default: {list(SENSING_AGENTS)}); reactive, the reference, always runs; "
+        "giver-replay meets replays only (--replays-per-fold N)",
+    )
+    p.add_argument(
+        "--factors",
+        nargs="+",
+        default=list(FACTORS),
+        metavar="NAME",
+        help=f"factors to sweep, any of {list(FACTORS)} (default: all three)",
+    )
+    p.add_argument(
+        "--walkers",
+        type=int,
+        default=None,
+        metavar="N",
+        help=f"scripted walkers per set (ID, OOD), the same at every point (default: 20; "
         f"{QUICK_WALKERS} with --quick)",
     )
 
@@ -257,6 +304,14 @@ def _common(p: argparse.ArgumentParser) -> None:
         "never for reported numbers",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    if p.prog.split()[-1] != "sensing-sweep":  # the sensing sweep varies the paper profile
+        p.add_argument(
+            "--sensing",
+            choices=("paper", "ideal", "randomized"),
+            default="paper",
+            help="the env's sensor profile (docs/sensing.md): the paper's camera, wrist F/T and "
+            "controller; the exact world; or drawn per episode (default: paper)",
+        )
     add_backend_arguments(p)
 
 
@@ -312,8 +367,19 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             folds=QUICK_FOLDS if quick else args.folds,
             seed=args.seed,
             workers=workers,
+            sensing=getattr(args, "sensing", "paper"),
         )
         sweep = None
+        if args.command == "sensing-sweep":
+            from handover_eval.closedloop.sensing_sweep import SensingSweepConfig
+
+            sweep = SensingSweepConfig(
+                agents=tuple(args.agents),
+                factors=tuple(args.factors),
+                walkers=receivers.walkers,
+                replays_per_fold=per_fold or 0,  # --quick: a few replays, for giver-replay
+                receivers=dataclasses.replace(receivers, agents=("reactive",)),
+            )
         if args.command == "theta-sweep":
             from handover_eval.closedloop.theta_sweep import SweepConfig
 
@@ -368,7 +434,17 @@ def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cach
     )
     try:
         with session(backend, receivers.workers) as sess:
-            if sweep is None:
+            if args.command == "sensing-sweep":
+                from handover_eval.closedloop.sensing_sweep import (
+                    run_sensing_sweep,
+                    write_sensing_sweep,
+                )
+
+                swept = run_sensing_sweep(sweep, dataset, args.data, options, cache, progress)
+                write_sensing_sweep(
+                    swept, sweep, dataset, out, args.bootstrap, args.seed, args.quick
+                )
+            elif sweep is None:
                 run = run_closed_loop(
                     receivers, dataset, args.data, options, cache, progress, replay, replay_data
                 )

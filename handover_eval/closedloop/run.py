@@ -27,6 +27,7 @@ files are written by :mod:`.output`.
 
 from __future__ import annotations
 
+import json
 import os
 import time
 import uuid
@@ -83,6 +84,7 @@ class ClosedLoopEvalConfig:
         walker_fold: the fold whose model the learning agents use on scripted walkers.
         chunk: receivers per worker job.
         workers: processes running episodes (1 = in this process).
+        sensing: the env's sensor profile ("paper", "ideal", "randomized"; docs/sensing.md).
     """
 
     agents: tuple[str, ...] = AGENTS
@@ -97,6 +99,7 @@ class ClosedLoopEvalConfig:
     walker_fold: int = 0
     chunk: int = 4
     workers: int = 2
+    sensing: str = "paper"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "agents", tuple(check_agents(list(self.agents))))
@@ -109,6 +112,8 @@ class ClosedLoopEvalConfig:
             raise ValueError("--walkers must be >= 0 and --replays-per-fold >= 1")
         if self.workers < 1 or self.chunk < 1:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if self.sensing not in ("paper", "ideal", "randomized"):
+            raise ValueError(f"--sensing must be paper, ideal or randomized, got {self.sensing!r}")
         if not 0 <= self.walker_fold < self.folds:
             raise ValueError(f"walker fold {self.walker_fold} is not a fold of {self.folds}")
 
@@ -155,6 +160,7 @@ def plan_jobs(
                         cache_dir,
                         fold,
                         None if fold is None else splits[fold][0],
+                        env_kwargs=json.dumps({"sensing": config.sensing}),
                     )
                 )
     order = {a: k for k, a in enumerate(AGENTS)}

@@ -8,6 +8,7 @@ what ran before in that env. :func:`episode_row` flattens the final ``info`` int
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections import OrderedDict
@@ -61,7 +62,9 @@ ENV_CACHE_SIZE = 4
 class EpisodeJob:
     """A chunk of receivers for one agent, Θ and model, run by :func:`run_job` in a worker.
 
-    ``extra`` columns are copied into every row (the Θ sweep's parameter and value).
+    ``extra`` columns are copied into every row (the Θ sweep's parameter and value);
+    ``env_kwargs`` (a JSON object, "" for none) are further ``gym.make`` keyword arguments (the
+    sensing sweep's ``sensing`` and ``sensors``).
     """
 
     token: str
@@ -74,14 +77,16 @@ class EpisodeJob:
     model_fold: int | None = None
     train_idx: np.ndarray | None = None
     extra: tuple[tuple[str, Any], ...] = ()
+    env_kwargs: str = ""
 
 
 _ENVS: OrderedDict[tuple, Any] = OrderedDict()
 
 
-def _env(kind: str, params: HandoverParams):
-    """This worker's env of ``kind`` with Θ = ``params`` (made once, kept for the next jobs)."""
-    key = (kind, params.as_array())
+def _env(kind: str, params: HandoverParams, env_kwargs: str = ""):
+    """This worker's env of ``kind`` with Θ = ``params`` and the JSON ``env_kwargs`` (made once,
+    kept for the next jobs)."""
+    key = (kind, params.as_array(), env_kwargs)
     if key in _ENVS:
         _ENVS.move_to_end(key)
         return _ENVS[key]
@@ -95,6 +100,7 @@ def _env(kind: str, params: HandoverParams):
         damping=params.damping,
         forecast_time=params.forecast_time,
         release_force=params.release_force,
+        **(json.loads(env_kwargs) if env_kwargs else {}),
     )
     _ENVS[key] = env
     while len(_ENVS) > ENV_CACHE_SIZE:
@@ -125,7 +131,7 @@ def run_job(dataset: HandoverDataset, job: EpisodeJob) -> tuple[list[dict], list
         model, record = rl_model(job.agent, dataset, job.options, job.cache_dir, job.token)
         fits += [record] if record is not None else []
     agent = make_agent(job.agent, job.params, model)
-    env = _env(env_kind(job.agent), job.params)
+    env = _env(env_kind(job.agent), job.params, job.env_kwargs)
     rows = []
     for spec in job.receivers:
         if job.agent in RL_AGENTS:  # never a receiver the policy trained on
