@@ -208,17 +208,18 @@ def test_rescore_rebuilds_the_tables_byte_for_byte(plugin_runs, tmp_path, capsys
 @pytest.mark.parametrize(
     "column, value, message",
     [
-        ("success", "yes", "line 2, success: 'yes' is not True or False"),
-        ("set", "train", "line 2, set: 'train' is not one of"),
-        ("handover_time", "1e999", "line 2, handover_time: '1e999' is not a finite number"),
+        ("success", "yes", "success: 'yes' is not True or False"),
+        ("set", "train", "set: 'train' is not one of"),
+        ("handover_time", "1e999", "handover_time: '1e999' is not a finite number"),
         ("handover_time", "__import__('os')", "is not a finite number"),
         ("first_failure", "no_grasp", "contradicts success"),
-        ("seed", "1.5", "line 2, seed: '1.5' is not an integer"),
+        ("seed", "1.5", "seed: '1.5' is not an integer"),
     ],
 )
 def test_episode_files_are_checked(plugin_runs, tmp_path, column, value, message, capsys) -> None:
     rows = list(csv.DictReader((plugin_runs["a"] / "closedloop_episodes.csv").open()))
-    rows[0][column] = value
+    i = next(k for k, r in enumerate(rows) if r["success"] == "True")  # a success to contradict
+    rows[i][column] = value
     path = tmp_path / "bad.csv"
     with path.open("w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
@@ -226,7 +227,7 @@ def test_episode_files_are_checked(plugin_runs, tmp_path, column, value, message
         w.writerows(rows)
     assert evaluate.main(["rescore", str(path), "--out", str(tmp_path / "r")]) == 2
     err = _one_line_error(capsys)
-    assert message in err and str(path) in err
+    assert message in err and str(path) in err and f"line {i + 2}, " in err
     assert not (tmp_path / "r" / "benchmark.md").exists()
 
 

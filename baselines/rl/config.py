@@ -61,6 +61,13 @@ def curve_seed(k: int) -> int:
     return TRAIN_SEED_START + k
 
 
+#: A ``--quick`` run's settings (tests, smoke runs): never for reported numbers.
+QUICK = {"steps": 256, "n_envs": 1, "n_steps": 64, "batch_size": 32, "n_epochs": 2,
+         "net_arch": (16, 16), "eval_every": 128, "curve_episodes": 2, "p_replay": 0.0}
+#: The env's sensing profiles a policy may train on ('' = the env's own default).
+SENSING = ("randomized", "paper", "ideal", "")
+
+
 @dataclass(frozen=True)
 class RLConfig:
     """One RL training run (recorded in the checkpoint's ``config.json``).
@@ -92,8 +99,10 @@ class RLConfig:
         folds, split_seed: the stratified split whose :func:`training_folds` give the replays.
         curve_episodes: receivers of the fixed learning-curve set (ID, OOD, and replays if any).
         eval_every: env steps between learning-curve evaluations and checkpoints.
-        sensing: the env's sensing profile (e.g. ``"randomized"``); ``""`` keeps the env's
-            default, and the option is passed to the env only if it accepts it.
+        sensing: the env's sensing profile for training: ``"randomized"`` (default: every sensor,
+            controller and latency parameter drawn per episode from its documented range, so the
+            policy meets the robot's imperfections, not one fixed world), ``"paper"``, ``"ideal"``,
+            or ``""`` for the env's own default.
         history: camera frames of receiver history in the observation (the env's ``history``).
     """
 
@@ -121,7 +130,7 @@ class RLConfig:
     split_seed: int = 0
     curve_episodes: int = 10
     eval_every: int = 20_000
-    sensing: str = ""
+    sensing: str = "randomized"
     history: int = 30
 
     def __post_init__(self) -> None:
@@ -133,6 +142,8 @@ class RLConfig:
             raise ValueError(f"base must be one of {list(BASES)}, got {self.base!r}")
         if self.form == "scratch" and self.base != "":
             object.__setattr__(self, "base", "")
+        if self.sensing not in SENSING:
+            raise ValueError(f"sensing must be one of {list(SENSING)}, got {self.sensing!r}")
         for name in ("residual_xyz", "residual_yaw", "learning_rate"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):

@@ -25,6 +25,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from baselines.rl.config import QUICK, SENSING
 from handover_env.paths import OUTPUT_LOCK, output_folder
 from handover_eval.cli.args import (
     SEEDS,
@@ -36,7 +37,6 @@ from handover_eval.cli.args import (
     positive_float,
 )
 from handover_eval.output_lock import OutputLock
-from handover_eval.rl.run import QUICK
 
 #: The default budget: 58 min of the 2-core machine at the PPO rate measured with 2 envs, 287
 #: env steps/s (229 with 1 env; README, "RL agent").
@@ -94,9 +94,10 @@ def add_rl_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--shaping", type=float, default=1.0,
                    help="weight of the potential-based shaping (reward per metre between the "
                    "bottle and the person's hand while held; default 1; 0 = HandoverReward alone)")
-    p.add_argument("--sensing", default="",
-                   help="the env's sensing profile for training, e.g. randomized (default: the "
-                   "env's own default; refused if the env has no sensing profiles)")
+    p.add_argument("--sensing", default="randomized",
+                   help=f"the env's sensing profile for training, one of {list(SENSING)} "
+                   "(default randomized: sensor, controller and latency parameters drawn per "
+                   "episode from their documented ranges; '' = the env's default, paper)")
     p.add_argument("--eval-every", type=STEPS, default=None,
                    help=f"env steps between learning-curve points and checkpoints (default "
                    f"{DEFAULT_EVAL_EVERY:,})")

@@ -199,8 +199,7 @@ def rl_checkpoint(agent: str, options: MethodOptions, cache_dir: Path) -> Path:
 
 def quick_rl_config(form: str, seed: int):
     """The tiny RL run of ``--quick`` (train.py rl --quick's budget, walkers only)."""
-    from baselines.rl.config import RLConfig
-    from handover_eval.rl.run import QUICK
+    from baselines.rl.config import QUICK, RLConfig
 
     return RLConfig(form=form, base="reactive" if form == "residual" else "", seed=seed, **QUICK)
 

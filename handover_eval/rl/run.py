@@ -26,8 +26,6 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval.closedloop.receivers import fold_of, held_out_folds
 
 #: ``--quick``: a few hundred steps of a tiny network on walkers only (tests, make test).
-QUICK = {"steps": 256, "n_envs": 1, "n_steps": 64, "batch_size": 32, "n_epochs": 2,
-         "net_arch": (16, 16), "eval_every": 128, "curve_episodes": 2, "p_replay": 0.0}
 
 
 def training_data(dataset: HandoverDataset | None, config: RLConfig) -> TrainingData:
