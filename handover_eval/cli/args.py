@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import argparse
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from pathlib import Path
 
 from handover_eval.backend import BACKENDS, Backend, import_ray
 
@@ -159,3 +160,13 @@ def backend_from_args(args: argparse.Namespace) -> Backend:
     if backend.kind == "ray":
         import_ray()
     return backend
+
+
+def load_replay_data(load: Callable, path: str | None, quick: bool, seed: int):
+    """``--replay-data PATH`` loaded with the command's own dataset loader ``load(path, quick,
+    seed)``, or None without the flag; FileNotFoundError naming the flag for a missing path."""
+    if path is None:
+        return None
+    if not Path(path).exists():
+        raise FileNotFoundError(f"--replay-data {path}: no such file or folder")
+    return load(path, quick, seed)

@@ -33,6 +33,7 @@ from handover_eval.cli.args import (
     backend_from_args,
     check_counts,
     int_in_range,
+    load_replay_data,
 )
 from handover_eval.closedloop.output import write_closed_loop, write_theta_sweep
 from handover_eval.closedloop.receivers import SETS
@@ -417,11 +418,7 @@ def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cach
     replay_data = getattr(args, "replay_data", None)
     try:
         dataset = load_dataset(args.data, args.quick, args.seed)
-        replay = None
-        if replay_data is not None:
-            if not Path(replay_data).exists():
-                raise FileNotFoundError(f"--replay-data {replay_data}: no such file or folder")
-            replay = load_dataset(replay_data, args.quick, args.seed)
+        replay = load_replay_data(load_dataset, replay_data, args.quick, args.seed)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2

@@ -49,6 +49,7 @@ from handover_eval.cli.args import (
     backend_from_args,
     check_counts,
     int_in_range,
+    load_replay_data,
 )
 from handover_eval.methods import (
     ACT_EVAL_STEPS,
@@ -302,11 +303,7 @@ def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) 
     replay_path = getattr(args, "replay_data", None)
     try:
         dataset = load_dataset(args.data, args.quick, args.seed)
-        test_data = None
-        if replay_path is not None:
-            if not Path(replay_path).exists():
-                raise FileNotFoundError(f"--replay-data {replay_path}: no such file or folder")
-            test_data = load_dataset(replay_path, args.quick, args.seed)
+        test_data = load_replay_data(load_dataset, replay_path, args.quick, args.seed)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
