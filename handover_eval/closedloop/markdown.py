@@ -137,11 +137,13 @@ def markdown(
         + t2
     )
     text += (
-        "\nAll episodes (a failed handover's effort counts too). Reach: the largest grip-shoulder "
-        "distance; arm extended: time with the arm out before the release; time lost: walking "
-        "time lost to slowing down; slowest speed: the lowest walking-speed factor (1 = never "
-        "slowed); path deviation: how far contact pushed the pelvis off its path; pull: the "
-        "largest pull while both held the object; jerk: the robot TCP's jerk at 30 Hz.\n"
+        "\nAll episodes (a failed handover's effort counts too). Reach: the right shoulder to the "
+        "object's centre when the person took it (0 without a grasp), as the recordings' "
+        "`object_shoulder_transfer`; arm extended: time with the arm out before the release; "
+        "time lost: walking time lost to slowing down; slowest speed: the lowest walking-speed "
+        "factor (1 = never slowed); path deviation: how far contact pushed the pelvis off its "
+        "path; pull: the largest pull while both held the object; jerk: the robot TCP's jerk "
+        "at 30 Hz.\n"
     )
     reps = [r for r in agg if r["set"].startswith("replay") and r.get("n_delta")]
     if reps:
