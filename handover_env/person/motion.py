@@ -36,6 +36,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from handover_env.numbers import checked_number, is_real_number
+
 # --------------------------------------------------------------------------------------------
 # Calibration tables: (cumulative probability, value) pairs of quantiles over recordings.
 # Source: public Dynamic Handover Dataset, ID recordings ("motion_normal_*"), statistics only.
@@ -196,11 +198,6 @@ FIELD_RANGES: dict[str, tuple[float, float, str, str]] = {
 }
 
 
-def _is_number(value: object) -> bool:
-    """A real number: int, float or a numpy one, and not a bool."""
-    return not isinstance(value, (bool, np.bool_)) and isinstance(
-        value, (int, float, np.integer, np.floating)
-    )
 
 
 def check_field(name: str, value: object) -> float:
@@ -211,15 +208,7 @@ def check_field(name: str, value: object) -> float:
             the message names the field and the range.
     """
     lo, hi, unit, why = FIELD_RANGES[name]
-    if not _is_number(value):
-        raise ValueError(f"walker {name} must be a number, got {value!r}")
-    x = float(value)  # type: ignore[arg-type]
-    if not (math.isfinite(x) and lo <= x <= hi):
-        raise ValueError(
-            f"walker {name} must be {'' if math.isfinite(x) else 'finite and '}in [{lo:g}, "
-            f"{hi:g}]{' ' + unit if unit else ''} ({why}), got {value!r}"
-        )
-    return x
+    return checked_number(f"walker {name}", value, lo, hi, unit, why)
 
 
 def check_overrides(overrides: object) -> dict[str, object]:
@@ -265,7 +254,7 @@ def _start_xy(value: object) -> tuple[float, float]:
     if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)):
         raise ValueError(f"walker start_xy must be a pair of numbers, got {value!r}")
     items = list(value)
-    if len(items) != 2 or not all(_is_number(v) for v in items):
+    if len(items) != 2 or not all(is_real_number(v) for v in items):
         raise ValueError(f"walker start_xy must be a pair of numbers, got {value!r}")
     start = (float(items[0]), float(items[1]))
     if not all(math.isfinite(v) and abs(v) <= WALK_HALF_SIZE for v in start):

@@ -7,12 +7,10 @@ reset options (``height``, ``speed``).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-import numpy as np
-
+from handover_env.numbers import checked_number
 from handover_env.person.person import RATE
 
 #: Speed up to which a segment's target is led by the feed-forward, m/s (peak hand speeds of
@@ -143,30 +141,13 @@ class ReceiverConfig:
 def check_setting(name: str, value: object) -> float:
     """``value`` as a float if it is a valid person setting ``name`` (:data:`SETTING_RANGES`)."""
     lo, hi, unit, why = SETTING_RANGES[name]
-    if isinstance(value, (bool, np.bool_)) or not isinstance(
-        value, (int, float, np.integer, np.floating)
-    ):
-        raise ValueError(f"person setting {name} must be a number, got {value!r:.80}")
-    x = float(value)
-    if not (math.isfinite(x) and lo <= x <= hi):
-        raise ValueError(
-            f"person setting {name} must be {'' if math.isfinite(x) else 'finite and '}in "
-            f"[{lo:.4g}, {hi:.4g}]{' ' + unit if unit else ''} ({why}), got {value!r}"
-        )
-    return x
+    return checked_number(f"person setting {name}", value, lo, hi, unit, why)
 
 
 def check_option(name: str, value: object, bounds: tuple[float, float], unit: str) -> float:
     """A numeric reset option as a float: a real number (not a bool), finite, within bounds."""
     lo, hi = bounds
-    if isinstance(value, (bool, np.bool_)) or not isinstance(
-        value, (int, float, np.integer, np.floating)
-    ):
-        raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}] {unit}, got {value!r:.80}")
-    x = float(value)
-    if not (math.isfinite(x) and lo <= x <= hi):
-        raise ValueError(f"{name} must be in [{lo:g}, {hi:g}] {unit}, got {value!r}")
-    return x
+    return checked_number(name, value, lo, hi, unit)
 
 
 def person_config(person: object, miss_distance: float) -> ReceiverConfig:

@@ -31,6 +31,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from handover_env.numbers import checked_number, is_real_number
+
 G = 9.81
 
 
@@ -107,24 +109,12 @@ CONTROLLER_FIELDS: dict[str, Field] = {
 }
 
 
-def _is_number(value: object) -> bool:
-    return not isinstance(value, (bool, np.bool_)) and isinstance(
-        value, (int, float, np.integer, np.floating)
-    )
 
 
 def check_value(group: str, table: Mapping[str, Field], name: str, value: object) -> float:
     """``value`` as a float if it is a valid ``group.name``; else ValueError naming the field."""
     lo, hi, _, unit, source = table[name]
-    if not _is_number(value):
-        raise ValueError(f"{group} {name} must be a number, got {value!r}")
-    x = float(value)  # type: ignore[arg-type]
-    if not (math.isfinite(x) and lo <= x <= hi):
-        raise ValueError(
-            f"{group} {name} must be {'' if math.isfinite(x) else 'finite and '}in "
-            f"[{lo:g}, {hi:g}]{' ' + unit if unit else ''} ({source}), got {value!r}"
-        )
-    return x
+    return checked_number(f"{group} {name}", value, lo, hi, unit, source)
 
 
 def _validate(obj: Any, group: str, table: Mapping[str, Field]) -> None:
@@ -306,13 +296,13 @@ def sensing_settings(sensing: object, sensors: object = None, obs_noise: object 
     checked = check_overrides(sensors) if sensors is not None else {}
     legacy: dict[str, dict[str, object]] = {}
     if obs_noise is not None:
-        if not _is_number(obs_noise) or not math.isfinite(float(obs_noise)) or obs_noise < 0:
+        if not is_real_number(obs_noise) or not math.isfinite(float(obs_noise)) or obs_noise < 0:
             raise ValueError(f"obs_noise must be a finite number >= 0 (m), got {obs_noise!r}")
         legacy.setdefault("camera", {}).update(
             pelvis_sigma=float(obs_noise), hand_sigma=float(obs_noise), pelvis_rho=0.0,
             hand_rho=0.0)
     if obs_latency is not None:
-        if (not _is_number(obs_latency) or not math.isfinite(float(obs_latency))
+        if (not is_real_number(obs_latency) or not math.isfinite(float(obs_latency))
                 or int(obs_latency) != obs_latency or obs_latency < 0):
             raise ValueError(
                 f"obs_latency must be a whole number of frames >= 0, got {obs_latency!r}")
