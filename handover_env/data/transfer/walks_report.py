@@ -20,7 +20,6 @@ Only statistics over recordings leave this module; no per-recording value is wri
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Sequence
@@ -37,6 +36,7 @@ from handover_env.data.public import (
     safe_load_pickle,
     validate_record,
 )
+from handover_env.data.transfer.report import write_json
 from handover_env.data.transfer.walks import (
     PAUSE_MIN_TIME,
     PAUSE_SPEED,
@@ -386,10 +386,7 @@ def run_walk_stats(
     )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    path = out / JSON_NAME
-    path.write_text(json.dumps(summary, indent=1) + "\n")
-    written.append(path)
+    written = [write_json(summary, out / JSON_NAME)]
     if figures:
         fold = stratified_fold_ids(np.array([o for _, o in recorded]), folds, seed)
         cal = [(w, o) for (w, o), f in zip(recorded, fold, strict=True) if f < calibration_folds]
