@@ -137,5 +137,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
       f_r. Outcomes success, premature_release, dropped, unsafe_force, missed and unstable;
       TimeLimit 450 steps (15 s). Sensing (issue 24): the camera, wrist F/T and controller of
       the paper's robot by default (``sensing="paper"``); ``sensing="ideal"`` is the env before
-      it, same-seed rollouts byte for byte.
+      it, same-seed rollouts byte for byte. With a joint speed limit (the paper profile) the
+      controller speed-scales its reference as the UR controller does, instead of only clamping
+      joint accelerations at the limit; "ideal" is unchanged.
     """

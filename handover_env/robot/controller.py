@@ -75,6 +75,9 @@ class ControllerConfig:
             :func:`constant_inertia`).
         joint_speed_limit: rad/s on every arm joint, 0 = none (UR5e datasheet: 180 deg/s).
         joint_accel_limit: rad/s^2 on every arm joint, 0 = none.
+        speed_scaling: with a joint speed limit, slow each plan of the reference so that its
+            joint velocities stay within the limit, as the UR controller does (True), or leave
+            the limit to the torque-level limiter alone (False, the ablation).
     """
 
     ticks: int = 3
@@ -90,6 +93,7 @@ class ControllerConfig:
     inertia: float = 0.0
     joint_speed_limit: float = 0.0
     joint_accel_limit: float = 0.0
+    speed_scaling: bool = True
 
     @property
     def mode(self) -> str:
@@ -238,6 +242,10 @@ class ImpedanceController:
         self._jac12 = np.zeros((12, nv))
         self._jac_cur, self._jac_prev = self._jac12[0:6], self._jac12[6:12]
         self._jacp, self._jacr = self._jac12[0:3], self._jac12[3:6]
+        self._jac_plan = np.zeros((6, nv))  # the speed scaling's Jacobian, at a replan
+        self._jacp_plan, self._jacr_plan = self._jac_plan[0:3], self._jac_plan[3:6]
+        self._plan_twist = np.zeros((self.config.plan_ticks, 6))
+        self.scaled_plans = 0  # replans slowed by the joint speed limit (since reset)
         self._j2 = self._jac12[:, self._dof]  # (12, 6) arm columns of both
         self._j = self._jac12[0:6, self._dof]
         # If the TCP moves only with the arm joints (a fixed-base arm), the other columns of its
@@ -418,6 +426,7 @@ class ImpedanceController:
         self._limit_motion = self._vlim > 0.0 or self._alim > 0.0
         if self._vlim <= 0.0:
             self._vlim = math.inf
+        self._scale_speed = c.speed_scaling and self._vlim < math.inf
 
     def set_limits(self, inertia: float | None = None, joint_speed_limit: float | None = None,
                    joint_accel_limit: float | None = None,
@@ -484,6 +493,7 @@ class ImpedanceController:
         """Start the reference at the current TCP pose with zero velocity."""
         if rest_qpos is not None:
             self._rest = np.asarray(rest_qpos, float).copy()
+        self._bind(data)
         pos = data.site_xpos[self.ids.tcp_site]
         self.x_d = pos.copy()
         self.v_d = np.zeros(3)
@@ -497,6 +507,7 @@ class ImpedanceController:
         self.last_torque[:] = 0.0
         self._have_prev = False
         self.limited_ticks = 0
+        self.scaled_plans = 0
 
     def set_target(self, pos: np.ndarray, yaw: float) -> None:
         """New Cartesian goal (30 Hz): position (3,) in m and gripper yaw in rad."""
@@ -509,7 +520,8 @@ class ImpedanceController:
 
         The filter's input is the goal, but moved at most ``min(v_max e / ω, a_max / ω²)`` from the
         current reference: the critically damped response to such a step peaks at ``v_max`` and
-        starts with acceleration ``a_max``. Replanning every ``plan_ticks`` (about one 30 Hz
+        starts with acceleration ``a_max``. With a joint speed limit, the plan is then speed-scaled
+        (:meth:`_speed_scale`). Replanning every ``plan_ticks`` (about one 30 Hz
         step) lets the reference approach far goals at a bounded speed and acceleration.
         """
         i = self._plan_i - 1
@@ -537,6 +549,15 @@ class ImpedanceController:
         )
         # (n, 3 rows: x_d, v, a; 4 columns: x, y, z, yaw)
         mujoco.mju_mulMatMat(self._traj_rows, self._powers_rows, s0)
+        if self._scale_speed and self._bound is not None:
+            scale = self._speed_scale()
+            if scale < 1.0:  # the same plan, slowed: its displacement and velocities times scale
+                s0[:2, :] *= scale
+                t0, t1, t2 = x0 - s0[0, 0], x1 - s0[0, 1], x2 - s0[0, 2]
+                s0[2, :] = (t0, t1, t2, self.yaw_d - s0[0, 3])
+                target[0], target[1], target[2] = t0, t1, t2
+                mujoco.mju_mulMatMat(self._traj_rows, self._powers_rows, s0)
+                self.scaled_plans += 1
         cs = self._cs
         np.cos(self._yaw_plan, out=cs[1])
         np.sin(self._yaw_plan, out=cs[2])
@@ -544,6 +565,31 @@ class ImpedanceController:
         self._w_plan[:, 6, _Z_ROT:] = self._rot_maps[27:].T  # trace(R_d Rᵀ)
         self._plan_i = 0
         self._stale = True
+
+    def _speed_scale(self) -> float:
+        """The factor (<= 1) that keeps the plan's reference within the joint speed limit.
+
+        The UR controller does not bend a commanded path at a joint speed limit: it slows the
+        whole motion down ("speed scaling", reported as RTDE ``speed_scaling``; see the UR ROS 2
+        driver's ``scaled_joint_trajectory_controller`` and ros2_controllers' speed-scaling page,
+        "On-Robot speed scaling ... One example of such robots are the Universal Robots
+        manipulators"). Here: the joint velocities ``J⁻¹ [v_d; ψ̇_d ẑ]`` the plan's reference twist
+        asks for at each tick (this tick's arm Jacobian, damped as Λ is), and ``q̇_max`` over their
+        largest magnitude if that exceeds ``q̇_max``. The plan is linear in its step and initial
+        velocity, so scaling both scales every velocity of it by the same factor while its start
+        stays where the reference is. The torque-level limiter (:meth:`_limit_joint_motion`) stays
+        as the backstop for the feedback's own joint speeds.
+        """
+        mujoco.mj_jacSite(self.model, self._bound, self._jacp_plan, self._jacr_plan, self._tcp)
+        j = self._jac_plan[:, self._dof]
+        twist = self._plan_twist
+        twist[:, :3] = self._v_plan
+        twist[:, 5] = self._yaw_rate_plan
+        jjt = j @ j.T
+        jjt.flat[::7] += self.config.singular_damping
+        qd = j.T @ np.linalg.solve(jjt, twist.T)  # (6, n) damped least squares
+        peak = float(np.abs(qd).max())
+        return self._vlim / peak if peak > self._vlim else 1.0
 
     def _refresh_dynamics(self, data: mujoco.MjData) -> None:
         """Λ(q) (as a Cholesky factor of Λ^-1), J M^-1, the null-space posture torque and W_k.

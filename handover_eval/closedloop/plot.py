@@ -53,11 +53,14 @@ def closed_loop_figure(rows: Sequence[dict], agg: Sequence[dict], title: str) ->
         mine = {r["agent"]: r for r in agg if r["set"] == s}
         xs = [x[i] + (k - (len(sets) - 1) / 2) * width for i, a in enumerate(agents) if a in mine]
         rate = [100 * mine[a]["success_rate"] for a in agents if a in mine]
+        # max(0, ...): a Wilson bound at a rate of 0 or 1 can miss it by a rounding error
         low = [
-            100 * (mine[a]["success_rate"] - mine[a]["success_low"]) for a in agents if a in mine
+            max(0.0, 100 * (mine[a]["success_rate"] - mine[a]["success_low"]))
+            for a in agents if a in mine
         ]
         high = [
-            100 * (mine[a]["success_high"] - mine[a]["success_rate"]) for a in agents if a in mine
+            max(0.0, 100 * (mine[a]["success_high"] - mine[a]["success_rate"]))
+            for a in agents if a in mine
         ]
         ax.bar(xs, rate, width, color=SET_COLOURS[s], alpha=0.8, label=s)
         ax.errorbar(xs, rate, yerr=[low, high], fmt="none", ecolor="k", capsize=2, lw=0.8)
