@@ -621,6 +621,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         if rec.state == "reaching" and rec.try_grasp(self.model, d):
             self.transfer_object_pos = self._object_pos_v.copy()
         rec.grip.apply(d)
+        self.contacts.count_object = self._gripper_holds or not rec.grip.active
         if d.ncon or self.contacts.active:
             self.contacts.scan(d)
         if self._gripper_holds or rec.grip.active:

@@ -2,7 +2,11 @@
 
 At every controller tick with contacts, :meth:`ContactMonitor.scan` sums the normal forces
 (``mj_contactForce``) of the robot-person and object-person contacts (the only pairs that can
-touch the person) per segment of the body, and keeps the deepest penetration.
+touch the person) per segment of the body, and keeps the deepest penetration. Object-person
+contacts count while the robot holds the object, or while nobody does (a dropped object falling
+on the person); once the person holds it alone (:attr:`ContactMonitor.count_object` False) the
+object is the person's, and its contact with their own body (carrying it against the torso) is
+no robot contact.
 
 Measured force. The solver's force at the first tick of a contact includes the impulse that
 removes that tick's penetration in one 5 ms step (up to several hundred newtons for a few
@@ -43,6 +47,8 @@ class ContactMonitor:
         penetration: deepest robot/object-person penetration so far, m (0 if none).
         touched_robot, touched_object: whether the robot / the object touched the person.
         unsafe_segment: index of the first segment whose force exceeded its ISO limit, or -1.
+        count_object: whether object-person contacts count (set by the env at every tick:
+            False once the person holds the object and the robot no longer does).
     """
 
     def __init__(self, model: mujoco.MjModel, ids: SceneIds, tick: float = 0.005) -> None:
@@ -67,6 +73,7 @@ class ContactMonitor:
         #: True while some segment's filtered force has not decayed (keep scanning every tick).
         self.active = False
         self.penetration = 0.0
+        self.count_object = True
         self.touched_robot = False
         self.touched_object = False
         self.unsafe_segment = -1
@@ -81,7 +88,7 @@ class ContactMonitor:
             c = data.contact[i]
             g1, g2 = c.geom1, c.geom2
             pair = cls[g1] | cls[g2]
-            if pair != ROBOT | PERSON and pair != OBJECT | PERSON:
+            if pair != ROBOT | PERSON and (pair != OBJECT | PERSON or not self.count_object):
                 continue
             mujoco.mj_contactForce(self.model, data, i, self._force6)
             s = int(seg[g1] if seg[g1] >= 0 else seg[g2])

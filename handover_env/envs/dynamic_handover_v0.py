@@ -139,5 +139,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
       the paper's robot by default (``sensing="paper"``); ``sensing="ideal"`` is the env before
       it, same-seed rollouts byte for byte. With a joint speed limit (the paper profile) the
       controller speed-scales its reference as the UR controller does, instead of only clamping
-      joint accelerations at the limit; "ideal" is unchanged.
+      joint accelerations at the limit; "ideal" is unchanged. Contacts of the object with the
+      person count as the robot's while the robot holds it or nobody does, no longer once the
+      person alone holds it (the physics is unchanged; contact figures after the take change).
     """
