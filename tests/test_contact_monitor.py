@@ -1,4 +1,4 @@
-"""ContactMonitor on real MuJoCo contacts: which pairs are the robot's (handover_env/envs/contacts.py)."""
+"""ContactMonitor on real MuJoCo contacts: which pairs are the robot's (envs/contacts.py)."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def pressed():
 
 
 def _object_person_depth(u) -> float:
-    m, d = u.model, u.data
+    d = u.data
     person = set(int(g) for g in u.ids.receiver_geoms)
     obj = int(u.ids.object_geom)
     depths = [-c.dist for c in d.contact[: d.ncon]
