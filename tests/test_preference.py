@@ -89,6 +89,32 @@ def test_runner_caches_episodes_and_runs_static_too() -> None:
     runner.close()
 
 
+def test_runner_runs_the_chosen_sensing_profile_and_refuses_others(tmp_path: Path) -> None:
+    from handover_env.config import HandoverParams
+    from handover_eval.preference.check import load_episode_cache, save_episode_cache
+
+    with pytest.raises(ValueError, match="sensing must be one of"):
+        EpisodeRunner("reactive", "id", sensing="perfect")
+    p = sample_participant(2)
+    theta = HandoverParams(110.0, 15.0, 0.3, 8.0)
+    seeds = p.walk_seeds(1)
+    infos = {}
+    for sensing in ("ideal", "paper"):
+        runner = EpisodeRunner("reactive", "id", sensing=sensing)
+        infos[sensing] = runner.run(p, theta, seeds)[0]
+        assert runner._env.unwrapped.sensing == sensing
+        if sensing == "ideal":
+            save_episode_cache(runner, tmp_path / "episodes.jsonl")
+        runner.close()
+    # the two worlds differ (the paper's camera and F/T), and the default is the env's: paper
+    assert infos["ideal"] != infos["paper"] and EpisodeRunner("reactive").sensing == "paper"
+    # the brute-force check's episode cache never serves an episode of another profile
+    paper, ideal = EpisodeRunner("reactive", "id"), EpisodeRunner("reactive", "id", sensing="ideal")
+    load_episode_cache(paper, tmp_path / "episodes.jsonl")
+    load_episode_cache(ideal, tmp_path / "episodes.jsonl")
+    assert len(paper.cache) == 0 and len(ideal.cache) == 1
+
+
 def test_train_preference_cli_writes_theta_history_and_plot(tmp_path: Path, capsys) -> None:
     from handover_eval.cli import train
 

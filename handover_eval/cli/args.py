@@ -133,6 +133,17 @@ def theta_grid(text: str) -> tuple[int, int, int, int]:
     return values  # type: ignore[return-value]
 
 
+def add_sensing_argument(parser: argparse.ArgumentParser, default: str = "paper") -> None:
+    """``--sensing``: the env's sensor profile (docs/sensing.md)."""
+    parser.add_argument(
+        "--sensing",
+        choices=("paper", "ideal", "randomized"),
+        default=default,
+        help="the env's sensor profile (docs/sensing.md): the paper's camera, wrist F/T and "
+        f"controller; the exact world; or drawn per episode (default: {default})",
+    )
+
+
 def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
     """``--backend process|ray`` and ``--ray-address`` (shared by every command that fans out)."""
     parser.add_argument(

@@ -30,6 +30,7 @@ from handover_eval.cli.args import (
     STEPS,
     WORKERS,
     add_backend_arguments,
+    add_sensing_argument,
     backend_from_args,
     check_counts,
     int_in_range,
@@ -306,13 +307,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     if p.prog.split()[-1] != "sensing-sweep":  # the sensing sweep varies the paper profile
-        p.add_argument(
-            "--sensing",
-            choices=("paper", "ideal", "randomized"),
-            default="paper",
-            help="the env's sensor profile (docs/sensing.md): the paper's camera, wrist F/T and "
-            "controller; the exact world; or drawn per episode (default: paper)",
-        )
+        add_sensing_argument(p)
     add_backend_arguments(p)
 
 

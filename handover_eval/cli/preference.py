@@ -22,6 +22,7 @@ from handover_eval.cli.args import (
     SEEDS,
     WALKS,
     add_backend_arguments,
+    add_sensing_argument,
     backend_from_args,
     theta_grid,
 )
@@ -95,6 +96,7 @@ def add_preference_arguments(p: argparse.ArgumentParser) -> None:
         "or results/preference/pooled-N)",
     )
     p.add_argument("--no-progress", action="store_true", help="no tqdm bar")
+    add_sensing_argument(p)
     add_backend_arguments(p)
 
 
@@ -116,6 +118,7 @@ def add_check_arguments(p: argparse.ArgumentParser) -> None:
         "--out", default="results/preference/check", help="output folder (episode cache, tables)"
     )
     p.add_argument("--no-progress", action="store_true", help="no tqdm bars")
+    add_sensing_argument(p)
 
 
 def run_preference_command(args: argparse.Namespace) -> None:
@@ -142,6 +145,7 @@ def run_preference_command(args: argparse.Namespace) -> None:
         walks=args.walks,
         agent=args.agent,
         receiver=args.receiver,
+        sensing=args.sensing,
         cospar=CoSparConfig(points_per_dim=args.grid),
         seed=args.seed,
     )
@@ -197,6 +201,7 @@ def run_check_command(args: argparse.Namespace) -> None:
         walks=args.walks,
         iterations=args.iterations,
         seed=args.seed,
+        sensing=args.sensing,
     )
     out = output_folder(args.out, "--out")
     with OutputLock(out):

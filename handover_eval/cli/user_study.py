@@ -18,6 +18,7 @@ from handover_eval.cli.args import (
     WALKS,
     WORKERS,
     add_backend_arguments,
+    add_sensing_argument,
     backend_from_args,
     int_in_range,
     theta_grid,
@@ -86,6 +87,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         help="processes running the per-participant CoSpar in parallel (default 1: in this "
         "process); with --backend ray it sizes the local Ray instance",
     )
+    add_sensing_argument(p)
     add_backend_arguments(p)
     return p
 
@@ -110,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             theta=tuple(args.theta) if args.theta else None,
             personalised=not args.no_personalised,
+            sensing=args.sensing,
             workers=args.workers,
         )
         backend = backend_from_args(args)

@@ -49,22 +49,29 @@ class CheckConfig:
     seed: int = 0
     agent: str = "ours"
     receiver: str = "id"
+    sensing: str = "paper"
 
 
-def _load_cache(runner: EpisodeRunner, path: Path) -> None:
+def load_episode_cache(runner: EpisodeRunner, path: Path) -> None:
+    """Fill ``runner``'s episode cache from ``path`` (JSON lines), only with the episodes of
+    ``runner``'s sensing profile (a line without one is from before the profiles: ideal)."""
     if path.exists():
         for line in path.read_text().splitlines():
             rec = json.loads(line)
+            if rec.get("sensing", "ideal") != runner.sensing:  # lines before profiles: ideal
+                continue
             key = rec["key"]
             runner.cache[tuple(key[:-1]) + (tuple(key[-1]),)] = rec["info"]
 
 
-def _save_cache(runner: EpisodeRunner, path: Path) -> None:
+def save_episode_cache(runner: EpisodeRunner, path: Path) -> None:
+    """Write ``runner``'s episode cache to ``path`` (JSON lines, each with its sensing profile)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     with tmp.open("w") as f:
         for key, info in runner.cache.items():
-            f.write(json.dumps({"key": list(key[:-1]) + [list(key[-1])], "info": info}) + "\n")
+            f.write(json.dumps({"key": list(key[:-1]) + [list(key[-1])], "info": info,
+                                "sensing": runner.sensing}) + "\n")
     tmp.replace(path)
 
 
@@ -74,9 +81,9 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
     from tqdm import tqdm
 
     participants = sample_population(config.participants, config.population_seed, male_fraction=0.5)
-    runner = runner or EpisodeRunner(config.agent, config.receiver)
+    runner = runner or EpisodeRunner(config.agent, config.receiver, sensing=config.sensing)
     cache = out / "episodes.jsonl"
-    _load_cache(runner, cache)
+    load_episode_cache(runner, cache)
     cospar = CoSparConfig(points_per_dim=config.grid)
     grid = action_grid(cospar)
     utilities: dict[int, np.ndarray] = {}
@@ -90,7 +97,7 @@ def run_check(config: CheckConfig, out: Path, progress: bool = True,
                 [p.utility(lived(runner.run(p, HandoverParams(*g), seeds))) for g in bar]
             )
     finally:
-        _save_cache(runner, cache)
+        save_episode_cache(runner, cache)
     rows = []
     for p in participants:
         u = utilities[p.pid]

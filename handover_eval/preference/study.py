@@ -82,6 +82,7 @@ class StudyConfig:
         theta: skip the pooled CoSpar run and use this population Theta-hat (K, B, t_f, f_r).
         personalised: run the per-participant CoSpar and comparison.
         agent: the planner whose Theta is tuned.
+        sensing: the env's sensing profile (``"paper"``, the env's default; docs/sensing.md).
         workers: processes running the per-participant CoSpar (part 4) in parallel (1: in this
             process); with the Ray backend (:mod:`.backend`) they are Ray tasks. Same results.
     """
@@ -95,6 +96,7 @@ class StudyConfig:
     theta: tuple[float, float, float, float] | None = None
     personalised: bool = True
     agent: str = "ours"
+    sensing: str = "paper"
     workers: int = 1
 
     def __post_init__(self) -> None:
@@ -126,6 +128,8 @@ class StudyResult:
     pooled_config: PreferenceConfig | None = None
     #: The walkers every episode met: ``"id"`` / ``"ood"`` scripted walkers or ``"replay"``.
     receiver: str = "id"
+    #: The env's sensing profile of every episode (the runner's).
+    sensing: str = "paper"
 
 
 # ---------------------------------------------------------------------------- statistics
@@ -247,10 +251,11 @@ def run_study(config: StudyConfig, progress: bool = True,
 
     t_start = time.perf_counter()
     people = sample_population(config.participants, config.seed)
-    runner = runner or EpisodeRunner(config.agent, "id")
+    runner = runner or EpisodeRunner(config.agent, "id", sensing=config.sensing)
     cospar = CoSparConfig(points_per_dim=config.grid)
     pcfg = PreferenceConfig(iterations=config.iterations, walks=config.walks, agent=config.agent,
-                            cospar=cospar, seed=config.seed, walk_stream=TUNING)
+                            sensing=config.sensing, cospar=cospar, seed=config.seed,
+                            walk_stream=TUNING)
     timings: dict[str, float] = {}
     # 1. population Theta-hat
     t0 = time.perf_counter()
@@ -263,7 +268,7 @@ def run_study(config: StudyConfig, progress: bool = True,
         theta_pop = HandoverParams(*config.theta)
     timings["pooled_cospar_s"] = time.perf_counter() - t0
     result = StudyResult(config, people, theta_pop, pooled=pooled, pooled_config=pcfg,
-                         receiver=runner.receiver)
+                         receiver=runner.receiver, sensing=runner.sensing)
     # 2. H1/H2
     t0 = time.perf_counter()
     _reseed(people, 11)

@@ -55,7 +55,8 @@ def walker_mix(result: StudyResult) -> str:
     return (
         f"Walker mix: {counts['id']} ID and {counts['ood']} OOD walks"
         + (f" and {counts['replay']} replays" if counts["replay"] else "")
-        + f" over all {n} episodes (every part runs the `{kind}` walkers): {drawn}."
+        + f" over all {n} episodes (every part runs the `{kind}` walkers, sensing profile "
+        f"`{result.sensing}`): {drawn}."
     )
 
 

@@ -87,14 +87,21 @@ class EpisodeRunner:
         receiver: ``"id"``/``"ood"`` scripted walkers with the participant's body, or ``"replay"``
             (synthetic demonstrations closest to the participant's speed, at their height).
         dataset: training data of ``ours`` and the replay pool (default: ``load_any(None)``).
+        sensing: the env's sensing profile (``"paper"``, the env's default, ``"ideal"`` or
+            ``"randomized"``; docs/sensing.md).
     """
 
-    def __init__(self, agent: str = "ours", receiver: str = "id", dataset: Any = None) -> None:
+    def __init__(self, agent: str = "ours", receiver: str = "id", dataset: Any = None,
+                 sensing: str = "paper") -> None:
+        from handover_env.sensors.profiles import PROFILES
+
         if agent not in AGENTS:
             raise ValueError(f"agent must be one of {AGENTS}, got {agent!r}")
         if receiver not in RECEIVERS:
             raise ValueError(f"receiver must be one of {RECEIVERS}, got {receiver!r}")
-        self.agent_name, self.receiver = agent, receiver
+        if sensing not in PROFILES:
+            raise ValueError(f"sensing must be one of {list(PROFILES)}, got {sensing!r}")
+        self.agent_name, self.receiver, self.sensing = agent, receiver, sensing
         self._dataset = dataset
         self._agent: Any = None
         self._static_agent: Any = None
@@ -143,6 +150,7 @@ class EpisodeRunner:
                 damping=theta.damping,
                 forecast_time=theta.forecast_time,
                 release_force=theta.release_force,
+                sensing=self.sensing,
             )
             self._env_key = key
         return self._env
@@ -254,6 +262,7 @@ class PreferenceConfig:
         walks: walks (episodes) per proposed Theta and participant.
         agent: ``"ours"`` or ``"reactive"``.
         receiver: ``"id"``, ``"ood"`` or ``"replay"``.
+        sensing: the env's sensing profile (see :class:`EpisodeRunner`).
         cospar: the learner's settings (grid over the paper's ranges, kernel, noise, Thompson
             samples, buffer).
         seed: seeds the Thompson samples.
@@ -264,6 +273,7 @@ class PreferenceConfig:
     walks: int = 3
     agent: str = "ours"
     receiver: str = "id"
+    sensing: str = "paper"
     cospar: CoSparConfig = field(default_factory=CoSparConfig)
     seed: int = 0
     walk_stream: int = 0
@@ -314,7 +324,7 @@ def run_preference(participants: Sequence[Participant], config: PreferenceConfig
     if not participants:
         raise ValueError("need at least one participant")
     start = time.perf_counter()
-    runner = runner or EpisodeRunner(config.agent, config.receiver)
+    runner = runner or EpisodeRunner(config.agent, config.receiver, sensing=config.sensing)
     learner = CoSpar(config.cospar, seed=config.seed)
     grid = learner.grid
     buffers: dict[int, list[int]] = {p.pid: [] for p in participants}

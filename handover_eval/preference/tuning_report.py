@@ -83,6 +83,7 @@ def save_run(
         "walks": config.walks,
         "agent": config.agent,
         "receiver": config.receiver,
+        "sensing": config.sensing,
         "grid": list(config.cospar.points_per_dim),
         "preferences": len(result.preferences),
         "episodes": result.episodes,
