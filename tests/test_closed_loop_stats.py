@@ -273,3 +273,16 @@ def test_theta_sweep_summarises_every_receiver_group_apart() -> None:
     assert ext[("walker-id", "release_force")]["diff"] == pytest.approx(15.0)
     moved = {(v["set"]): v["outcomes_moved"] for v in verdicts(extremes)}
     assert "success" in moved["replay-ood"] and "success" not in moved["replay-id"]
+
+
+def test_a_verdict_gives_no_percentage_against_a_zero_reference():
+    """A summed 0 s (time lost, ~1e-17 s by rounding) is not a base for a relative change."""
+    from handover_eval.closedloop.theta_sweep import verdicts
+
+    base = {"param": "forecast_time", "set": "all", "ci_excludes_zero": True,
+            "diff_low": 0.03, "diff_high": 0.08}
+    (v,) = verdicts([{**base, "metric": "time_lost", "diff": 0.0465,
+                      "reference_value": 1.25e-17}])
+    assert v["outcomes_moved"] == "time_lost +0.0465 [+0.03, +0.08]"
+    (v,) = verdicts([{**base, "metric": "handover_time", "diff": 0.5, "reference_value": 2.0}])
+    assert v["outcomes_moved"] == "handover_time +0.5 (+25.0 %) [+0.03, +0.08]"

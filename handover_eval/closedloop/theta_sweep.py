@@ -248,7 +248,10 @@ def _moved(e: dict) -> str:
             f"{100 * e['diff_high']:+.0f}]"
         )
     ref = e["reference_value"]
-    rel = f" ({100 * e['diff'] / abs(ref):+.1f} %)" if ref and math.isfinite(ref) else ""
+    # relative only to a reference that is not zero up to rounding (a summed 0 s is ~1e-17 s)
+    rel = (
+        f" ({100 * e['diff'] / abs(ref):+.1f} %)" if math.isfinite(ref) and abs(ref) > 1e-9 else ""
+    )
     return f"{e['metric']} {e['diff']:+.3g}{rel} [{e['diff_low']:+.3g}, {e['diff_high']:+.3g}]"
 
 
