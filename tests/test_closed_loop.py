@@ -125,6 +125,7 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
     md = (quick_run / "closed_loop.md").read_text()
     assert "simulated person" in md and "No ghosts" in md and "start of the recording" in md
     assert "Paired against the reactive agent" in md
+    assert "Sensing profile `ideal`" in md  # the header names the world it was measured in
     assert (quick_run / "closed_loop.png").stat().st_size > 20_000
     ghosts = _rows(quick_run / "closed_loop_ghosts.csv")
     assert (ghosts[0]["agent"], ghosts[0]["set"]) == ("all", "all")

@@ -69,7 +69,7 @@ def _header(title: str, dataset, receivers: ClosedLoopEvalConfig, quick: bool, n
         f"{th.release_force:g} N. Learning agents: Table I's {receivers.folds}-fold split (seed "
         f"{receivers.seed}); a replay of fold f meets the model trained on the other folds, the "
         f"scripted walkers meet the fold-{receivers.walker_fold} model. Replays: hand mode "
-        f"`{receivers.hand_mode}`."
+        f"`{receivers.hand_mode}`. Sensing profile `{receivers.sensing}` (docs/sensing.md)."
         f"{' **Quick run: tiny models, never for reported numbers.**' if quick else ''}\n"
     )
 
