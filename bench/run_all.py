@@ -32,6 +32,7 @@ ORDER = (
     "sweep_backends",
     "rl_throughput",
     "agent_episode_cost",
+    "spurious_force",
 )
 
 
