@@ -30,8 +30,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(PY) -m handover_eval.demo
 
+# pytest-xdist: a test file per worker process (module fixtures stay shared), 2 = CI's cores
+TEST_WORKERS ?= 2
+
 test: lint
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 lint: $(STAMP)
 	$(PY) -m ruff check .

@@ -9,7 +9,8 @@ clone you made for it:
 
 1. ``make -C CLONE install`` (venv + pip; the download and build time);
 2. ``make -C CLONE lint`` (ruff, the first half of ``make test``);
-3. ``CLONE/.venv/bin/python -m pytest -q`` in CLONE (the second half), with ``--durations``
+3. ``CLONE/.venv/bin/python -m pytest -q -n 2 --dist loadfile`` in CLONE (the second half, as
+   the Makefile runs it), with ``--durations``
    so the slowest tests are listed.
 
 It refuses a folder that is not a clone of this project (no ``Makefile``/``pyproject.toml``) or
@@ -41,7 +42,8 @@ def commands(clone: Path, torch_index: str | None = None) -> list[tuple[str, lis
         ("install (make install)", make_install),
         ("lint (make lint)", ["make", "-C", str(clone), "lint"]),
         ("tests (pytest of make test)",
-         [str(clone / ".venv" / "bin" / "python"), "-m", "pytest", "-q", "--durations=15"]),
+         [str(clone / ".venv" / "bin" / "python"), "-m", "pytest", "-q", "-n", "2",
+          "--dist", "loadfile", "--durations=15"]),
     ]
 
 
@@ -93,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     for label, sec, code in times:
         print(f"  {label:30s} {sec / 60:6.1f} min" + (f"  (exit {code})" if code else ""))
     total = sum(t for _, t, _ in times)
-    print(f"  {'make test total (all of it)':30s} {total / 60:6.1f} min  (budget 15 min)")
+    print(f"  {'make test total (all of it)':30s} {total / 60:6.1f} min  (budget 10 min)")
     return max((c for *_, c in times), default=0)
 
 
