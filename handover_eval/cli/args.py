@@ -21,6 +21,7 @@ import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
+from handover_env.sensors.profiles import PROFILES
 from handover_eval.backend import BACKENDS, Backend, import_ray
 
 
@@ -137,7 +138,7 @@ def add_sensing_argument(parser: argparse.ArgumentParser, default: str = "paper"
     """``--sensing``: the env's sensor profile (docs/sensing.md)."""
     parser.add_argument(
         "--sensing",
-        choices=("paper", "ideal", "randomized"),
+        choices=PROFILES,
         default=default,
         help="the env's sensor profile (docs/sensing.md): the paper's camera, wrist F/T and "
         f"controller; the exact world; or drawn per episode (default: {default})",

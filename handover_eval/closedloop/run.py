@@ -39,6 +39,7 @@ import numpy as np
 
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
+from handover_env.sensors.profiles import PROFILES
 from handover_eval.backend import map_folds
 from handover_eval.closedloop.receivers import (
     FIT_ALL,
@@ -112,8 +113,8 @@ class ClosedLoopEvalConfig:
             raise ValueError("--walkers must be >= 0 and --replays-per-fold >= 1")
         if self.workers < 1 or self.chunk < 1:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
-        if self.sensing not in ("paper", "ideal", "randomized"):
-            raise ValueError(f"--sensing must be paper, ideal or randomized, got {self.sensing!r}")
+        if self.sensing not in PROFILES:
+            raise ValueError(f"--sensing must be one of {list(PROFILES)}, got {self.sensing!r}")
         if not 0 <= self.walker_fold < self.folds:
             raise ValueError(f"walker fold {self.walker_fold} is not a fold of {self.folds}")
 
