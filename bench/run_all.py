@@ -25,6 +25,7 @@ from pathlib import Path
 BENCH_DIR = Path(__file__).resolve().parent
 ORDER = (
     "env_speed",
+    "env_overhead",
     "physics_breakdown",
     "planner_latency",
     "baseline_latency",
