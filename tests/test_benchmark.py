@@ -339,3 +339,24 @@ def test_help_says_a_plugin_runs_its_code(capsys) -> None:
     for flag in ("--agent", "--agent-config", "--tracks", "--data", "--replay-data", "--quick",
                  "--name", "--out", "--workers"):
         assert flag in text
+
+
+def test_the_closed_loop_track_runs_the_protocols_sensing_profile() -> None:
+    """v1 is scored on the paper profile, passed to the env explicitly (a later change of the
+    env's default cannot move v1's numbers), and that profile is the env's default today."""
+    import gymnasium as gym
+
+    from handover_eval.benchmark.closed_loop import clear_state, track_env
+
+    assert protocol.SENSING == "paper"
+    try:
+        env = track_env(protocol.THETA).unwrapped
+        assert env.sensing == protocol.SENSING
+        assert env.params == protocol.THETA
+    finally:
+        clear_state()
+    default = gym.make(protocol.ENV_ID).unwrapped
+    try:
+        assert default.sensing == protocol.SENSING
+    finally:
+        default.close()

@@ -33,7 +33,7 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval.backend import map_folds
 from handover_eval.benchmark.outcomes import EVENTS, events, first_failure
 from handover_eval.benchmark.plugin import ROSTER_NAME, AgentSource, build_plugin
-from handover_eval.benchmark.protocol import ENV_ID, BenchReceiver
+from handover_eval.benchmark.protocol import ENV_ID, SENSING, BenchReceiver
 from handover_eval.closedloop.receivers import FIT_ALL, replay_source
 from handover_eval.closedloop.roster import fold_model, make_agent, prepare_models
 from handover_eval.closedloop.worker import EpisodeJob, episode_row, instabilities
@@ -72,7 +72,8 @@ _PLUGINS: OrderedDict[tuple, Agent] = OrderedDict()
 CACHE_SIZE = 4
 
 
-def _env(params: HandoverParams):
+def track_env(params: HandoverParams):
+    """This process's env of the closed-loop track at Θ ``params`` (cached, on :data:`SENSING`)."""
     key = params.as_array()
     if key not in _ENVS:
         import gymnasium as gym
@@ -81,7 +82,7 @@ def _env(params: HandoverParams):
 
         _ENVS[key] = gym.make(ENV_ID, stiffness=params.stiffness, damping=params.damping,
                               forecast_time=params.forecast_time,
-                              release_force=params.release_force)
+                              release_force=params.release_force, sensing=SENSING)
         while len(_ENVS) > CACHE_SIZE:
             _ENVS.popitem(last=False)[1].close()
     return _ENVS[key]
@@ -147,7 +148,7 @@ def run_bench_job(dataset: HandoverDataset, job: BenchJob) -> list[dict]:
     from handover_env.rollout import run_episode
 
     agent = _agent(dataset, job)
-    env = _env(job.params)
+    env = track_env(job.params)
     rows = []
     for rec in job.receivers:
         spec = rec.spec
