@@ -134,3 +134,19 @@ def test_module_runs_as_a_subprocess(tmp_path: Path) -> None:
     )
     assert result.returncode == 0, result.stderr
     assert "episodes: 6 (5 ID, 1 OOD)" in result.stdout and out.is_file()
+
+
+def test_no_progress_hides_the_loading_bar_of_a_public_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """evaluate.py's loader (closed-loop, table1, benchmark) shows the folder's loading bar only
+    when asked: --no-progress passes progress=False down to the public-dataset reader."""
+    from handover_eval.cli.evaluate import load_dataset
+
+    folder = _public_folder(tmp_path / "whole_motions")
+    quiet = load_dataset(str(folder), False, 0, progress=False)
+    assert "loading whole_motions" not in capsys.readouterr().err
+    loud = load_dataset(str(folder), False, 0, progress=True)
+    assert "loading whole_motions" in capsys.readouterr().err
+    assert len(quiet) == len(loud) == 4
+    assert [e.source_id for e in quiet] == [e.source_id for e in loud]

@@ -174,11 +174,13 @@ def backend_from_args(args: argparse.Namespace) -> Backend:
     return backend
 
 
-def load_replay_data(load: Callable, path: str | None, quick: bool, seed: int):
+def load_replay_data(load: Callable, path: str | None, quick: bool, seed: int,
+                     progress: bool = True):
     """``--replay-data PATH`` loaded with the command's own dataset loader ``load(path, quick,
-    seed)``, or None without the flag; FileNotFoundError naming the flag for a missing path."""
+    seed, progress)``, or None without the flag; FileNotFoundError naming the flag for a missing
+    path."""
     if path is None:
         return None
     if not Path(path).exists():
         raise FileNotFoundError(f"--replay-data {path}: no such file or folder")
-    return load(path, quick, seed)
+    return load(path, quick, seed, progress)

@@ -207,12 +207,12 @@ def _run(args, load_dataset, source, tracks, settings, options, out, cache, back
     from handover_eval.benchmark.run import run_benchmark
 
     try:
-        dataset = load_dataset(args.data, args.quick, 0)
+        dataset = load_dataset(args.data, args.quick, 0, not args.no_progress)
         replay = None
         if args.replay_data is not None:
             if not Path(args.replay_data).exists():
                 raise FileNotFoundError(f"--replay-data {args.replay_data}: no such file or folder")
-            replay = load_dataset(args.replay_data, args.quick, 0)
+            replay = load_dataset(args.replay_data, args.quick, 0, not args.no_progress)
     except (ValueError, OSError, RuntimeError) as exc:
         return _error(exc)
     print(f"benchmark: {source.name} on {list(tracks)}, fit on {dataset.name} ({len(dataset)} "

@@ -412,8 +412,9 @@ def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cach
     """The closed-loop run or Θ sweep into the locked folder ``out``; the exit status."""
     replay_data = getattr(args, "replay_data", None)
     try:
-        dataset = load_dataset(args.data, args.quick, args.seed)
-        replay = load_replay_data(load_dataset, replay_data, args.quick, args.seed)
+        dataset = load_dataset(args.data, args.quick, args.seed, not args.no_progress)
+        replay = load_replay_data(load_dataset, replay_data, args.quick, args.seed,
+                                  not args.no_progress)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2

@@ -224,14 +224,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def load_dataset(path: str | None, quick: bool, seed: int):
+def load_dataset(path: str | None, quick: bool, seed: int, progress: bool = True):
+    """``--data``: the synthetic default (with --quick), a canonical .npz or a public-dataset folder
+    (``progress``: its loading bar)."""
     from handover_env.data import generate_synthetic, load_any
 
     if path is not None and not Path(path).exists():
         raise FileNotFoundError(f"--data {path}: no such file or folder")
     if path is None and quick:
         return generate_synthetic(n=QUICK_EPISODES, ood_fraction=0.2, seed=seed)
-    data = load_any(path, progress=True)
+    data = load_any(path, progress=progress)
     if quick and len(data) > QUICK_EPISODES:
         from handover_env.data.dataset import HandoverDataset
 
@@ -302,8 +304,9 @@ def _run_open_loop(args, methods, folds, protocol, options, out: Path, backend) 
 
     replay_path = getattr(args, "replay_data", None)
     try:
-        dataset = load_dataset(args.data, args.quick, args.seed)
-        test_data = load_replay_data(load_dataset, replay_path, args.quick, args.seed)
+        dataset = load_dataset(args.data, args.quick, args.seed, not args.no_progress)
+        test_data = load_replay_data(load_dataset, replay_path, args.quick, args.seed,
+                                     not args.no_progress)
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
