@@ -233,7 +233,7 @@ class Traits:
             raise ValueError("answer_noise, preferred_pull and jerk_ref must be > 0")
 
 
-def _num(info: Mapping, key: str, default: float = 0.0) -> float:
+def _info_float(info: Mapping, key: str, default: float = 0.0) -> float:
     value = info.get(key)
     return default if value is None else float(value)
 
@@ -301,17 +301,18 @@ class Participant:
             lived = info.get("handover_time_with_delay", info.get("handover_time"))
             if lived is not None:
                 c["waiting"] = t.time_cost * max(0.0, float(lived) - t.expected_time)
-        c["slowing"] = t.slowdown_cost * max(0.0, _num(info, "time_lost"))
-        excess_reach = _num(info, "reach_distance") / b.arm_length - t.comfort_reach
+        c["slowing"] = t.slowdown_cost * max(0.0, _info_float(info, "time_lost"))
+        excess_reach = _info_float(info, "reach_distance") / b.arm_length - t.comfort_reach
         c["reach"] = t.reach_cost * max(0.0, excess_reach) / 0.1
-        c["arm_out"] = t.arm_cost * max(0.0, _num(info, "arm_extended_time") - t.arm_time)
-        pull = _num(info, "pull_force")
+        c["arm_out"] = t.arm_cost * max(0.0, _info_float(info, "arm_extended_time") - t.arm_time)
+        pull = _info_float(info, "pull_force")
         if pull > t.preferred_pull:
             c["pull"] = t.pull_cost * math.log2(pull / t.preferred_pull)
-        if _num(info, "body_contact_force") > TOUCH_FORCE:
-            ratio = max(_num(info, f"contact_force_{seg}") / lim for seg, lim in ISO_LIMITS.items())
+        if _info_float(info, "body_contact_force") > TOUCH_FORCE:
+            ratio = max(_info_float(info, f"contact_force_{seg}") / lim
+                        for seg, lim in ISO_LIMITS.items())
             c["contact"] = t.touch_cost + t.contact_cost * min(2.0, ratio)
-        jerk = _num(info, "robot_jerk_rms")
+        jerk = _info_float(info, "robot_jerk_rms")
         if jerk > t.jerk_ref:
             c["robot_motion"] = t.jerk_cost * math.log2(jerk / t.jerk_ref)
         return c

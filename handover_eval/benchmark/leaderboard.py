@@ -69,7 +69,7 @@ def _get(d: dict, *keys: str) -> Any:
     return d
 
 
-def _num(v: Any, default: float) -> float:
+def _finite_or(v: Any, default: float) -> float:
     return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else default
 
 
@@ -77,12 +77,12 @@ def rank_key(result: dict) -> tuple:
     """Sort key (module docstring): higher success first, then faster, then lower RMS."""
     cl = _get(result, "metrics", "closedloop")
     if cl is not None:
-        return (0, -_num(_get(cl, "all", "success", "value"), -1.0),
-                -_num(_get(cl, "far-pass", "success", "value"), -1.0),
-                _num(_get(cl, "all", "handover_time", "value"), math.inf),
+        return (0, -_finite_or(_get(cl, "all", "success", "value"), -1.0),
+                -_finite_or(_get(cl, "far-pass", "success", "value"), -1.0),
+                _finite_or(_get(cl, "all", "handover_time", "value"), math.inf),
                 result["agent"]["name"])
     ol = _get(result, "metrics", "openloop")
-    return (1, _num(_get(ol, "all", "rms_now_axis_mm", "value"), math.inf), 0.0, 0.0,
+    return (1, _finite_or(_get(ol, "all", "rms_now_axis_mm", "value"), math.inf), 0.0, 0.0,
             result["agent"]["name"])
 
 

@@ -57,7 +57,7 @@ EVENTS: tuple[str, ...] = (
 PENETRATION_FLAG_M = 0.01
 
 
-def _num(row: Mapping[str, Any], key: str) -> float:
+def _cell_float(row: Mapping[str, Any], key: str) -> float:
     v = row.get(key)
     if v is None or v == "" or isinstance(v, bool):
         return math.nan if not isinstance(v, bool) else float(v)
@@ -78,17 +78,17 @@ def events(row: Mapping[str, Any]) -> dict[str, bool]:
     episode_row`'s columns)."""
     outcome = row.get("outcome")
     return {
-        "unstable": outcome == "unstable" or _num(row, "sim_unstable") > 0,
+        "unstable": outcome == "unstable" or _cell_float(row, "sim_unstable") > 0,
         "unsafe_force": outcome == "unsafe_force",
         "premature_release": outcome == "premature_release" or _flag(row, "release_before_grasp"),
-        "reached": math.isfinite(_num(row, "reach_onset_time")),
-        "grasped": math.isfinite(_num(row, "transfer_time")),
+        "reached": math.isfinite(_cell_float(row, "reach_onset_time")),
+        "grasped": math.isfinite(_cell_float(row, "transfer_time")),
         "released": _flag(row, "released"),
         "dropped": outcome == "dropped",
         "missed": outcome == "missed",
         "timeout": outcome == "timeout",
-        "body_contact": _num(row, "body_contact_force") > 0,
-        "penetration_over_1cm": _num(row, "penetration") > PENETRATION_FLAG_M,
+        "body_contact": _cell_float(row, "body_contact_force") > 0,
+        "penetration_over_1cm": _cell_float(row, "penetration") > PENETRATION_FLAG_M,
     }
 
 

@@ -33,7 +33,7 @@ def recorded_measures(folder: str | Path, names: Iterable[str]) -> dict[str, dic
     return out
 
 
-def _num(text: object) -> float:
+def _float_or_nan(text: object) -> float:
     try:
         return float(text)  # type: ignore[arg-type]
     except (TypeError, ValueError):
@@ -57,12 +57,12 @@ def reach_agreement(
                 if want is not None and str(r.get("is_ood")) != want:
                     continue
                 got = recorded.get(str(r["receiver"]))
-                s = _num(r.get("reach_distance"))
+                s = _float_or_nan(r.get("reach_distance"))
                 if got is None or not s > 0 or not math.isfinite(got[RECORDED[0]]):
                     continue
                 sim.append(s)
                 rec.append(got[RECORDED[0]])
-                a, b = _num(r.get("arm_extended_time")), got[RECORDED[1]]
+                a, b = _float_or_nan(r.get("arm_extended_time")), got[RECORDED[1]]
                 if math.isfinite(a) and math.isfinite(b):
                     sim_arm.append(a)
                     rec_arm.append(b)

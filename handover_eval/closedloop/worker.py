@@ -175,7 +175,7 @@ def instabilities(data: Any) -> int:
     return int(sum(data.warning[int(k)].number for k in kinds))
 
 
-def _num(value: Any) -> float:
+def _none_to_nan(value: Any) -> float:
     return math.nan if value is None else float(value)
 
 
@@ -205,15 +205,16 @@ def episode_row(job: EpisodeJob, spec: ReceiverSpec, info: dict, steps: int, wal
             for axis, v in zip(
                 axes, value if value is not None else (None,) * len(axes), strict=True
             ):
-                row[f"{stem}_{axis}"] = _num(v)
+                row[f"{stem}_{axis}"] = _none_to_nan(v)
         elif key == "outcome":
             row[key] = "timeout" if value == "running" else value
         elif value is None or (isinstance(value, (int, float)) and not isinstance(value, bool)):
-            row[key] = _num(value)
+            row[key] = _none_to_nan(value)
         else:
             row[key] = value
-    row["body_contact"] = _num(info.get("body_contact_force")) > 0  # any robot-body contact
-    t_release, t_grasp = _num(info.get("release_time")), _num(info.get("transfer_time"))
+    row["body_contact"] = _none_to_nan(info.get("body_contact_force")) > 0  # any robot-body contact
+    t_release = _none_to_nan(info.get("release_time"))
+    t_grasp = _none_to_nan(info.get("transfer_time"))
     row["release_before_grasp"] = bool(info.get("released")) and not (t_grasp <= t_release)
     row["hold_time"] = t_release - t_grasp  # the shared hold: grasp to release (NaN without both)
     if spec.set == "replay":

@@ -19,7 +19,7 @@ def _label(group: str) -> str:
     return f"{HALF_LABEL[half]} {KIND_LABEL[kind]}"
 
 
-def _num(value: float | None, unit: str = "") -> str:
+def _fmt(value: float | None, unit: str = "") -> str:
     if value is None:
         return "–"
     digits = 1 if unit == "deg" else 2 if unit in ("s", "m/s", "") else 3
@@ -29,7 +29,7 @@ def _num(value: float | None, unit: str = "") -> str:
 def _cell(q: dict, unit: str) -> str:
     if not q["n"]:
         return "–"
-    return f"{_num(q['p50'], unit)} [{_num(q['p25'], unit)}, {_num(q['p75'], unit)}]"
+    return f"{_fmt(q['p50'], unit)} [{_fmt(q['p25'], unit)}, {_fmt(q['p75'], unit)}]"
 
 
 def _header(columns: list[str]) -> list[str]:
@@ -70,7 +70,7 @@ def _full(summary: dict) -> list[str]:
     for name, meta in summary["measures"].items():
         for group in (*COLUMNS, "all/all"):
             q = summary["quantiles"][name][group]
-            values = " | ".join(_num(q[f"p{p}"], meta["unit"]) for p in (5, 25, 50, 75, 95))
+            values = " | ".join(_fmt(q[f"p{p}"], meta["unit"]) for p in (5, 25, 50, 75, 95))
             lines.append(f"| `{name}` | {_label(group)} | {q['n']} | {values} |")
     return lines
 
@@ -84,9 +84,9 @@ def _noise(summary: dict) -> list[str]:
             s = noise[stage]
             sp, st = s["pelvis_max_speed"], s["hand_max_step"]
             lines.append(
-                f"| {_label(group)} | {label} | {_num(sp['p50'], 's')} [{_num(sp['p95'], 's')}] "
-                f"({_num(s['pelvis_max_speed_max'], 's')}) | {s['recordings_pelvis_over_2mps']} | "
-                f"{_num(st['p50'], 'm')} [{_num(st['p95'], 'm')}] | "
+                f"| {_label(group)} | {label} | {_fmt(sp['p50'], 's')} [{_fmt(sp['p95'], 's')}] "
+                f"({_fmt(s['pelvis_max_speed_max'], 's')}) | {s['recordings_pelvis_over_2mps']} | "
+                f"{_fmt(st['p50'], 'm')} [{_fmt(st['p95'], 'm')}] | "
                 f"{s['recordings_with_hand_jump']} | "
                 f"{s['hand_jump_frames']} |"
             )
@@ -122,7 +122,7 @@ def _grasp(summary: dict) -> list[str]:
             ("d15_min_window", "min, -0.2 .. +0.5 s"),
         ):
             lines.append(
-                f"| {_label(g)} | {what} | " + " | ".join(_num(v, "m") for v in gr[key]) + " |"
+                f"| {_label(g)} | {what} | " + " | ".join(_fmt(v, "m") for v in gr[key]) + " |"
             )
     return lines
 
