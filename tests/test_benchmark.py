@@ -360,3 +360,11 @@ def test_the_closed_loop_track_runs_the_protocols_sensing_profile() -> None:
         assert default.sensing == protocol.SENSING
     finally:
         default.close()
+
+
+def test_a_missing_replay_data_path_is_refused_before_any_run(tmp_path, capsys) -> None:
+    missing = tmp_path / "nowhere"
+    assert evaluate.main(["benchmark", "--agent", "cv", "--quick", "--no-progress",
+                          "--replay-data", str(missing), "--out", str(tmp_path / "b")]) == 2
+    assert f"--replay-data {missing}: no such file or folder" in capsys.readouterr().err
+    assert not (tmp_path / "b" / "result.json").exists()

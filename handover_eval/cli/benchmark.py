@@ -19,6 +19,7 @@ from handover_eval.cli.args import (
     WORKERS,
     add_backend_arguments,
     backend_from_args,
+    load_replay_data,
 )
 from handover_eval.methods import METHODS, MethodOptions, default_workers
 from handover_eval.output_lock import OutputLock
@@ -208,11 +209,8 @@ def _run(args, load_dataset, source, tracks, settings, options, out, cache, back
 
     try:
         dataset = load_dataset(args.data, args.quick, 0, not args.no_progress)
-        replay = None
-        if args.replay_data is not None:
-            if not Path(args.replay_data).exists():
-                raise FileNotFoundError(f"--replay-data {args.replay_data}: no such file or folder")
-            replay = load_dataset(args.replay_data, args.quick, 0, not args.no_progress)
+        replay = load_replay_data(load_dataset, args.replay_data, args.quick, 0,
+                                  not args.no_progress)
     except (ValueError, OSError, RuntimeError) as exc:
         return _error(exc)
     print(f"benchmark: {source.name} on {list(tracks)}, fit on {dataset.name} ({len(dataset)} "
