@@ -286,3 +286,13 @@ def test_a_verdict_gives_no_percentage_against_a_zero_reference():
     assert v["outcomes_moved"] == "time_lost +0.0465 [+0.03, +0.08]"
     (v,) = verdicts([{**base, "metric": "handover_time", "diff": 0.5, "reference_value": 2.0}])
     assert v["outcomes_moved"] == "handover_time +0.5 (+25.0 %) [+0.03, +0.08]"
+
+
+def test_cell_float_reads_a_cell_as_written_or_as_read_back():
+    from handover_eval.closedloop.stats import cell_float
+
+    assert cell_float("0.25") == 0.25 and cell_float(3) == 3.0 and cell_float(0.5) == 0.5
+    assert cell_float(True) == 1.0 and cell_float(False) == 0.0
+    assert cell_float("inf") == math.inf
+    for blank in (None, "", "abc", "nan", math.nan, [1.0]):
+        assert math.isnan(cell_float(blank))

@@ -30,6 +30,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from handover_eval.closedloop.stats import cell_float
+
 CHECKS: tuple[str, ...] = (
     "unstable",
     "unsafe_force",
@@ -57,16 +59,6 @@ EVENTS: tuple[str, ...] = (
 PENETRATION_FLAG_M = 0.01
 
 
-def _cell_float(row: Mapping[str, Any], key: str) -> float:
-    v = row.get(key)
-    if v is None or v == "" or isinstance(v, bool):
-        return math.nan if not isinstance(v, bool) else float(v)
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return math.nan
-
-
 def _flag(row: Mapping[str, Any], key: str) -> bool:
     v = row.get(key)
     return v is True or v == "True" or (isinstance(v, (int, float)) and not isinstance(v, bool)
@@ -78,17 +70,17 @@ def events(row: Mapping[str, Any]) -> dict[str, bool]:
     episode_row`'s columns)."""
     outcome = row.get("outcome")
     return {
-        "unstable": outcome == "unstable" or _cell_float(row, "sim_unstable") > 0,
+        "unstable": outcome == "unstable" or cell_float(row.get("sim_unstable")) > 0,
         "unsafe_force": outcome == "unsafe_force",
         "premature_release": outcome == "premature_release" or _flag(row, "release_before_grasp"),
-        "reached": math.isfinite(_cell_float(row, "reach_onset_time")),
-        "grasped": math.isfinite(_cell_float(row, "transfer_time")),
+        "reached": math.isfinite(cell_float(row.get("reach_onset_time"))),
+        "grasped": math.isfinite(cell_float(row.get("transfer_time"))),
         "released": _flag(row, "released"),
         "dropped": outcome == "dropped",
         "missed": outcome == "missed",
         "timeout": outcome == "timeout",
-        "body_contact": _cell_float(row, "body_contact_force") > 0,
-        "penetration_over_1cm": _cell_float(row, "penetration") > PENETRATION_FLAG_M,
+        "body_contact": cell_float(row.get("body_contact_force")) > 0,
+        "penetration_over_1cm": cell_float(row.get("penetration")) > PENETRATION_FLAG_M,
     }
 
 

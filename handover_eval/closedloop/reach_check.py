@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from handover_eval.closedloop.stats import cell_float
+
 RECORDED = ("object_shoulder_transfer", "arm_extended")
 SIMULATED = ("reach_distance", "arm_extended_time")
 
@@ -31,13 +33,6 @@ def recorded_measures(folder: str | Path, names: Iterable[str]) -> dict[str, dic
         m = analyse_file(Path(folder) / f"{name}.pkl").analysis.measures
         out[name] = {k: float(m.get(k, math.nan)) for k in RECORDED}
     return out
-
-
-def _float_or_nan(text: object) -> float:
-    try:
-        return float(text)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        return math.nan
 
 
 def reach_agreement(
@@ -57,12 +52,12 @@ def reach_agreement(
                 if want is not None and str(r.get("is_ood")) != want:
                     continue
                 got = recorded.get(str(r["receiver"]))
-                s = _float_or_nan(r.get("reach_distance"))
+                s = cell_float(r.get("reach_distance"))
                 if got is None or not s > 0 or not math.isfinite(got[RECORDED[0]]):
                     continue
                 sim.append(s)
                 rec.append(got[RECORDED[0]])
-                a, b = _float_or_nan(r.get("arm_extended_time")), got[RECORDED[1]]
+                a, b = cell_float(r.get("arm_extended_time")), got[RECORDED[1]]
                 if math.isfinite(a) and math.isfinite(b):
                     sim_arm.append(a)
                     rec_arm.append(b)

@@ -10,6 +10,8 @@ Everything here is plain numpy and deterministic for a given seed:
   by row order) and drops receivers where either value is undefined.
 * :func:`paired_difference`: the median (or mean) of the paired differences agent - reference,
   with a bootstrap CI over receivers (resampling pairs), and whether the CI excludes 0.
+* :func:`cell_float`: one cell of an episode row (CSV text as read back, or the live value) as
+  a float, NaN where it holds no number.
 """
 
 from __future__ import annotations
@@ -80,6 +82,15 @@ def bootstrap_ci(
     alpha = (1.0 - level) / 2.0
     lo, hi = np.quantile(boot, [alpha, 1.0 - alpha])
     return est, float(lo), float(hi)
+
+
+def cell_float(value: object) -> float:
+    """An episode-row cell as a float: a number, its CSV text or a bool (as 0 / 1); NaN for None,
+    a blank or any text that is not a number."""
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return math.nan
 
 
 def pair_up(
