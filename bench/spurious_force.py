@@ -26,16 +26,16 @@ def measure(sensing: str, walkers: int) -> dict[str, float]:
 
     env = gym.make("handover_env/DynamicHandover-v0", sensing=sensing)
     u = env.unwrapped
+    agent = ReactiveAgent()
     diffs = []
     for seed in range(walkers):
-        agent = ReactiveAgent()
         obs, _ = env.reset(seed=seed, options={"receiver": "id"})
         agent.reset()
         done = False
         while not done:
             obs, _, term, trunc, _ = env.step(agent.act(obs))
             done = term or trunc
-            if u.receiver.grip.active or u.released:
+            if u.receiver_holds or u.released:
                 break
             diffs.append(np.asarray(u.wrist.f_ext, float) - np.asarray(u.wrist.f_true, float))
     env.close()
