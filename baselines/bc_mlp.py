@@ -53,12 +53,12 @@ from agents.predictive import ClosedLoopConfig
 from baselines import trainer
 from baselines.checkpoint_io import (
     check_loadable,
-    config_from_dict,
     expected_of,
     load_tensors,
     staged_write,
     write_json,
 )
+from baselines.config_json import config_from_dict
 from baselines.giver_conditioned import GiverConditionedAgent
 from baselines.norm_bounds import MIN_STD, check_stat, feature_limits
 from handover_env.config import HandoverParams

@@ -15,12 +15,12 @@ symbolic link in the destination or the staged source, the destination inside th
 folder, the source a regular file. A refused entry is a CheckpointError naming it, with nothing
 changed. Loading never recovers (:func:`check_loadable`): it writes nothing at all.
 
-**Validated reads.** :func:`read_json` (size-bounded, one error naming the file),
-:func:`load_tensors` (keys, shapes, dtypes and finiteness against what the model expects) and
-:func:`config_from_dict` (every field present, of its exact JSON type: ``"no"`` is not a bool, a
-float is not an int) raise :class:`CheckpointError` naming the file and the problem; nothing raw
-(``SafetensorError``, ``JSONDecodeError``, ``KeyError``...) escapes. Optimizer and training state:
-:mod:`baselines.optimizer_state`, :mod:`baselines.trainer`.
+**Validated reads.** :func:`read_json` (size-bounded, one error naming the file) and
+:func:`load_tensors` (keys, shapes, dtypes and finiteness against what the model expects), each
+one read of a regular file inside its folder (:mod:`handover_env.regular_file`), and
+:func:`baselines.config_json.config_from_dict` raise :class:`CheckpointError` naming the file and
+the problem; nothing raw (``SafetensorError``, ``JSONDecodeError``, ``KeyError``...) escapes.
+Optimizer and training state: :mod:`baselines.optimizer_state`, :mod:`baselines.trainer`.
 
 **Output folders.** :func:`check_out_dir` decides whether ``train.py`` may write into ``--out``.
 """
@@ -29,19 +29,17 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 import os
 import re
 import shutil
 import stat
-import typing
 from collections.abc import Iterable, Iterator
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 from handover_env.extras import missing_extra
 from handover_env.paths import OUTPUT_LOCK, UnsafePathError, output_folder
+from handover_env.regular_file import read_regular_file
 
 try:
     import torch
@@ -56,6 +54,7 @@ class CheckpointError(ValueError):
 STAGING = ".staging"
 COMMIT = "COMMIT.json"
 MAX_JSON_BYTES = 16 << 20
+MAX_TENSOR_BYTES = 4 << 30  # ACT's optimizer state, the largest file we write, is ~0.4 GB
 _SAFE_REL = re.compile(r"[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)*", re.ASCII)
 
 # ---------------------------------------------------------------------- atomic writes
@@ -241,18 +240,19 @@ def check_loadable(folder: str | os.PathLike, files: Iterable[str], label: str) 
 
 
 # ---------------------------------------------------------------------- validated reads
-def read_json(path: str | os.PathLike, what: str = "JSON file") -> Any:
-    """Parse the JSON file at ``path`` (at most :data:`MAX_JSON_BYTES`), or a CheckpointError."""
+def read_json(path: str | os.PathLike, what: str = "JSON file",
+              root: str | os.PathLike | None = None) -> Any:
+    """Parse the JSON file at ``path`` (at most :data:`MAX_JSON_BYTES`), or a CheckpointError.
+    Read once by :func:`~handover_env.regular_file.read_regular_file`, inside ``root`` (default:
+    the file's own folder)."""
     path = Path(path)
+    if not os.path.lexists(path):
+        raise CheckpointError(f"{path}: missing {what}")
+    raw = read_regular_file(path, MAX_JSON_BYTES, path.parent if root is None else root,
+                            inside="checkpoint folder", kind=what, error=CheckpointError)
     try:
-        if not path.is_file():
-            raise CheckpointError(f"{path}: missing {what}")
-        if path.stat().st_size > MAX_JSON_BYTES:
-            raise CheckpointError(f"{path}: larger than {MAX_JSON_BYTES:,} bytes")
-        return json.loads(path.read_text(encoding="utf-8"))
-    except CheckpointError:
-        raise
-    except (ValueError, OSError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
+        return json.loads(raw.decode("utf-8"))
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
         raise CheckpointError(f"{path}: not valid JSON ({type(exc).__name__}: {exc})") from None
 
 
@@ -265,21 +265,26 @@ def load_tensors(
     path: str | os.PathLike,
     expected: dict[str, tuple[tuple[int, ...], torch.dtype]] | None = None,
     finite: bool = True,
+    root: str | os.PathLike | None = None,
 ) -> dict[str, torch.Tensor]:
-    """The tensors of a safetensors file, checked against ``expected`` {key: (shape, dtype)}.
+    """The tensors of a safetensors file, checked against ``expected`` {key: (shape, dtype)}; read
+    once (at most :data:`MAX_TENSOR_BYTES`, inside ``root``) as :func:`read_json` reads.
 
     Raises:
         CheckpointError: missing, unreadable or truncated file; missing or unexpected keys; a
             shape, dtype or (with ``finite``) NaN/inf that does not fit; the message names the
             file and the key.
     """
-    from safetensors.torch import load_file
+    from safetensors.torch import load
 
     path = Path(path)
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise CheckpointError(f"{path}: missing")
+    raw = read_regular_file(path, MAX_TENSOR_BYTES, path.parent if root is None else root,
+                            inside="checkpoint folder", kind="safetensors file",
+                            error=CheckpointError)
     try:
-        tensors = load_file(path)
+        tensors = load(raw)
     except Exception as exc:  # noqa: BLE001 - SafetensorError, OSError, ValueError on a damaged file
         raise CheckpointError(
             f"{path}: not a readable safetensors file ({type(exc).__name__}: {exc})"
@@ -310,61 +315,6 @@ def expected_of(
 ) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
     """{key: (shape, dtype)} of a module's state dict, for :func:`load_tensors`."""
     return {k: (tuple(v.shape), v.dtype) for k, v in state_dict.items()}
-
-
-def json_type_ok(value: Any, hint: Any) -> bool:
-    """Is ``value`` (read from JSON) of the type ``hint``: bool, int, float (finite), str, a JSON
-    object (``dict``), ``tuple[X, ...]`` (a JSON list) or ``X | None``? A bool is not an int."""
-    origin = typing.get_origin(hint)
-    args = typing.get_args(hint)
-    if type(None) in args:
-        return value is None or any(json_type_ok(value, a) for a in args if a is not type(None))
-    if hint is bool:
-        return isinstance(value, bool)
-    if hint is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    if hint is float:
-        return (
-            isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-        )
-    if hint is str:
-        return isinstance(value, str)
-    if origin is dict or hint is dict:  # a JSON object; its contents are the config's to check
-        return isinstance(value, dict) and all(isinstance(k, str) for k in value)
-    if origin is tuple:  # tuple[int, ...] stored as a JSON list
-        return isinstance(value, (list, tuple)) and all(json_type_ok(v, args[0]) for v in value)
-    return False
-
-
-def config_from_dict(cls: type, d: Any, source: str, ignore: frozenset[str] = frozenset()) -> Any:
-    """``cls(**d)`` for a config dataclass, refusing missing, unknown or mistyped fields.
-
-    Args:
-        cls: the dataclass (its fields are int, float, bool, str or tuple[int, ...]).
-        d: the dict read from JSON.
-        source: the file, for messages.
-        ignore: fields that may be absent (filled by the caller).
-    """
-    if not isinstance(d, dict):
-        raise CheckpointError(f"{source}: config must be a JSON object, got {type(d).__name__}")
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in fields(cls)]
-    unknown = sorted(set(d) - set(names))
-    missing = sorted(set(names) - set(d) - ignore)
-    if unknown or missing:
-        raise CheckpointError(
-            f"{source}: config fields do not match (unknown {unknown}, missing {missing})"
-        )
-    for name in names:
-        if name in d and not json_type_ok(d[name], hints[name]):
-            raise CheckpointError(
-                f"{source}: config field {name} = {d[name]!r} is not a "
-                f"{getattr(hints[name], '__name__', hints[name])}"
-            )
-    try:
-        return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
-    except (ValueError, TypeError) as exc:
-        raise CheckpointError(f"{source}: invalid config ({exc})") from None
 
 
 # ---------------------------------------------------------------------- output folders

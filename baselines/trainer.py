@@ -53,15 +53,14 @@ from baselines.checkpoint_io import (
     MAX_JSON_BYTES,
     CheckpointError,
     check_loadable,
-    config_from_dict,
     expected_of,
-    json_type_ok,
     load_tensors,
     read_json,
     recover,
     staged_write,
     write_json,
 )
+from baselines.config_json import config_from_dict, json_type_ok
 from baselines.optimizer_state import (
     OPTIMIZER_PARAM_GROUPS,
     OPTIMIZER_STATE,
@@ -265,20 +264,22 @@ def load_training_state(
     diff = sorted(k for k in config if k not in checks.resumable and theirs.get(k) != config[k])
     if diff:
         raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
-    state = checks.check_state(read_json(ts / "state.json", "training state"), ts / "state.json")
+    state_file = ts / "state.json"
+    state = checks.check_state(read_json(state_file, "training state", root=out), state_file)
     if state["split"] != split:
         raise CheckpointError(
             f"cannot resume from {out}: it was trained on a different dataset/split"
         )
     expected = expected_of(module.state_dict())
-    module.load_state_dict(load_tensors(ts / "last.safetensors", expected))
+    module.load_state_dict(load_tensors(ts / "last.safetensors", expected, root=out))
     best = load_tensors(out / "model.safetensors", expected)
     if checks.check_best is not None:
         checks.check_best(best, out / "model.safetensors")
     load_optimizer(opt, ts)
     if rng:
         saved = load_tensors(ts / "rng.safetensors",
-                             {"torch_rng": (tuple(torch.get_rng_state().shape), torch.uint8)})
+                             {"torch_rng": (tuple(torch.get_rng_state().shape), torch.uint8)},
+                             root=out)
         try:
             torch.set_rng_state(saved["torch_rng"])
         except (RuntimeError, ValueError) as exc:

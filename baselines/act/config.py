@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from baselines.checkpoint_io import CheckpointError, config_from_dict, json_type_ok
+from baselines.checkpoint_io import CheckpointError
+from baselines.config_json import config_from_dict, json_type_ok
 from handover_env.data.features import (
     ACTION,
     ACTION_DIM,

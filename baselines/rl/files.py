@@ -13,7 +13,7 @@ without unpickling and without writing anything.
 
 Loading (:func:`read_checkpoint`): :func:`~baselines.checkpoint_io.check_loadable` (no
 interrupted commit, no file linked out of the folder), :func:`~baselines.checkpoint_io.read_json`,
-:func:`~baselines.checkpoint_io.config_from_dict` for the config, then the policy is rebuilt from
+:func:`~baselines.config_json.config_from_dict` for the config, then the policy is rebuilt from
 that config (:func:`baselines.rl.policy.build_policy`) and its weights are read by
 :func:`~baselines.checkpoint_io.load_tensors` against the rebuilt policy's keys, shapes and dtypes
 (finite), and the normalisation against this code's constants. Any problem is one
@@ -34,12 +34,12 @@ import torch
 from baselines.checkpoint_io import (
     CheckpointError,
     check_loadable,
-    config_from_dict,
     expected_of,
     load_tensors,
     read_json,
     write_json,
 )
+from baselines.config_json import config_from_dict
 from baselines.rl.config import RLConfig
 from baselines.rl.envs import PART_SCALES, PolicyIO, normalisation
 from baselines.rl.policy import build_policy

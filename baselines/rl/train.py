@@ -225,8 +225,8 @@ def restore(out: Path, model: Any, config: RLConfig) -> dict:
     if diff:
         raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
     ts = out / TRAINING_STATE
-    state = check_state(read_json(ts / "state.json", "RL training state"), ts / "state.json",
-                        config)
+    state_file = ts / "state.json"
+    state = check_state(read_json(state_file, "RL training state", root=out), state_file, config)
     expected = {f"policy.{k}": v for k, v in expected_of(model.policy.state_dict()).items()}
     n = model.observation_space.shape[0]
     expected["io.offset"] = expected["io.scale"] = ((n,), torch.float32)
@@ -236,7 +236,8 @@ def restore(out: Path, model: Any, config: RLConfig) -> dict:
         load_optimizer(opt, ts / name)
     if hasattr(model, "log_ent_coef"):
         shape = tuple(model.log_ent_coef.shape)
-        saved_coef = load_tensors(ts / "sac.safetensors", {"log_ent_coef": (shape, torch.float32)})
+        saved_coef = load_tensors(ts / "sac.safetensors", {"log_ent_coef": (shape, torch.float32)},
+                                  root=out)
         with torch.no_grad():
             model.log_ent_coef.copy_(saved_coef["log_ent_coef"])
     return state

@@ -44,7 +44,6 @@ import io
 import os
 import pickle
 import re
-import stat
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,6 +56,7 @@ from handover_env.data.dataset import DEFAULT_RATE_HZ, Episode, HandoverDataset
 from handover_env.data.errors import DatasetError
 from handover_env.data.limits import MAX_FRAMES, MAX_PICKLE_BYTES
 from handover_env.data.pickle_scan import UnsafePickleError, scan_pickle
+from handover_env.regular_file import read_regular_file, shown
 
 try:  # numpy >= 2
     from numpy._core import multiarray as _multiarray
@@ -126,63 +126,6 @@ class SafeUnpickler(pickle.Unpickler):
         raise UnsafePickleError(f"{self.source}: refused to load: the pickle uses persistent ids")
 
 
-def _show(path: Path | str) -> str:
-    """A path for a one-line message: as is, or quoted when it holds control characters."""
-    text = str(path)
-    return text if text.isprintable() else repr(text)
-
-
-def read_regular_file(path: str | os.PathLike, limit: int, root: Path | None = None) -> bytes:
-    """The bytes of ``path``, refusing anything but a regular file of at most ``limit`` bytes.
-
-    Args:
-        path: the file.
-        limit: the largest size accepted, checked on the size the file system reports before
-            reading and again on what is read (a sparse or growing file cannot slip through).
-        root: when given, a symbolic link must resolve to a file inside this folder.
-
-    Raises:
-        DatasetError: a folder, FIFO, device or socket, a dangling or looping link, a link out
-            of ``root``, or a file over the limit; the message names the path.
-    """
-    path = Path(path)
-    try:
-        st = os.lstat(path)
-        target = path
-        if stat.S_ISLNK(st.st_mode):
-            try:
-                target = path.resolve(strict=True)
-            except RuntimeError:
-                raise DatasetError(f"{_show(path)}: symbolic link loop") from None
-            except FileNotFoundError:
-                raise DatasetError(f"{_show(path)}: dangling symbolic link") from None
-            if root is not None and not target.is_relative_to(root.resolve()):
-                raise DatasetError(
-                    f"{_show(path)}: symbolic link to {_show(target)}, outside the dataset folder"
-                )
-            st = os.stat(target)
-        if stat.S_ISDIR(st.st_mode):
-            raise DatasetError(f"{_show(path)}: a folder, not a file")
-        if not stat.S_ISREG(st.st_mode):
-            raise DatasetError(f"{_show(path)}: not a regular file (a FIFO, socket or device)")
-        if st.st_size > limit:
-            raise DatasetError(
-                f"{_show(path)}: {st.st_size:,} bytes, more than the {limit:,} a recording may have"
-            )
-        fd = os.open(
-            target, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOFOLLOW", 0)
-        )
-        with os.fdopen(fd, "rb") as f:
-            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise DatasetError(f"{_show(path)}: not a regular file")
-            data = f.read(limit + 1)
-    except OSError as exc:
-        raise DatasetError(f"{_show(path)}: cannot read ({exc.strerror or exc})") from None
-    if len(data) > limit:
-        raise DatasetError(f"{_show(path)}: more than the {limit:,} bytes a recording may have")
-    return data
-
-
 def safe_load_pickle(path: str | os.PathLike, root: Path | None = None) -> Any:
     """Unpickle ``path`` safely: bounded read, static scan, then :class:`SafeUnpickler`.
 
@@ -192,23 +135,24 @@ def safe_load_pickle(path: str | os.PathLike, root: Path | None = None) -> Any:
             pickle, or declares more than :mod:`handover_env.data.limits` allows.
     """
     path = Path(path)
-    data = read_regular_file(path, MAX_PICKLE_BYTES, root)
+    data = read_regular_file(path, MAX_PICKLE_BYTES, root, inside="dataset folder",
+                             kind="recording", error=DatasetError)
     if not data:
-        raise DatasetError(f"{_show(path)}: empty file (0 bytes)")
-    scan_pickle(data, _show(path))
+        raise DatasetError(f"{shown(path)}: empty file (0 bytes)")
+    scan_pickle(data, shown(path))
     try:
-        return SafeUnpickler(io.BytesIO(data), _show(path)).load()
+        return SafeUnpickler(io.BytesIO(data), shown(path)).load()
     except UnsafePickleError:
         raise
     except EOFError as exc:
         raise DatasetError(
-            f"{_show(path)}: truncated pickle ({len(data)} bytes; ended early)"
+            f"{shown(path)}: truncated pickle ({len(data)} bytes; ended early)"
         ) from exc
     except (
         Exception
     ) as exc:  # UnpicklingError, ValueError, TypeError, MemoryError from a corrupt stream
         raise DatasetError(
-            f"{_show(path)}: not a readable pickle ({type(exc).__name__}: {exc})"
+            f"{shown(path)}: not a readable pickle ({type(exc).__name__}: {exc})"
         ) from exc
 
 
@@ -296,19 +240,19 @@ def load_public_file(path: str | os.PathLike, root: str | os.PathLike | None = N
     match = FILE_NAME_RE.fullmatch(path.name)
     if match is None:
         raise DatasetError(
-            f"{_show(path)}: not a public-dataset file name (expected {ID_PREFIX}<i>.pkl or "
+            f"{shown(path)}: not a public-dataset file name (expected {ID_PREFIX}<i>.pkl or "
             f"{OOD_PREFIX}<i>.pkl, <i> in ASCII digits without leading zeros)"
         )
     try:
-        record = validate_record(safe_load_pickle(path, Path(root) if root else None), _show(path))
+        record = validate_record(safe_load_pickle(path, Path(root) if root else None), shown(path))
         return episode_from_record(record, path.stem, is_ood=match.group(1) == "motion_variation")
     except DatasetError as exc:
         message = str(exc)
-        if not message.startswith(_show(path)):  # Episode's own checks name the episode only
-            raise DatasetError(f"{_show(path)}: {message}") from exc
+        if not message.startswith(shown(path)):  # Episode's own checks name the episode only
+            raise DatasetError(f"{shown(path)}: {message}") from exc
         raise
     except Exception as exc:  # outside the contract: still one error naming the file
-        raise DatasetError(f"{_show(path)}: cannot load ({type(exc).__name__}: {exc})") from exc
+        raise DatasetError(f"{shown(path)}: cannot load ({type(exc).__name__}: {exc})") from exc
 
 
 def list_public_files(folder: str | os.PathLike) -> list[Path]:
@@ -394,14 +338,14 @@ def load_public_dataset(
         except (DatasetError, OSError) as exc:
             if not skip_bad:
                 raise
-            reason = str(exc).removeprefix(f"{_show(path)}: ")
-            report.skipped.append((_show(path.name), reason))
+            reason = str(exc).removeprefix(f"{shown(path)}: ")
+            report.skipped.append((shown(path.name), reason))
             if on_skip is not None:
-                on_skip(_show(path.name), reason)
+                on_skip(shown(path.name), reason)
             else:
                 import warnings
 
-                warnings.warn(f"skipping {_show(path)}: {reason}", stacklevel=2)
+                warnings.warn(f"skipping {shown(path)}: {reason}", stacklevel=2)
     report.loaded = len(episodes)
     if not episodes:
         raise DatasetError(f"{folder}: none of the {len(files)} dataset file(s) could be loaded")
