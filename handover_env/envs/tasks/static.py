@@ -15,7 +15,10 @@ STOP_XY = (0.45, -0.95)  # the predefined area where the receiver stops, m
 class StaticHandover(HandoverTask):
     """The receiver walks to :data:`STOP_XY`, stops and raises the right hand; the robot may move
     ``stabilisation_delay`` s after the raised hand is detected. The person waits: only the
-    TimeLimit ends an episode without a handover (no ``missed``).
+    TimeLimit ends an episode without a handover (no ``missed``). A scripted walker's path ends at
+    the stop area: ``options["walker"]`` may set every other WalkerParams field, while its
+    ``end_x`` and ``pass_y`` (checked first, like every field) are replaced by the stop area's, so
+    one participant's walker options serve both variants.
 
     Args:
         reward: the reward's weights (:class:`~handover_env.envs.tasks.base.HandoverReward`).
