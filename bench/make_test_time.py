@@ -8,10 +8,8 @@ clone you made for it:
     git clone <repo> /path/to/fresh && python bench/make_test_time.py /path/to/fresh
 
 1. ``make -C CLONE install`` (venv + pip; the download and build time);
-2. ``make -C CLONE lint`` (ruff, the first half of ``make test``);
-3. ``CLONE/.venv/bin/python -m pytest -q -n 2 --dist loadfile`` in CLONE (the second half, as
-   the Makefile runs it), with ``--durations``
-   so the slowest tests are listed.
+2. ``make -C CLONE test`` (ruff, then pytest exactly as the Makefile runs it, with its
+   ``TEST_WORKERS``), with ``PYTEST_ADDOPTS=--durations=15`` so the slowest tests are listed.
 
 It refuses a folder that is not a clone of this project (no ``Makefile``/``pyproject.toml``) or
 whose ``.venv`` already exists (that would time a warm install; ``--allow-existing-venv`` to time
@@ -40,10 +38,7 @@ def commands(clone: Path, torch_index: str | None = None) -> list[tuple[str, lis
         make_install.append(f"TORCH_INDEX={torch_index}")
     return [
         ("install (make install)", make_install),
-        ("lint (make lint)", ["make", "-C", str(clone), "lint"]),
-        ("tests (pytest of make test)",
-         [str(clone / ".venv" / "bin" / "python"), "-m", "pytest", "-q", "-n", "2",
-          "--dist", "loadfile", "--durations=15"]),
+        ("lint + tests (make test)", ["make", "-C", str(clone), "test"]),
     ]
 
 
@@ -81,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{shlex.join(cmd)}    # {label}")
         return 0
     check_clone(clone, args.allow_existing_venv)
-    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
+               PYTEST_ADDOPTS="--durations=15")
     env.pop("PYTHONPATH", None)  # the clone's own package, not the caller's tree
     times = []
     for label, cmd in steps:
