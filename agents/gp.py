@@ -390,6 +390,32 @@ class FlowBank:
             mask, c * np.sum(self.z_all**2, axis=1) + np.log(hyp.signal_var), -np.inf
         )
         self._z_t = np.ascontiguousarray(self.z_all.T)  # (2, P)
+        self._any_empty_top, self._any_empty_bot = bool(self._empty_top.any()), bool(
+            self._empty_bot.any())
+        self._single: tuple | None = None  # buffers of a one-point query, built on first use
+
+    def __getstate__(self) -> dict:
+        # The one-point buffers hold views of each other, which a copy would not keep: a copy
+        # (pickle, deepcopy, a worker process) builds its own on first use.
+        return {**self.__dict__, "_single": None}
+
+    def _single_query(self) -> tuple:
+        """Buffers of a one-point query (the streaming frame): the kernel row, the product
+        outputs and, per bucket, the views the two products read and write (built once)."""
+        if self._single is None:
+            k = np.empty((1, self.z_all.shape[0]), dtype=self.dtype)
+            top = np.empty((self._top_off[-1], 1), dtype=self.dtype)
+            bot = np.empty((max(self._bot_off[-1], 1), 1), dtype=self.dtype)
+            kt, views = k.T, []
+            for b, t0, t1, b0, b1 in zip(
+                self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]
+            ):
+                kb = kt[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, 1)
+                views.append((b.top, kb, top[t0:t1].reshape(b.n_demos, -1, 1),
+                              (b.bottom, kb[:, b.h :], bot[b0:b1].reshape(b.n_demos, -1, 1))
+                              if b1 > b0 else None))
+            self._single = (k, top, bot, views)
+        return self._single
 
     @property
     def n_stored(self) -> int:
@@ -409,27 +435,40 @@ class FlowBank:
         e += self._log_base
         e += (self._c * np.sum(xq**2, axis=1))[:, None]
         np.minimum(e, np.log(self.hyp.signal_var), out=e)  # round-off can not push k above s2
-        if self.dtype == np.float32:  # float32 exp is ~3x faster; exponent error ~1e-7 relative
-            k = np.exp(e.astype(np.float32)).T
+        if q == 1:  # the streaming frame: the same products on buffers and views built once
+            k, top, bot, views = self._single_query()
+            if self.dtype == np.float32:  # float32 exp is ~3x faster; exponent error ~1e-7
+                np.exp(e.astype(np.float32), out=k)
+            else:
+                np.exp(e, out=k)
+            for t, kb, out, rest in views:
+                np.matmul(t, kb, out=out)
+                if rest is not None:
+                    np.matmul(*rest[:2], out=rest[2])
         else:
-            k = np.exp(e, out=e).T  # (P, Q)
-        top = np.empty((self._top_off[-1], q), dtype=self.dtype)
-        bot = np.empty((max(self._bot_off[-1], 1), q), dtype=self.dtype)
-        for b, t0, t1, b0, b1 in zip(
-            self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]
-        ):
-            kb = k[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, q)
-            np.matmul(b.top, kb, out=top[t0:t1].reshape(b.n_demos, -1, q))
-            if b1 > b0:
-                np.matmul(b.bottom, kb[:, b.h :], out=bot[b0:b1].reshape(b.n_demos, -1, q))
+            if self.dtype == np.float32:
+                k = np.exp(e.astype(np.float32)).T
+            else:
+                k = np.exp(e, out=e).T  # (P, Q)
+            top = np.empty((self._top_off[-1], q), dtype=self.dtype)
+            bot = np.empty((max(self._bot_off[-1], 1), q), dtype=self.dtype)
+            for b, t0, t1, b0, b1 in zip(
+                self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]
+            ):
+                kb = k[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, q)
+                np.matmul(b.top, kb, out=top[t0:t1].reshape(b.n_demos, -1, q))
+                if b1 > b0:
+                    np.matmul(b.bottom, kb[:, b.h :], out=bot[b0:b1].reshape(b.n_demos, -1, q))
         mean = top[self._mean_idx].astype(np.float64)  # (N, D, Q)
         top *= top
         bot *= bot
         sq = np.add.reduceat(top, self._seg_top, axis=0)[1::2].astype(np.float64)  # (N_sorted, Q)
-        sq[self._empty_top] = 0.0  # reduceat returns one element for an empty segment
+        if self._any_empty_top:
+            sq[self._empty_top] = 0.0  # reduceat returns one element for an empty segment
         if self._bot_off[-1] > 0:
             sq_bot = np.add.reduceat(bot, np.minimum(self._seg_bot, bot.shape[0] - 1), axis=0)
-            sq_bot[self._empty_bot] = 0.0
+            if self._any_empty_bot:
+                sq_bot[self._empty_bot] = 0.0
             sq += sq_bot
         var = self.hyp.signal_var - sq[self._unsort]
         return mean.transpose(2, 0, 1), var.T

@@ -217,6 +217,7 @@ class NonparametricAgent(PredictiveAgent):
         self._rr = np.sum(
             self.receivers**2, axis=2
         )  # (N, Lmax): |r|^2 for the closest-frame search
+        self._giver_rows = self.givers.reshape(-1, 3)  # (N * Lmax, 3), a view
         self.n_demos = n
         self._top_k = min(c.top_k, n)
         self._steps = np.arange(c.horizon)
@@ -258,12 +259,14 @@ class NonparametricAgent(PredictiveAgent):
     def _blend(self, d: np.ndarray, xy: np.ndarray) -> np.ndarray:
         k = self._top_k
         sel = np.argpartition(d, k - 1)[:k] if k < d.size else np.arange(d.size)
-        w = np.exp(-(d[sel] - d[sel].min()))
+        ds = d[sel]
+        w = np.exp(-(ds - ds.min()))
         w /= w.sum()
         # t_k = argmin_t |r_{k,t} - x|^2 = argmin_t (|r_{k,t}|^2 - 2 r_{k,t}.x)
         t_k = np.argmin(self._rr[sel] - self.receivers[sel] @ (2.0 * xy), axis=1)
         rows = np.minimum(t_k[:, None] + self._steps[None, :], self.lengths[sel, None] - 1)
-        return (w @ self.givers[sel[:, None], rows].reshape(k, -1)).reshape(-1, 3)
+        rows += (sel * self.givers.shape[1])[:, None]  # flat row index into every demo's rows
+        return (w @ self._giver_rows[rows.reshape(-1)].reshape(k, -1)).reshape(-1, 3)
 
     def predict(self, receiver_history: np.ndarray) -> np.ndarray:
         """(H, 3) predicted giver trajectory; row 0 is the current frame (open-loop use)."""
@@ -302,8 +305,20 @@ class NonparametricAgent(PredictiveAgent):
         if xy.shape[0] != 1:
             raise ValueError(f"stream_update takes one frame (2,), got {np.shape(receiver_xy)}")
         s = self._state
-        vel = np.zeros((1, 2)) if s.last is None else (xy - s.last) * self.config.rate_hz
-        s.sums += self.frame_terms(xy, vel)[0]
+        x0, x1 = xy[0].tolist()
+        if s.last is None:
+            v0 = v1 = 0.0
+        else:
+            l0, l1 = s.last.tolist()
+            v0, v1 = (x0 - l0) * self.config.rate_hz, (x1 - l1) * self.config.rate_hz
+        # frame_terms(xy, vel) of one frame, in the same float64 operations
+        o0, o1 = self.origin.tolist()
+        mean, var = self.bank.predict(np.array([[x0 - o0, x1 - o1]]))
+        scaled = mean[0] * self.output_scale
+        dcos = cosine_distance(np.array([v0, v1]), scaled, self.config.min_speed)
+        dcos *= self.config.kappa
+        dcos += var[0]
+        s.sums += dcos
         s.count += 1
         s.last = xy[0]
 

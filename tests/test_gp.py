@@ -107,6 +107,34 @@ def test_bank_batches_every_demo_exactly(demos, ratio, n_buckets):
     assert np.abs(m32 - mean).max() < 1e-3 and np.abs(v32 - var).max() < 1e-3
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_one_point_queries_are_exact_and_keep_their_results(demos, dtype):
+    # The streaming frame (one query point) runs on buffers built once; each result stays what
+    # it was when a later query reuses them, equals the per-demo form, and a copy of the bank
+    # (pickle, deepcopy) builds buffers of its own.
+    import copy
+    import pickle
+
+    hyp = GPHyperparameters(lengthscale=0.15, noise_var=0.03)
+    xs, ys = [d[0] for d in demos], [d[1] for d in demos]
+    bank = build_bank(xs, ys, hyp, 0.4, n_buckets=3, dtype=dtype)
+    points = [xs[1][5], xs[2][60] + 0.02, np.array([10.0, 10.0])]
+    first = [bank.predict(p[None]) for p in points]
+    kept = [(m.copy(), v.copy()) for m, v in first]
+    for (m, v), (m0, v0) in zip(first, kept):  # later queries did not overwrite earlier results
+        assert np.array_equal(m, m0) and np.array_equal(v, v0)
+    for p, (m, v) in zip(points, first):
+        for k, (x, y) in enumerate(demos):
+            mk, vk = fitc_gp(x, y, x[inducing_indices(len(x), 0.4)], hyp).predict(p[None], hyp)
+            tol = 1e-9 if dtype == np.float64 else 1e-3
+            np.testing.assert_allclose(m[0, k], mk[0], atol=tol)
+            np.testing.assert_allclose(v[0, k], vk[0], atol=tol)
+    for twin in (pickle.loads(pickle.dumps(bank)), copy.deepcopy(bank)):
+        for p, (m, v) in zip(points, kept):
+            m2, v2 = twin.predict(p[None])
+            assert np.array_equal(m2, m) and np.array_equal(v2, v)
+
+
 def test_inducing_indices_uniform_in_time():
     idx = inducing_indices(100, 0.4)
     assert idx.size == 40 and idx[0] == 0 and idx[-1] == 99
