@@ -63,6 +63,7 @@ test tracks shifted 0.25 / 0.5 / 1 / 2 m away: 3D RMS 106 -> 142 / 200 / 352 / 4
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -299,13 +300,14 @@ class NonparametricAgent(PredictiveAgent):
     def stream_update(self, receiver_xy: np.ndarray) -> None:
         """Add one new 30 Hz frame: only its own terms, for all demos at once."""
         self._check_fitted()
-        xy = validate_history(
-            np.reshape(receiver_xy, (1, 2)) if np.size(receiver_xy) == 2 else receiver_xy
-        )
-        if xy.shape[0] != 1:
+        arr = np.asarray(receiver_xy, dtype=np.float64)
+        if arr.size != 2:
+            validate_history(arr)  # a clear error for a bad shape, NaN or no frame
             raise ValueError(f"stream_update takes one frame (2,), got {np.shape(receiver_xy)}")
+        x0, x1 = arr.reshape(-1).tolist()
+        if not (math.isfinite(x0) and math.isfinite(x1)):
+            raise ValueError("receiver_history contains NaN or inf")
         s = self._state
-        x0, x1 = xy[0].tolist()
         if s.last is None:
             v0 = v1 = 0.0
         else:
@@ -320,7 +322,7 @@ class NonparametricAgent(PredictiveAgent):
         dcos += var[0]
         s.sums += dcos
         s.count += 1
-        s.last = xy[0]
+        s.last = np.array([x0, x1])
 
     def stream_distances(self) -> np.ndarray:
         """Eq. d from the running sums: (N,)."""

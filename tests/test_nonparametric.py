@@ -168,6 +168,16 @@ def test_bad_input_raises(agent):
         agent.stream_predict()
     with pytest.raises(ValueError):
         agent.stream_update(np.array([np.inf, 0.0]))
+    agent.stream_update([0.5, -0.8])
+    sums, last = agent.stream_distances().copy(), agent._state.last.copy()
+    for bad, match in ((np.zeros((3, 2)), "takes one frame"), (np.zeros((5, 3)), "shape"),
+                       ([[np.nan, 0.0]], "NaN or inf"), (np.zeros((0, 2)), "at least 1"),
+                       (["a", "b"], "could not convert")):
+        with pytest.raises(ValueError, match=match):
+            agent.stream_update(bad)
+    # a refused frame changes nothing
+    assert np.array_equal(agent.stream_distances(), sums)
+    assert np.array_equal(agent._state.last, last) and agent._state.count == 1
     with pytest.raises(RuntimeError):
         NonparametricAgent().predict(np.zeros((3, 2)))
     with pytest.raises(ValueError):
