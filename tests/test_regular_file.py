@@ -22,6 +22,16 @@ linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"),
                                 reason="/proc/self/fd names an open file on Linux only")
 
 
+def _folders(tmp_path, name: str, secret: str, text: str):
+    """``tmp_path/outside`` holding the file ``secret`` and an empty folder ``tmp_path/name``."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / secret).write_text(text)
+    root = tmp_path / name
+    root.mkdir()
+    return outside, root
+
+
 def test_reads_a_regular_file_and_its_inside_link(tmp_path):
     (tmp_path / "a.bin").write_bytes(b"abc")
     (tmp_path / "link.bin").symlink_to("a.bin")
@@ -30,11 +40,7 @@ def test_reads_a_regular_file_and_its_inside_link(tmp_path):
 
 
 def test_refuses_what_is_not_a_bounded_regular_file_inside_its_folder(tmp_path):
-    outside = tmp_path / "outside"
-    outside.mkdir()
-    (outside / "secret.json").write_text("{}")
-    root = tmp_path / "root"
-    root.mkdir()
+    outside, root = _folders(tmp_path, "root", "secret.json", "{}")
     (root / "out.json").symlink_to(outside / "secret.json")
     (root / "gone.json").symlink_to(root / "nothing")
     (root / "loop.json").symlink_to(root / "loop.json")
@@ -52,13 +58,9 @@ def test_refuses_what_is_not_a_bounded_regular_file_inside_its_folder(tmp_path):
 
 @linux_only
 def test_a_folder_on_the_path_swapped_for_a_link_out_is_refused(tmp_path):
-    # Only the last component is a link's to check by name: a linked folder on the way is caught
-    # on the open file itself.
-    outside = tmp_path / "outside"
-    outside.mkdir()
-    (outside / "state.json").write_text('{"x": 1}')
-    root = tmp_path / "ckpt"
-    root.mkdir()
+    # A name check sees only the last component; a linked folder on the way is caught on the
+    # open file itself.
+    outside, root = _folders(tmp_path, "ckpt", "state.json", '{"x": 1}')
     (root / "training_state").symlink_to(outside)
     with pytest.raises(UnsafeFileError, match=r"opened .*outside the folder"):
         read_regular_file(root / "training_state" / "state.json", 100, root)
@@ -91,5 +93,5 @@ def test_checkpoint_reads_give_their_own_errors(tmp_path):
     (tmp_path / "bad.json").write_bytes(b"\xff{")
     with pytest.raises(CheckpointError, match="not valid JSON"):
         read_json(tmp_path / "bad.json")
-    assert read_json(tmp_path / "ok.json") if (tmp_path / "ok.json").write_text("[1]") else None
+    (tmp_path / "ok.json").write_text("[1]")
     assert read_json(tmp_path / "ok.json") == [1]
