@@ -130,11 +130,13 @@ def pending_commit(out: str | os.PathLike) -> list[str] | None:
     if not os.path.lexists(stage):
         return None
     if stage.is_symlink() or not stage.is_dir():
-        raise CheckpointError(f"{stage}: not a folder (a symbolic link?); refused, nothing changed")
+        raise CheckpointError(f"{stage}: not a folder (a symbolic link?); refused, nothing changed "
+                              f"(delete {stage} to discard the interrupted write)")
     if not os.path.lexists(record):
         return None
     if not stat.S_ISREG(record.lstat().st_mode):
-        raise CheckpointError(f"{record}: not a regular file; refused, nothing changed")
+        raise CheckpointError(f"{record}: not a regular file; refused, nothing changed (delete "
+                              f"{stage} to discard the interrupted write)")
     saved = read_json(record, "commit record")
     files = saved.get("files") if isinstance(saved, dict) else None
     if set(saved if isinstance(saved, dict) else ()) != {"files"} or not isinstance(files, list):
@@ -159,7 +161,9 @@ def check_commit(out: Path, files: list, staged: bool = False) -> None:
     for rel in files:
         why = _commit_problem(out, rel, staged)
         if why is not None:
-            raise CheckpointError(f"{out}: commit entry {rel!r}: {why}; refused, nothing changed")
+            hint = f" (delete {out / STAGING} to discard the interrupted write)" if staged else ""
+            raise CheckpointError(
+                f"{out}: commit entry {rel!r}: {why}; refused, nothing changed{hint}")
 
 
 def _commit_problem(out: Path, rel: Any, staged: bool) -> str | None:

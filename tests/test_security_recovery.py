@@ -321,10 +321,13 @@ def test_an_unsafe_commit_is_refused_by_name_and_nothing_changes(tmp_path, outsi
     (folder / "ok.json").write_text("old")
     message = UNSAFE[name](folder, outside)
     untouched = Untouched(outside, folder)
-    for attempt in (recover, lambda f: check_out_dir(f, "bc_mlp", True, False), checkpoint_kind):
+    for attempt in (recover, lambda f: check_out_dir(f, "bc_mlp", True, False), checkpoint_kind,
+                    lambda f: check_out_dir(f, "bc_mlp", False, True)):
         with pytest.raises(CheckpointError, match=message) as info:
             attempt(folder)
         assert "\n" not in str(info.value)
+        # even --overwrite stops here; the message says how to go on
+        assert f"delete {folder / '.staging'}" in str(info.value)
     untouched.check()
 
 
