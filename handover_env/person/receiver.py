@@ -52,6 +52,7 @@ themselves are the pure functions of :mod:`handover_env.person.receiver_rules`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import mujoco
@@ -209,6 +210,7 @@ class Receiver:
         self._gripper: np.ndarray | None = None
         self._clear = False
         self._gripper_axis: np.ndarray | None = None
+        self._judged: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ queries
     @property
@@ -275,6 +277,7 @@ class Receiver:
         self._object_axis = object_rot[:, 2].copy()
         grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
         self._ahead = self._path_ahead()
+        self._judged = {}  # this step's judgements of the object (see _once)
         # ---- how fast to walk on
         slow = False
         if object_free and self.state in ("walking", "reaching"):
@@ -287,6 +290,7 @@ class Receiver:
         # ---- what the hand does
         if object_free:
             self._decide(t1, grasp_point, object_vel)
+        self._judged = None
         key = self._pose_at(self.tau, (grasp_point, object_vel, dt))
         self.targets.push(key)
         self._t = t1
@@ -302,6 +306,17 @@ class Receiver:
         rate = RATE * max(self.rho, self.config.min_speed_factor)
         return PathAhead((frames - self.tau) / rate, shoulder, forward)
 
+    def _once(self, key: str, judge: Callable[[], Any]) -> Any:
+        """``judge()``, computed once per env step: within :meth:`plan_step` the object, its
+        velocity, the path ahead, the state and the reach plan are the same whenever the slow-down
+        rule and the decision ask, so the second asking gets the first answer."""
+        judged = self._judged
+        if judged is None:  # outside plan_step: nothing to share
+            return judge()
+        if key not in judged:
+            judged[key] = judge()
+        return judged[key]
+
     def _meeting(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> Meeting:
         """When and how far from the shoulder the person will meet the object on their own path
         (:func:`~handover_env.person.receiver_rules.meet`, the object extrapolated over the reach
@@ -309,15 +324,17 @@ class Receiver:
         closest = take = None
         if self.state == "reaching" and self.reach_plan is not None:
             closest, take = self.reach_plan.closest, self.reach_plan.take
-        return meet(grasp_point, object_vel, self._ahead, self._max_reach,
-                    self.config.reach_lead_time, self._comfort, closest, take)
+        return self._once("meeting", lambda: meet(
+            grasp_point, object_vel, self._ahead, self._max_reach, self.config.reach_lead_time,
+            self._comfort, closest, take))
 
     def _left_behind(self, grasp_point: np.ndarray) -> bool:
         """The person has walked past the object for good
         (:func:`~handover_env.person.receiver_rules.left_behind`): it is ``give_up_behind``
         behind the shoulder within ``PASS_DISTANCE``, and the rest of their walk never brings it
         ahead of them again."""
-        return left_behind(grasp_point, self._ahead, self.config.give_up_behind, PASS_DISTANCE)
+        return self._once("left_behind", lambda: left_behind(
+            grasp_point, self._ahead, self.config.give_up_behind, PASS_DISTANCE))
 
     def _should_slow(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> bool:
         """Slow down: the person is about to meet the object (within the reach lead time) farther
