@@ -76,6 +76,8 @@ class MotionPose:
         dims = motion.dims
         self.shoulder_local = dims.local(J["RIGHT_SHOULDER"], SEG["torso"])
         self.grip_local = dims.grip("r")
+        self._elbow_local = dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"])
+        self._wrist_local = dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])
         self.arm_reach = float(
             np.linalg.norm(dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"]))
             + np.linalg.norm(dims.grip("r") + dims.local(J["RIGHT_WRIST"], SEG["forearm_r"]))
@@ -176,16 +178,15 @@ class MotionPose:
             torso = quat_to_mat(quat[SEG["torso"]])
             rel = interp(m.arm_swing, tau)
             arm = tuple(torso @ rel[k] for k in range(3))
+            shoulder = origin[SEG["torso"]] + torso @ self.shoulder_local
         if arm is not None:
-            dims = m.dims
+            # (the torso and its shoulder are those above: only the arm's rotations change here)
             rot_q = mat_to_quat(np.stack(arm))
             prev = quat[list(RIGHT_ARM)]
             rot_q *= np.where(np.sum(rot_q * prev, axis=-1, keepdims=True) < 0, -1.0, 1.0)
             quat[list(RIGHT_ARM)] = rot_q
-            torso = quat_to_mat(quat[SEG["torso"]])
-            shoulder = origin[SEG["torso"]] + torso @ self.shoulder_local
-            elbow = shoulder + arm[0] @ dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"])
-            wrist = elbow + arm[1] @ dims.local(J["RIGHT_WRIST"], SEG["forearm_r"])
+            elbow = shoulder + arm[0] @ self._elbow_local
+            wrist = elbow + arm[1] @ self._wrist_local
             origin[RIGHT_ARM[0]], origin[RIGHT_ARM[1]], origin[RIGHT_ARM[2]] = (
                 shoulder,
                 elbow,
