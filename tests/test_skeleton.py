@@ -123,6 +123,18 @@ def test_measure_dims_keeps_lengths_and_rejects_bad_input():
         BodyDims.from_height(3.0)
 
 
+def test_swing_of_one_pair_is_the_batched_swing_bit_for_bit():
+    # One pair (a pose's arm, every env step) takes a float path; it must not move a bit.
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(2000, 3)) * rng.lognormal(size=(2000, 1))
+    b = rng.normal(size=(2000, 3)) * rng.lognormal(size=(2000, 1))
+    b[::5] = 2.0 * a[::5] + 1e-9 * rng.normal(size=(400, 3))  # nearly parallel
+    batched = swing(a, b)
+    assert all(np.array_equal(swing(a[i], b[i]), batched[i]) for i in range(len(a)))
+    one = swing(a[0].astype(np.float32), b[0].astype(np.float32))  # not float64: numpy's path
+    np.testing.assert_allclose(one, batched[0], atol=1e-6)
+
+
 def test_walking_pose_swings_legs_in_antiphase_and_follows_the_track():
     walker = rm.sample_walker(np.random.default_rng(0), "id")
     traj = trajectory.base_trajectory(walker)

@@ -192,6 +192,9 @@ def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     Antiparallel inputs (a rotation of pi, whose axis is undefined) turn about any axis normal to
     ``a``; the body never needs it (a limb would have to point straight back up along its parent).
     """
+    if a.shape == b.shape == (3,) and a.dtype == b.dtype == np.float64:
+        # one pair (a pose's arm): the same arithmetic in floats
+        return _swing_one(a, b)
     a, b = _normalize(a), _normalize(b)
     v = np.cross(a, b)
     c = np.sum(a * b, axis=-1)
@@ -201,6 +204,25 @@ def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     k = 1.0 / np.maximum(1.0 + c, 1e-9)
     eye = np.broadcast_to(np.eye(3), vx.shape)
     return eye + vx + (vx @ vx) * k[..., None, None]
+
+
+def _unit3(v: np.ndarray) -> tuple[float, float, float]:
+    """:func:`_normalize` of one 3-vector, as floats (the same sum of squares, left to right)."""
+    x, y, z = v.tolist()
+    n = max(math.sqrt(x * x + y * y + z * z), 1e-12)
+    return x / n, y / n, z / n
+
+
+def _swing_one(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`swing` of one pair of 3-vectors: each elementwise step (normalise, cross product,
+    dot product) in floats, bit for bit numpy's, and the matrix product in numpy as there."""
+    a0, a1, a2 = _unit3(a)
+    b0, b1, b2 = _unit3(b)
+    v0, v1, v2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    c = a0 * b0 + a1 * b1 + a2 * b2
+    vx = np.array([[0.0, -v2, v1], [v2, 0.0, -v0], [-v1, v0, 0.0]])
+    k = 1.0 / max(1.0 + c, 1e-9)
+    return np.eye(3) + vx + (vx @ vx) * k
 
 
 def triad(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
