@@ -22,6 +22,7 @@ from handover_env.person.skeleton import (
     J,
     forward_kinematics,
     joints_of,
+    length,
     mat_to_quat,
     measure_dims,
     retarget,
@@ -133,6 +134,16 @@ def test_swing_of_one_pair_is_the_batched_swing_bit_for_bit():
     assert all(np.array_equal(swing(a[i], b[i]), batched[i]) for i in range(len(a)))
     one = swing(a[0].astype(np.float32), b[0].astype(np.float32))  # not float64: numpy's path
     np.testing.assert_allclose(one, batched[0], atol=1e-6)
+
+
+def test_length_is_numpys_norm_bit_for_bit():
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(3000, 4)) * rng.lognormal(size=(3000, 1))
+    for v in x:  # contiguous float64: the fast path
+        assert length(v[:3]) == np.linalg.norm(v[:3]) and length(v) == np.linalg.norm(v)
+    for v in (x[:5, 1], x[0].astype(np.float32), [3.0, 4.0], np.zeros(3)):  # the others
+        assert length(v) == np.linalg.norm(v)
+    assert isinstance(length(x[0]), float)
 
 
 def test_walking_pose_swings_legs_in_antiphase_and_follows_the_track():

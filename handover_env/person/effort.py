@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from handover_env.person.body_model import BodyIds
-from handover_env.person.skeleton import RIGHT_ARM
+from handover_env.person.skeleton import RIGHT_ARM, length
 
 
 class Effort:
@@ -54,7 +54,7 @@ class Effort:
             self.arm_out_time += dt
             shoulder = data.xpos[b.bodies[RIGHT_ARM[0]]]
             grip = data.site_xpos[b.grip_site]
-            self.reach_max = max(self.reach_max, float(np.linalg.norm(grip - shoulder)))
+            self.reach_max = max(self.reach_max, length(grip - shoulder))
         pelvis = data.xpos[b.bodies[0]]
         self.path_deviation = max(
             self.path_deviation, float(np.hypot(*(pelvis[:2] - pelvis_target[:2])))
@@ -64,4 +64,4 @@ class Effort:
         """The person took the object now: record the shoulder-object distance
         (``reach_distance``)."""
         shoulder = data.xpos[self.body.bodies[RIGHT_ARM[0]]]
-        self.reach_distance = float(np.linalg.norm(np.asarray(object_pos) - shoulder))
+        self.reach_distance = length(np.asarray(object_pos) - shoulder)

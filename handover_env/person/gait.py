@@ -33,6 +33,7 @@ from handover_env.person.skeleton import (
     BodyPose,
     J,
     forward_kinematics,
+    length,
     swing,
     yaw_matrix,
 )
@@ -131,21 +132,21 @@ def arm_pose(shoulder: np.ndarray, torso_rot: np.ndarray, grip: np.ndarray, dims
         end = grip
     else:
         hand_dir = np.asarray(hand_dir, dtype=np.float64) / max(
-            float(np.linalg.norm(hand_dir)), 1e-9
+            length(hand_dir), 1e-9
         )
         rest_lower = rest_fore
-        end = grip - float(np.linalg.norm(grip_local)) * hand_dir  # the wrist
-    l1, l2 = float(np.linalg.norm(rest_upper)), float(np.linalg.norm(rest_lower))
+        end = grip - length(grip_local) * hand_dir  # the wrist
+    l1, l2 = length(rest_upper), length(rest_lower)
     d = end - shoulder
-    dist = float(np.linalg.norm(d))
+    dist = length(d)
     dist_c = min(max(dist, abs(l1 - l2) + 1e-4), (l1 + l2) * 0.9995)
     u = d / max(dist, 1e-9)
     pole = torso_rot @ np.array([0.0, -0.35, -1.0])  # down and to the right
     pole = pole - (pole @ u) * u
-    if np.linalg.norm(pole) < 1e-6:
+    if length(pole) < 1e-6:
         pole = torso_rot @ np.array([-1.0, 0.0, 0.0])
         pole = pole - (pole @ u) * u
-    pole /= np.linalg.norm(pole)
+    pole /= length(pole)
     a = (l1 * l1 - l2 * l2 + dist_c * dist_c) / (2.0 * dist_c)
     h = math.sqrt(max(l1 * l1 - a * a, 0.0))
     elbow = shoulder + a * u + h * pole

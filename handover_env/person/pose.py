@@ -17,7 +17,7 @@ import numpy as np
 
 from handover_env.person.gait import arm_pose
 from handover_env.person.person import RATE, PersonMotion
-from handover_env.person.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, mat_to_quat
+from handover_env.person.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, length, mat_to_quat
 
 #: The arm counts as straight at this fraction of its full length (the elbow never locks).
 STRAIGHT_ARM = 0.97
@@ -87,7 +87,7 @@ class MotionPose:
         """(right shoulder, walking direction (3,), walking speed) at playback position tau."""
         m = self.motion
         torso_q = interp(m.quat[:, SEG["torso"]], tau)
-        torso = quat_to_mat(torso_q / np.linalg.norm(torso_q))
+        torso = quat_to_mat(torso_q / length(torso_q))
         shoulder = interp(m.origin[:, SEG["torso"]], tau) + torso @ self.shoulder_local
         h = float(interp(m.heading, tau))
         u = np.array([math.cos(h), math.sin(h), 0.0])
@@ -115,7 +115,7 @@ class MotionPose:
         q = interp(m.quat[:, 0], tau)
         i = min(int(tau), m.frames - 2)
         vel = (m.origin[i + 1, 0] - m.origin[i, 0]) * RATE * rho
-        return interp(m.origin[:, 0], tau), quat_to_mat(q / np.linalg.norm(q)), vel
+        return interp(m.origin[:, 0], tau), quat_to_mat(q / length(q)), vel
 
     def swing_hand(self, tau: float, rho: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Grip point of the walking swing at tau, with its velocity (zero acceleration)."""
@@ -128,7 +128,7 @@ class MotionPose:
         arm rotations ``arm`` (T, 3, 3, 3) relative to the torso."""
         m = self.motion
         torso_q = interp(m.quat[:, SEG["torso"]], tau)
-        torso = quat_to_mat(torso_q / np.linalg.norm(torso_q))
+        torso = quat_to_mat(torso_q / length(torso_q))
         rel = interp(arm, tau)
         return torso, [torso @ rel[k] for k in range(3)]
 
@@ -145,7 +145,7 @@ class MotionPose:
         """Grip point of the recorded right arm at tau."""
         m = self.motion
         q = interp(m.quat[:, SEG["hand_r"]], tau)
-        rot = quat_to_mat(q / np.linalg.norm(q))
+        rot = quat_to_mat(q / length(q))
         return interp(m.origin[:, SEG["hand_r"]], tau) + rot @ self.grip_local
 
     def at(
@@ -172,7 +172,7 @@ class MotionPose:
             # A hand held out toward an object is level, pointing away from the shoulder.
             level = hand - shoulder
             level[2] = 0.0
-            n = float(np.linalg.norm(level))
+            n = length(level)
             arm = arm_pose(shoulder, torso, hand, m.dims, level / n if n > 0.05 else None)
         elif swing_arm:
             torso = quat_to_mat(quat[SEG["torso"]])
@@ -205,15 +205,15 @@ class MotionPose:
         base = origin[SEG["torso"]]
         torso = quat_to_mat(quat[SEG["torso"]])
         s = torso @ self.shoulder_local
-        need = float(np.linalg.norm(base + s - hand)) - STRAIGHT_ARM * self.arm_reach
+        need = length(base + s - hand) - STRAIGHT_ARM * self.arm_reach
         if need <= 0.0:
             return
         h = hand - base
         axis = np.cross(s, h)
-        n = float(np.linalg.norm(axis))
+        n = length(axis)
         if n < 1e-9:
             return
-        angle = min(need / float(np.linalg.norm(s)), TRUNK_MAX_TURN)
+        angle = min(need / length(s), TRUNK_MAX_TURN)
         half = 0.5 * angle
         dq = np.concatenate([[math.cos(half)], axis / n * math.sin(half)])
         rot = quat_to_mat(dq)

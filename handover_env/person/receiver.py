@@ -72,7 +72,7 @@ from handover_env.person.settings import (
     ReceiverConfig,
     check_option,
 )
-from handover_env.person.skeleton import SEG, J
+from handover_env.person.skeleton import SEG, J, length
 from handover_env.person.targets import BodyTargets
 from handover_env.robot.scene import SceneIds
 
@@ -270,7 +270,7 @@ class Receiver:
         self._released = released
         self._gripper = None if gripper_pos is None else np.asarray(gripper_pos, dtype=np.float64)
         if self._gripper is not None and self.state == "holding" and released and not self._clear:
-            self._clear = float(np.linalg.norm(object_pos - self._gripper)) > CLEAR_OF_GRIPPER
+            self._clear = length(object_pos - self._gripper) > CLEAR_OF_GRIPPER
         self._gripper_axis = (
             None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
         )
@@ -359,7 +359,7 @@ class Receiver:
         ):
             grip = self.pose.recorded_grip(self.tau)
             centre = grasp_point - self._object_axis * (self._grasp_side * cfg.grasp_offset)
-            if np.linalg.norm(grip - centre) <= cfg.close_radius:
+            if length(grip - centre) <= cfg.close_radius:
                 # Close on the part of the object the hand comes from (its top or its bottom).
                 self._grasp_side = (
                     1.0 if float((grip - centre) @ self._object_axis) >= 0.0 else -1.0
@@ -374,7 +374,7 @@ class Receiver:
             self.t_hand_raised = t
         elif (
             self.state == "presented"
-            and np.linalg.norm(self._hand[0] - grasp_point) <= cfg.present_reach
+            and length(self._hand[0] - grasp_point) <= cfg.present_reach
         ):
             self._begin_reach(t, cfg.close_time)
         elif self.state == "reaching" and self.hand_mode == "reach" and not self.present_after_walk:
@@ -434,8 +434,8 @@ class Receiver:
                 axis[2] = 0.0
                 if float(axis @ away) > 0.0:
                     away = axis
-            norm = float(np.linalg.norm(away))
-            if float(np.linalg.norm(grasp_point - shoulder)) > self._max_reach:
+            norm = length(away)
+            if length(grasp_point - shoulder) > self._max_reach:
                 # Out of reach: hold the hand ready in front of the object; close in only once
                 # it can be taken.
                 self._hand_goal_time = max(self._hand_goal_time, self._t + cfg.close_time)
@@ -454,7 +454,7 @@ class Receiver:
             # gripper's fingers, until it is clear of the gripper.
             pelvis, rot, vel = self.pose.pelvis(tau, self.rho)
             pull = self._hold_rel.copy()
-            reach = float(np.linalg.norm(pull[:2]))
+            reach = length(pull[:2])
             pull[:2] *= max(reach - cfg.pull_distance, min(reach, CARRY_CLEARANCE)) / max(
                 reach, 1e-6
             )
@@ -478,7 +478,7 @@ class Receiver:
         # Aim where the goal will be when the movement ends (it moves on at goal_v).
         x, v, a = min_jerk_step(*self._hand, goal + goal_v * remaining, goal_v, remaining, dt)
         off = x - shoulder
-        dist = float(np.linalg.norm(off))
+        dist = length(off)
         if dist > self.pose.arm_reach:
             x = shoulder + off * (self.pose.arm_reach / dist)
         self._hand = (x, v, a)
@@ -518,13 +518,13 @@ class Receiver:
             return False
         cfg = self.config
         grip = data.site_xpos[self.body.grip_site]
-        if np.linalg.norm(grip - self.grasp_point(data)) > cfg.grasp_radius:
+        if length(grip - self.grasp_point(data)) > cfg.grasp_radius:
             return False
         v = self._v6
         mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_SITE, self.body.grip_site, v, 0)
         v_grip = v[3:].copy()
         mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, self.ids.object_body, v, 0)
-        if np.linalg.norm(v_grip - v[3:]) > cfg.grasp_speed:
+        if length(v_grip - v[3:]) > cfg.grasp_speed:
             return False
         self.grip.close(data, np.array([0.0, 0.0, self._grasp_side * cfg.grasp_offset]))
         self.state = "holding"

@@ -206,6 +206,15 @@ def swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return eye + vx + (vx @ vx) * k[..., None, None]
 
 
+def length(v: np.ndarray) -> float:
+    """|v| of a vector, ``np.linalg.norm``'s value: for a contiguous float64 1-D array the same
+    BLAS dot product it takes, without its Python-level checks (a pose's few norms per step)."""
+    v = np.asarray(v)
+    if v.dtype == np.float64 and v.ndim == 1 and v.flags.c_contiguous:
+        return math.sqrt(v.dot(v))
+    return float(np.linalg.norm(v))
+
+
 def _unit3(v: np.ndarray) -> tuple[float, float, float]:
     """:func:`_normalize` of one 3-vector, as floats (the same sum of squares, left to right)."""
     x, y, z = v.tolist()
