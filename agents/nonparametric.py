@@ -317,10 +317,10 @@ class NonparametricAgent(PredictiveAgent):
         o0, o1 = self.origin.tolist()
         mean, var = self.bank.predict(np.array([[x0 - o0, x1 - o1]]))
         scaled = mean[0] * self.output_scale
-        dcos = cosine_distance(np.array([v0, v1]), scaled, self.config.min_speed)
-        dcos *= self.config.kappa
-        dcos += var[0]
-        s.sums += dcos
+        terms = cosine_distance(np.array([v0, v1]), scaled, self.config.min_speed)
+        terms *= self.config.kappa  # kappa * d_cos + sigma2: the frame's Eq. d summands
+        terms += var[0]
+        s.sums += terms
         s.count += 1
         s.last = np.array([x0, x1])
 
