@@ -124,6 +124,50 @@ def test_bad_sensing_settings_are_refused_naming_the_field():
         gym.make(DYN, sensors={"controller": {"control_rate_hz": 250.0}})
 
 
+#: Every numeric sensor override field, then the env's three older sensing kwargs: each is one
+#: case in which an integer too large for a float (``10**400``) must be one error naming it.
+_HUGE_CASES = [
+    ({"sensors": {group: {name: None}}}, rf"{group} {name} must be finite and in \[")
+    for group, table in (("camera", CAMERA_FIELDS), ("wrist", WRIST_FIELDS),
+                         ("controller", CONTROLLER_FIELDS))
+    for name in table
+] + [
+    ({"obs_noise": None}, r"obs_noise must be a finite number >= 0 \(m\)"),
+    ({"obs_latency": None}, r"obs_latency must be a whole number of frames >= 0"),
+    ({"force_filter_tau": None},
+     r"force_filter_tau \(the wrist filter_tau\): wrist filter_tau must be finite"),
+]
+
+
+def _with(kwargs: dict, value: object) -> dict:
+    """``kwargs`` with its one ``None`` leaf replaced by ``value``."""
+    if "sensors" in kwargs:
+        ((group, fields),) = kwargs["sensors"].items()
+        return {"sensors": {group: {name: value for name in fields}}}
+    return {key: value for key in kwargs}
+
+
+def test_every_sensing_number_is_one_of_the_23_cases():
+    assert len(_HUGE_CASES) == 23 == len(CAMERA_FIELDS) + len(WRIST_FIELDS) + len(
+        CONTROLLER_FIELDS) + 3
+
+
+@pytest.mark.parametrize(("kwargs", "message"), _HUGE_CASES,
+                         ids=[m.split(" must")[0].replace(" ", ".") for _, m in _HUGE_CASES])
+def test_an_integer_too_large_for_a_float_is_refused_naming_the_field(kwargs, message):
+    for value in (10**400, -(10**400)):
+        with pytest.raises(ValueError, match=message + r".*got an integer of about 401 digits"):
+            gym.make(DYN, **_with(kwargs, value))
+    # the same field's finite out-of-range value is refused by the same rule
+    with pytest.raises(ValueError, match=message.split(" must")[0]):
+        gym.make(DYN, **_with(kwargs, 1e300))
+
+
+def test_wrist_zeroing_of_a_huge_integer_is_refused_naming_the_field():
+    with pytest.raises(ValueError, match="wrist zeroing must be True or False, got an integer"):
+        gym.make(DYN, sensors={"wrist": {"zeroing": 10**400}})
+
+
 @pytest.mark.parametrize("sensing", ["paper", "randomized"])
 def test_same_seed_same_episode(sensing):
     a = _episode(gym.make(DYN, sensing=sensing), seed=5)

@@ -111,9 +111,35 @@ CONTROLLER_FIELDS: dict[str, Field] = {
 
 
 
+def _shown(value: object) -> str:
+    """``value`` for an error message: its repr cut at 80 characters, or an integer too large for
+    a float by its number of digits (its repr may not even be allowed: ``sys.int_info``)."""
+    if is_real_number(value) and not _fits_float(value):
+        digits = int(abs(int(value)).bit_length() * math.log10(2)) + 1  # type: ignore[call-overload]
+        return f"an integer of about {digits} digits"
+    return f"{value!r:.80}"
+
+
+def _fits_float(value: object) -> bool:
+    """False for a number ``float()`` cannot hold (an int beyond ~1.8e308); True otherwise."""
+    try:
+        float(value)  # type: ignore[arg-type]
+    except OverflowError:
+        return False
+    except (TypeError, ValueError):
+        return True
+    return True
+
+
 def check_value(group: str, table: Mapping[str, Field], name: str, value: object) -> float:
-    """``value`` as a float if it is a valid ``group.name``; else ValueError naming the field."""
+    """``value`` as a float if it is a valid ``group.name``; else ValueError naming the field (an
+    integer too large for a float included)."""
     lo, hi, _, unit, source = table[name]
+    if not _fits_float(value):
+        raise ValueError(
+            f"{group} {name} must be finite and in [{lo:.6g}, {hi:.6g}]"
+            f"{' ' + unit if unit else ''} ({source}), got {_shown(value)}"
+        )
     return checked_number(f"{group} {name}", value, lo, hi, unit, source)
 
 
@@ -173,7 +199,7 @@ class WristFTParams:
     def __post_init__(self) -> None:
         _validate(self, "wrist", WRIST_FIELDS)
         if not isinstance(self.zeroing, (bool, np.bool_)):
-            raise ValueError(f"wrist zeroing must be True or False, got {self.zeroing!r}")
+            raise ValueError(f"wrist zeroing must be True or False, got {_shown(self.zeroing)}")
         object.__setattr__(self, "zeroing", bool(self.zeroing))
 
 
@@ -277,6 +303,18 @@ def make_profile(name: str, overrides: object = None,
     return SensorProfile(name, parts["camera"], parts["wrist"], parts["controller"])
 
 
+def _set_by(kwarg: str, legacy: dict[str, dict[str, object]], group: str,
+            **values: object) -> None:
+    """Add the ``group`` fields that the env kwarg ``kwarg`` sets to ``legacy``, each checked; a
+    bad one is a ValueError naming both the kwarg and the field."""
+    for name, value in values.items():
+        try:
+            check_value(group, _GROUPS[group][1], name, value)
+        except ValueError as exc:
+            raise ValueError(f"{kwarg} (the {group} {name}): {exc}") from None
+    legacy.setdefault(group, {}).update(values)
+
+
 def sensing_settings(sensing: object, sensors: object = None, obs_noise: object = None,
                      obs_latency: object = None, force_filter_tau: object = None,
                      frame_rate: float = 30.0) -> tuple[str, dict[str, dict[str, object]]]:
@@ -296,19 +334,21 @@ def sensing_settings(sensing: object, sensors: object = None, obs_noise: object 
     checked = check_overrides(sensors) if sensors is not None else {}
     legacy: dict[str, dict[str, object]] = {}
     if obs_noise is not None:
-        if not is_real_number(obs_noise) or not math.isfinite(float(obs_noise)) or obs_noise < 0:
-            raise ValueError(f"obs_noise must be a finite number >= 0 (m), got {obs_noise!r}")
-        legacy.setdefault("camera", {}).update(
-            pelvis_sigma=float(obs_noise), hand_sigma=float(obs_noise), pelvis_rho=0.0,
-            hand_rho=0.0)
+        if (not is_real_number(obs_noise) or not _fits_float(obs_noise)
+                or not math.isfinite(float(obs_noise)) or obs_noise < 0):
+            raise ValueError(
+                f"obs_noise must be a finite number >= 0 (m), got {_shown(obs_noise)}")
+        _set_by("obs_noise", legacy, "camera", pelvis_sigma=float(obs_noise),
+                hand_sigma=float(obs_noise), pelvis_rho=0.0, hand_rho=0.0)
     if obs_latency is not None:
-        if (not is_real_number(obs_latency) or not math.isfinite(float(obs_latency))
+        if (not is_real_number(obs_latency) or not _fits_float(obs_latency)
+                or not math.isfinite(float(obs_latency))
                 or int(obs_latency) != obs_latency or obs_latency < 0):
             raise ValueError(
-                f"obs_latency must be a whole number of frames >= 0, got {obs_latency!r}")
-        legacy.setdefault("camera", {})["latency"] = int(obs_latency) / frame_rate
+                f"obs_latency must be a whole number of frames >= 0, got {_shown(obs_latency)}")
+        _set_by("obs_latency", legacy, "camera", latency=int(obs_latency) / frame_rate)
     if force_filter_tau is not None:
-        legacy.setdefault("wrist", {})["filter_tau"] = force_filter_tau
+        _set_by("force_filter_tau", legacy, "wrist", filter_tau=force_filter_tau)
     legacy = check_overrides(legacy)
     out = {g: dict(v) for g, v in checked.items()}
     for group, values in legacy.items():
