@@ -3,9 +3,14 @@ validation, and loaded without writing anything.
 
 **Atomic writes.** :func:`staged_write` gives the caller an empty ``<out>/.staging`` folder to write
 a whole checkpoint into (weights, optimizer, RNG, ``state.json``, configs). When the caller is done
-the file list is recorded in ``.staging/COMMIT.json`` (written to a temporary name and renamed,
-after every file was flushed to disk), and only then are the files renamed over the old ones. So a
-kill at any moment leaves either the previous or the new checkpoint, never files of two epochs.
+the file list is recorded in ``.staging/COMMIT.json`` (written by
+:func:`handover_env.atomic_write.atomic_write_bytes`, after every file was flushed to disk), and
+only then are the files renamed over the old ones. So a kill at any moment leaves either the
+previous or the new checkpoint, never files of two epochs. The staging folder is made afresh
+(``mkdir``, which fails on anything already there), so no link can be planted at a name inside it;
+the JSON files go through the atomic writer all the same (:func:`write_json`), and a destination
+in ``<out>`` is replaced by a rename, never written through: a symbolic link there is refused
+(:func:`check_commit`) and a hard link keeps the other file's bytes.
 
 **Recovery, by the writer only.** :func:`recover` discards a staging folder without
 ``COMMIT.json`` (the previous checkpoint is intact) and finishes one with it. Only the command
@@ -37,6 +42,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
+from handover_env.atomic_write import atomic_write_bytes
 from handover_env.extras import missing_extra
 from handover_env.paths import OUTPUT_LOCK, UnsafePathError, output_folder
 from handover_env.regular_file import read_regular_file
@@ -89,10 +95,7 @@ def staged_write(out: str | os.PathLike) -> Iterator[Path]:
         check_commit(out, files)
         for rel in files:
             _fsync_path(stage / rel)
-        tmp = stage / (COMMIT + ".tmp")
-        tmp.write_text(json.dumps({"files": files}))
-        _fsync_path(tmp)
-        os.replace(tmp, stage / COMMIT)
+        atomic_write_bytes(stage / COMMIT, json.dumps({"files": files}).encode())
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
@@ -261,8 +264,10 @@ def read_json(path: str | os.PathLike, what: str = "JSON file",
 
 
 def write_json(path: Path, obj: Any) -> None:
-    """Write ``obj`` as indented JSON (no NaN: a NaN in a checkpoint is a bug)."""
-    path.write_text(json.dumps(obj, indent=1))
+    """Write ``obj`` as indented JSON (no NaN: a NaN in a checkpoint is a bug), atomically through
+    :func:`handover_env.atomic_write.atomic_write_bytes` (a fresh temporary file, no link
+    followed; a target that is a link out of its folder is refused)."""
+    atomic_write_bytes(path, json.dumps(obj, indent=1).encode("utf-8"))
 
 
 def load_tensors(

@@ -1,16 +1,29 @@
-"""The one writer of each result format (CSV, text/Markdown, PNG), each atomic, and the CSV reader.
+"""The one writer of each result format (CSV, text/Markdown/JSON/HTML, PNG), each atomic, and the
+CSV reader.
 
-Every file is written to a temporary name beside it and renamed over ``path``, so a killed run
-leaves the previous file or the new one, never half of one."""
+Every file goes through :func:`atomic_write_bytes` (:func:`handover_env.atomic_write.atomic_write`,
+the project's one file writer): a fresh, unpredictably named temporary file beside ``path``,
+created exclusively without following any link, flushed to disk and renamed over ``path``. So a
+killed run leaves the previous file or the new one, never half of one, a link planted at any name
+is never followed or truncated, and a ``path`` that is a symbolic link out of its folder (or not a
+regular file) is refused with :class:`UnsafeTargetError` naming it."""
 
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
+
+from handover_env.atomic_write import UnsafeTargetError, atomic_write, atomic_write_bytes
+
+__all__ = [
+    "METHOD_LABELS", "PAPER_TABLE1", "UnsafeTargetError", "atomic_write_bytes", "markdown_table",
+    "mean_std", "read_csv", "write_csv", "write_png", "write_text",
+]
 
 # The paper's Table I (RMS error in mm, mean +- std over a stratified 10-fold split, full public
 # set).
@@ -41,19 +54,20 @@ def mean_std(mean: float, std: float, digits: int = 2) -> str:
 
 def write_csv(rows: Sequence[Mapping[str, object]], path: str | os.PathLike) -> Path:
     """Write dict rows to CSV (columns in first-seen order); atomically replaces ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     columns: list[str] = []
     for row in rows:
         columns.extend(k for k in row if k not in columns)
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", newline="") as fh:
+
+    def fill(raw: BinaryIO) -> None:
+        fh = io.TextIOWrapper(raw, encoding="utf-8", newline="")
         writer = csv.DictWriter(fh, fieldnames=columns)
         writer.writeheader()
         for row in rows:
             writer.writerow({k: _fmt_cell(v) for k, v in row.items()})
-    os.replace(tmp, path)
-    return path
+        fh.flush()
+        fh.detach()  # the raw file stays open for atomic_write to sync and close
+
+    return atomic_write(path, fill)
 
 
 def read_csv(path: str | os.PathLike) -> list[dict[str, str]]:
@@ -70,28 +84,20 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[object]]) -> s
 
 
 def write_text(text: str, path: str | os.PathLike) -> Path:
-    """Write ``text`` to ``path`` atomically, creating parent folders."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-    return path
+    """Write ``text`` (UTF-8) to ``path`` atomically, creating parent folders."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def write_png(fig: Any, path: str | os.PathLike, dpi: float | None = None) -> Path:
     """Save the matplotlib figure ``fig`` as a PNG at ``path`` atomically, then close it."""
     import matplotlib.pyplot as plt
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
     try:
-        fig.savefig(tmp, format="png", **({} if dpi is None else {"dpi": dpi}))
-        os.replace(tmp, path)
+        return atomic_write(
+            path, lambda f: fig.savefig(f, format="png", **({} if dpi is None else {"dpi": dpi}))
+        )
     finally:
         plt.close(fig)
-    return path
 
 
 def _fmt_cell(value: object) -> object:
