@@ -50,7 +50,7 @@ except ModuleNotFoundError as _exc:
     raise missing_extra("baselines", _exc, __name__) from None
 
 from agents.predictive import ClosedLoopConfig
-from baselines import trainer
+from baselines import checkpoint_meta, trainer
 from baselines.checkpoint_io import (
     check_loadable,
     expected_of,
@@ -393,7 +393,7 @@ class BCMLPAgent(GiverConditionedAgent):
         )
         write_json(
             stage / "config.json",
-            trainer.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state),
+            checkpoint_meta.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state),
         )
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -451,7 +451,7 @@ def _check_state(state: object, source: Path) -> dict:
 
 def _read_config(path: Path) -> dict:
     """``config.json`` of a BC-MLP checkpoint folder, validated."""
-    return trainer.read_checkpoint_json(
+    return checkpoint_meta.read_checkpoint_json(
         path, "config.json", CHECKPOINT_TYPE, CHECKPOINT_FORMAT, BCMLPConfig, "BC-MLP"
     )
 

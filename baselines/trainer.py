@@ -20,10 +20,9 @@ checkpoints, resume, progress.
   used (a config that differs in a field the run may not change, a state inconsistent with its
   loss curves, a different split, weights of other shapes, a foreign optimizer state, a file
   linked out of the folder: each a :class:`~baselines.checkpoint_io.CheckpointError` naming the
-  file). Loading a model (:func:`read_checkpoint_json`) never recovers: it writes nothing.
-* **Checkpoint JSON** (:func:`checkpoint_json`, :func:`read_checkpoint_json`): the
-  ``{"type", "format", "config", "features", "training"}`` record both baselines write, read back
-  with every config field present and of its JSON type.
+  file). Loading a model (:func:`baselines.checkpoint_meta.read_checkpoint_json`) never
+  recovers: it writes nothing.
+* **Checkpoint JSON**: the record each checkpoint carries is :mod:`baselines.checkpoint_meta`'s.
 * **Progress** (:class:`TrainingProgress`): one tqdm bar, the caller's ``log`` line per validation
   pass, and the same record as a JSON line (``train_log.jsonl``: ``{"epoch"|"step", "train_loss",
   "val_loss", "best_val", "best_epoch"|"best_step", "wall_time_s"}``), the TensorBoard-style scalar
@@ -37,7 +36,7 @@ import math
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -60,7 +59,7 @@ from baselines.checkpoint_io import (
     staged_write,
     write_json,
 )
-from baselines.config_json import config_from_dict, json_type_ok
+from baselines.config_json import json_type_ok
 from baselines.optimizer_state import (
     OPTIMIZER_PARAM_GROUPS,
     OPTIMIZER_STATE,
@@ -70,16 +69,6 @@ from baselines.optimizer_state import (
 
 TRAINING_STATE = "training_state"
 LOG_FILE = "train_log.jsonl"
-#: The summary of a run kept in the checkpoint JSON (``"training"``), when present in the state.
-SUMMARY_KEYS = (
-    "epoch",
-    "step",
-    "best_epoch",
-    "best_step",
-    "best_val",
-    "stopped_early",
-    "wall_time_s",
-)
 
 
 def clone_weights(module: torch.nn.Module) -> dict[str, torch.Tensor]:
@@ -441,58 +430,3 @@ def check_state(
     if problems:
         raise CheckpointError(f"{source}: inconsistent training state: {'; '.join(problems)}")
     return state
-
-
-# ---------------------------------------------------------------------- checkpoint JSON
-def checkpoint_json(kind: str, fmt: int, config: Any, state: dict | None) -> dict:
-    """The record a checkpoint carries: type, format, config (a dataclass), features, run
-    summary."""
-    d = {"type": kind, "format": fmt, "config": json.loads(json.dumps(asdict(config))),
-         "features": config.spec.to_dict()}
-    if state:
-        d["training"] = {k: state[k] for k in SUMMARY_KEYS if k in state}
-    return d
-
-
-def read_checkpoint_json(
-    path: Path,
-    file: str,
-    kind: str,
-    fmt: int,
-    config_cls: type,
-    label: str,
-    upgrades: dict[int, Callable[[Any, str], dict]] | None = None,
-) -> dict:
-    """``path/file`` as written by :func:`checkpoint_json`, validated; raises CheckpointError naming
-    the file.
-
-    Args:
-        path: the checkpoint folder.
-        file: the record's file name in it.
-        kind, fmt: the checkpoint type and format this code reads.
-        config_cls: the config dataclass (every field present and of its JSON type).
-        label: the baseline's name, for messages.
-        upgrades: {older format: function(config, source) -> the config in this format}; the
-            function validates the old config and raises CheckpointError if it cannot.
-    """
-    check_loadable(path, [file], label)
-    f = path / file
-    if not f.is_file():
-        raise CheckpointError(f"{path}: missing {file} (not a {label} checkpoint of this project)")
-    saved = read_json(f, file)
-    if not isinstance(saved, dict):
-        raise CheckpointError(f"{f}: expected a JSON object")
-    if saved.get("type") != kind:
-        raise CheckpointError(f"{path} holds a {saved.get('type')!r} checkpoint, not {kind!r}")
-    old = saved.get("format")
-    if old != fmt and not (isinstance(old, int) and old in (upgrades or {})):
-        raise CheckpointError(f"{path}: checkpoint format {old}, this code reads {fmt}")
-    if old != fmt:
-        saved = {**saved, "format": fmt, "config": upgrades[old](saved.get("config"), str(f))}
-    cfg = config_from_dict(config_cls, saved.get("config"), str(f))
-    if saved.get("features") != cfg.spec.to_dict():
-        raise CheckpointError(f"{f}: features {saved.get('features')!r} disagree with its config")
-    if not isinstance(saved.get("training", {}), dict):
-        raise CheckpointError(f"{f}: training must be a JSON object")
-    return saved
-

@@ -14,6 +14,8 @@ pytest.importorskip("torch")
 from baselines_toy import toy_dataset  # noqa: E402
 
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig  # noqa: E402
+from baselines.checkpoint_io import CheckpointError  # noqa: E402
+from baselines.checkpoint_meta import SUMMARY_KEYS, read_checkpoint_json  # noqa: E402
 from baselines.trainer import LOG_FILE  # noqa: E402
 
 
@@ -27,7 +29,10 @@ def test_bc_mlp_does_not_import_lerobot():
     assert res.stdout.strip() == "False"
 
 
-@pytest.mark.parametrize("module", ["baselines.bc_mlp", "baselines.act", "baselines.trainer"])
+@pytest.mark.parametrize(
+    "module",
+    ["baselines.bc_mlp", "baselines.act", "baselines.trainer", "baselines.checkpoint_meta"],
+)
 def test_a_baseline_without_its_extra_is_a_one_line_error_naming_it(module):
     res = _run(f"import sys; sys.modules['torch'] = None\nimport {module}")
     last = res.stderr.strip().splitlines()[-1]
@@ -57,3 +62,16 @@ def test_training_writes_one_json_line_per_validation_and_a_tqdm_bar(tmp_path, c
         4,
         5,
     ]
+
+
+def test_the_checkpoint_record_is_read_back_by_checkpoint_meta(tmp_path):
+    out = tmp_path / "bc"
+    agent = BCMLPAgent(BCMLPConfig(hidden=(8,), max_epochs=2, patience=50)).fit(
+        toy_dataset(n=6, length=40, seed=4), out_dir=out
+    )
+    record = read_checkpoint_json(out, "config.json", "bc_mlp", 1, BCMLPConfig, "BC-MLP")
+    assert record["type"] == "bc_mlp" and record["config"]["hidden"] == [8]
+    assert set(record["training"]) <= set(SUMMARY_KEYS) and record["training"]["epoch"] == 2
+    assert record["training"]["best_val"] == min(agent.train_log["val_loss"])
+    with pytest.raises(CheckpointError, match="not 'act'"):
+        read_checkpoint_json(out, "config.json", "act", 1, BCMLPConfig, "ACT")

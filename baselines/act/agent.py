@@ -64,7 +64,7 @@ except ModuleNotFoundError as _exc:
     raise missing_extra("baselines", _exc, __name__) from None
 
 from agents.predictive import ClosedLoopConfig
-from baselines import trainer
+from baselines import checkpoint_meta, trainer
 from baselines.act.config import ACTAgentConfig
 from baselines.act.data import normalise_samples, prepared_export, training_samples
 from baselines.act.dropout import DropoutMasks, fast_dropout
@@ -425,7 +425,7 @@ class ACTAgent(GiverConditionedAgent):
         self.postprocessor.save_pretrained(out)
         write_json(
             out / HANDOVER_JSON,
-            trainer.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state),
+            checkpoint_meta.checkpoint_json(CHECKPOINT_TYPE, CHECKPOINT_FORMAT, self.config, state),
         )
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -489,7 +489,7 @@ def _check_state(state: object, source: Path) -> dict:
 
 def _read_handover_json(path: Path) -> dict:
     """``handover_act.json``, validated: type, format, a complete config and matching features."""
-    return trainer.read_checkpoint_json(
+    return checkpoint_meta.read_checkpoint_json(
         path, HANDOVER_JSON, CHECKPOINT_TYPE, CHECKPOINT_FORMAT, ACTAgentConfig, "ACT",
         upgrades={1: ACTAgentConfig.from_legacy},
     )
