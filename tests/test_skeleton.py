@@ -12,6 +12,7 @@ import pytest
 from handover_env.person import motion as rm
 from handover_env.person import trajectory
 from handover_env.person.gait import arm_pose, walking_pose
+from handover_env.person.rotations import length, mat_to_quat, swing, triad, yaw_matrix
 from handover_env.person.skeleton import (
     N_SEGMENTS,
     SEG,
@@ -22,13 +23,8 @@ from handover_env.person.skeleton import (
     J,
     forward_kinematics,
     joints_of,
-    length,
-    mat_to_quat,
     measure_dims,
     retarget,
-    swing,
-    triad,
-    yaw_matrix,
 )
 
 

@@ -16,7 +16,8 @@ import mujoco
 import numpy as np
 
 from handover_env.person.body_model import BodyIds
-from handover_env.person.skeleton import RIGHT_ARM, length
+from handover_env.person.rotations import length
+from handover_env.person.skeleton import RIGHT_ARM
 
 
 class Effort:

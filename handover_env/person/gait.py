@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from handover_env.person.rotations import length, swing, yaw_matrix
 from handover_env.person.skeleton import (
     SEG,
     SEGMENTS,
@@ -33,9 +34,6 @@ from handover_env.person.skeleton import (
     BodyPose,
     J,
     forward_kinematics,
-    length,
-    swing,
-    yaw_matrix,
 )
 from handover_env.person.trajectory import BaseTrajectory
 

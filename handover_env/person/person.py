@@ -39,12 +39,12 @@ from handover_env.data.recording import Recording, position_array, skeleton_arra
 from handover_env.person import motion as rm
 from handover_env.person import trajectory
 from handover_env.person.gait import walking_pose
+from handover_env.person.rotations import mat_to_quat
 from handover_env.person.skeleton import (
     RIGHT_ARM,
     SEG,
     BodyDims,
     BodyPose,
-    mat_to_quat,
     measure_dims,
     retarget,
 )

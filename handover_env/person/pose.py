@@ -17,7 +17,8 @@ import numpy as np
 
 from handover_env.person.gait import arm_pose
 from handover_env.person.person import RATE, PersonMotion
-from handover_env.person.skeleton import RIGHT_ARM, SEG, SEGMENTS, J, length, mat_to_quat
+from handover_env.person.rotations import length, mat_to_quat
+from handover_env.person.skeleton import RIGHT_ARM, SEG, SEGMENTS, J
 
 #: The arm counts as straight at this fraction of its full length (the elbow never locks).
 STRAIGHT_ARM = 0.97

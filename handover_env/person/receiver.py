@@ -66,13 +66,14 @@ from handover_env.person.min_jerk import min_jerk_step
 from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
 from handover_env.person.pose import STRAIGHT_ARM, TRUNK_MAX_TURN, MotionPose, interp
 from handover_env.person.receiver_rules import Meeting, PathAhead, left_behind, meet
+from handover_env.person.rotations import length
 from handover_env.person.settings import (
     HEIGHT_OPTION_RANGE,
     PASS_DISTANCE,
     ReceiverConfig,
     check_option,
 )
-from handover_env.person.skeleton import SEG, J, length
+from handover_env.person.skeleton import SEG, J
 from handover_env.person.targets import BodyTargets
 from handover_env.robot.scene import SceneIds
 
