@@ -10,8 +10,9 @@
 * :func:`add_backend_arguments`, :func:`backend_from_args`: ``--backend`` / ``--ray-address``.
 * :data:`SEEDS`, :data:`WORKERS`, :data:`FOLDS`, ...: the bounds shared by several commands.
 
-Output folders are checked by :func:`handover_env.paths.output_folder` and locked by
-:class:`handover_eval.output_lock.OutputLock`.
+Output folders are checked by :func:`handover_env.paths.output_folder` (through
+:func:`folder_option` where the option has a default folder: an empty ``--out ""`` is refused, never
+taken for "unset") and locked by :class:`handover_eval.output_lock.OutputLock`.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
+from handover_env.paths import output_folder
 from handover_env.sensors.profiles import PROFILES
 from handover_eval.backend import BACKENDS, Backend, import_ray
 
@@ -184,3 +186,11 @@ def load_replay_data(load: Callable, path: str | None, quick: bool, seed: int,
     if not Path(path).exists():
         raise FileNotFoundError(f"--replay-data {path}: no such file or folder")
     return load(path, quick, seed, progress)
+
+
+def folder_option(value: str | None, flag: str, default: str | Path) -> Path:
+    """The output folder given as option ``flag`` (its parsed ``value``), or ``default`` when the
+    option was not given (None). Anything given is checked by
+    :func:`handover_env.paths.output_folder`, so ``--out ""`` (an unset shell variable) is a
+    one-line :class:`~handover_env.paths.UnsafePathError` naming ``flag``, never the default."""
+    return output_folder(default if value is None else value, flag)

@@ -11,7 +11,6 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from handover_env.paths import output_folder
 from handover_eval.backend import JobError, session
 from handover_eval.cli.args import (
     EPOCHS,
@@ -19,6 +18,7 @@ from handover_eval.cli.args import (
     WORKERS,
     add_backend_arguments,
     backend_from_args,
+    folder_option,
     load_replay_data,
 )
 from handover_eval.methods import METHODS, MethodOptions, default_workers
@@ -135,17 +135,18 @@ def _leaderboard(args: argparse.Namespace) -> int:
     from handover_eval.reporting import write_png, write_text
 
     try:
-        out = output_folder(args.out or Path("results") / "leaderboard", "--out")
+        out = folder_option(args.out, "--out", Path("results") / "leaderboard")
         results = load_results(args.results)
+        with OutputLock(out):
+            text = leaderboard_markdown(results)
+            write_text(text, out / "leaderboard.md")
+            png = write_png(leaderboard_figure(results), out / "leaderboard.png")
+            if args.html:
+                from handover_eval.benchmark.html import leaderboard_html
+
+                write_text(leaderboard_html(results, png.read_bytes()), out / "leaderboard.html")
     except (ValueError, OSError) as exc:
         return _error(exc)
-    text = leaderboard_markdown(results)
-    write_text(text, out / "leaderboard.md")
-    png = write_png(leaderboard_figure(results), out / "leaderboard.png")
-    if args.html:
-        from handover_eval.benchmark.html import leaderboard_html
-
-        write_text(leaderboard_html(results, png.read_bytes()), out / "leaderboard.html")
     print(text)
     print(f"wrote {out}/leaderboard.md and leaderboard.png"
           + (" and leaderboard.html" if args.html else ""))
@@ -156,8 +157,9 @@ def _rescore(args: argparse.Namespace) -> int:
     from handover_eval.benchmark.output import rescore
 
     try:
-        out = output_folder(args.out or Path("results") / "rescore", "--out")
-        _, files = rescore([Path(p) for p in args.episodes], out)
+        out = folder_option(args.out, "--out", Path("results") / "rescore")
+        with OutputLock(out):
+            _, files = rescore([Path(p) for p in args.episodes], out)
     except (ValueError, OSError) as exc:
         return _error(exc)
     print(files[-1].read_text())
@@ -192,14 +194,13 @@ def _benchmark(args: argparse.Namespace, load_dataset: Callable) -> int:
             workers=default_workers() if args.workers is None else args.workers,
         )
         safe = source.name.replace(" ", "_").replace(":", "-")
-        out = output_folder(
-            args.out or Path("results") / ("benchmark-quick" if args.quick else "benchmark") / safe,
-            "--out",
+        out = folder_option(
+            args.out, "--out",
+            Path("results") / ("benchmark-quick" if args.quick else "benchmark") / safe,
         )
-        cache = output_folder(
-            args.checkpoints
-            or Path("results") / ("table1-quick" if args.quick else "table1") / "checkpoints",
-            "--checkpoints",
+        cache = folder_option(
+            args.checkpoints, "--checkpoints",
+            Path("results") / ("table1-quick" if args.quick else "table1") / "checkpoints",
         )
         backend = backend_from_args(args)
         lock = OutputLock(out).acquire()
