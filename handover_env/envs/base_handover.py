@@ -244,7 +244,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self.model, self.ids, self.params, ControllerConfig(ticks=ticks)
         )
         self.receiver = Receiver(
-            self.model, self.ids, person_config(person, miss_distance=self.miss_distance)
+            self.model, self.ids.receiver, person_config(person, miss_distance=self.miss_distance)
         )
         self.dt = self.model.opt.timestep * FRAME_SKIP
         self._ticks = self.controller.config.ticks

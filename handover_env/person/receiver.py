@@ -53,13 +53,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
 import numpy as np
 
 from handover_env.person import motion as rm
-from handover_env.person.body_model import apply_dims
+from handover_env.person.body_model import BodyIds, apply_dims
 from handover_env.person.effort import Effort
 from handover_env.person.grip import ArmGrip
 from handover_env.person.min_jerk import min_jerk_step
@@ -75,7 +76,6 @@ from handover_env.person.settings import (
 )
 from handover_env.person.skeleton import SEG, J
 from handover_env.person.targets import BodyTargets
-from handover_env.robot.scene import SceneIds
 
 CAMERA_RATE = RATE
 STATES = ("walking", "reaching", "holding", "presenting", "presented", "passed")
@@ -95,17 +95,31 @@ CLEAR_OF_GRIPPER = 0.1
 PRESENT_OFFSET = (0.30, -0.15, -0.15)
 
 
+@dataclass(frozen=True)
+class ReceiverIds:
+    """The indices of a compiled scene that the receiver reads, handed over by the scene
+    (:attr:`handover_env.robot.scene.SceneIds.receiver`).
+
+    Attributes:
+        body: the person's bodies, joints, welds, sites and geoms.
+        object_body: the handed-over object's body.
+    """
+
+    body: BodyIds
+    object_body: int
+
+
 class Receiver:
     """Drives the simulated person in a compiled handover scene.
 
     Args:
         model: the compiled scene (its receiver geometry is resized at every reset).
-        ids: scene indices (``ids.body`` holds the receiver's).
+        ids: the scene indices the person reads (its body's and the object's).
         config: behaviour settings.
     """
 
     def __init__(
-        self, model: mujoco.MjModel, ids: SceneIds, config: ReceiverConfig | None = None
+        self, model: mujoco.MjModel, ids: ReceiverIds, config: ReceiverConfig | None = None
     ) -> None:
         self.model, self.ids, self.body = model, ids, ids.body
         self.config = config or ReceiverConfig()

@@ -37,6 +37,7 @@ import numpy as np
 
 from handover_env.person.body_model import GEOM_NAMES, BodyIds, add_receiver, body_ids
 from handover_env.person.body_model import PREFIX as RECEIVER_PREFIX
+from handover_env.person.receiver import ReceiverIds
 from handover_env.robot.menagerie import robotiq_2f85_xml, ur5e_xml
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
@@ -107,6 +108,11 @@ class SceneIds:
     receiver_geom_names: tuple[str, ...]
     payload_mass: float = 0.0
     payload_com_local: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def receiver(self) -> ReceiverIds:
+        """What the receiver reads of the scene: its body's indices and the object's body."""
+        return ReceiverIds(body=self.body, object_body=self.object_body)
 
 
 def _motorize(arm: mujoco.MjSpec) -> None:
