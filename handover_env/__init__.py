@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
+#: The package version: the one string pyproject.toml reads (dynamic version), every result.json
+#: records (software.handover_env) and CHANGELOG.md and CITATION.cff name.
 __version__ = "0.1.0"
 
 _ENVS = {

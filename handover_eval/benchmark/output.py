@@ -8,11 +8,11 @@ files write the same bytes. Tables: ``closedloop_table.csv``, ``openloop_table.c
 
 from __future__ import annotations
 
-import importlib.metadata
 import platform
 from collections.abc import Mapping
 from pathlib import Path
 
+from handover_env import __version__
 from handover_eval.benchmark import tables
 from handover_eval.benchmark.files import (
     EPISODE_FILES,
@@ -77,13 +77,6 @@ def rescore(paths: list[Path], out: Path) -> tuple[dict, list[Path]]:
     return write_tables(track_rows, out)
 
 
-def _version() -> str:
-    try:
-        return importlib.metadata.version("handover_env")
-    except importlib.metadata.PackageNotFoundError:
-        return "unknown"
-
-
 def write_benchmark(run: BenchmarkRun, out: Path) -> dict:
     """Episode CSVs, tables and result.json of ``run`` into ``out``; returns the result."""
     episodes, track_rows = {}, {}
@@ -109,7 +102,7 @@ def write_benchmark(run: BenchmarkRun, out: Path) -> dict:
         "fingerprints": run.fingerprints,
         "metrics": {t: metrics[t][src.name] for t in run.tracks},
         "episodes": episodes,
-        "software": {"handover_env": _version(), "python": platform.python_version()},
+        "software": {"handover_env": __version__, "python": platform.python_version()},
         "timing": {f"{t}_seconds": round(s, 3) for t, s in run.seconds.items()},
     }
     write_result(result, out / RESULT_NAME)
