@@ -17,11 +17,11 @@ import handover_env  # noqa: F401
 from handover_env.data.dataset import Episode
 from handover_env.data.errors import DatasetError
 from handover_env.data.limits import MIN_BONE_M
-from handover_env.data.recording import Recording, load_recording
 from handover_env.person import motion as rm
 from handover_env.person import trajectory
 from handover_env.person.gait import walking_pose
 from handover_env.person.person import replay_input
+from handover_env.person.recording import Recording, load_recording
 from handover_env.person.settings import (
     LONGEST_EPISODE,
     SETTING_RANGES,

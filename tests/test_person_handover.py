@@ -199,8 +199,8 @@ def _giver_replay_on_held_out(env) -> None:
     from handover_env.data.dataset import stratified_fold_ids
     from handover_env.data.filtering import smooth_track
     from handover_env.data.public import list_public_files
-    from handover_env.data.recording import load_recording
     from handover_env.data.transfer.detect import detect_transfer
+    from handover_env.person.recording import load_recording
 
     files = list_public_files(DATA)
     folds = stratified_fold_ids(
@@ -227,8 +227,8 @@ def _giver_replay_on_held_out(env) -> None:
 @pytest.mark.skipif(not DATA.is_dir(), reason="development copy of the public dataset not present")
 def test_a_recorded_person_stops_on_the_static_stop_line():
     from agents.static import StaticAgent
-    from handover_env.data.recording import load_recording
     from handover_env.envs.static_handover_v0 import STOP_XY
+    from handover_env.person.recording import load_recording
 
     env = gym.make("handover_env/StaticHandover-v0")
     rec = load_recording(DATA / "motion_normal_0.pkl")

@@ -142,7 +142,7 @@ def sensing_figures(
     ``refit_fraction`` (of frames), ``refit_mean_run`` (frames), ``repeated_frames``.
     """
     from handover_env.data.public import ID_PREFIX, list_public_files
-    from handover_env.data.recording import load_recording
+    from handover_env.person.recording import load_recording
 
     files = [p for p in list_public_files(public_dir) if p.name.startswith(ID_PREFIX)]
     files = files[:limit] if limit else files

@@ -13,7 +13,7 @@ Sources:
   (ID, or OOD wandering / pausing), its pelvis track from ``base_trajectory`` and the rest of the
   body from :func:`handover_env.person.gait.walking_pose`;
 * :func:`recorded_motion`: a public recording. With the receiver's BODY_34 skeleton
-  (:class:`handover_env.data.recording.Recording`, or a dict with ``receiver_pose``), the body
+  (:class:`handover_env.person.recording.Recording`, or a dict with ``receiver_pose``), the body
   is the recorded person, filtered once (:func:`handover_env.data.filtering.smooth_track`) and
   retargeted onto the rigid segments (:func:`handover_env.person.skeleton.retarget`). With the
   pelvis track only (an :class:`~handover_env.data.dataset.Episode`, e.g. synthetic data), the
@@ -35,10 +35,10 @@ import numpy as np
 from handover_env.data.dataset import Episode
 from handover_env.data.filtering import smooth_track
 from handover_env.data.limits import MAX_ID_CHARS
-from handover_env.data.recording import Recording, position_array, skeleton_array
 from handover_env.person import motion as rm
 from handover_env.person import trajectory
 from handover_env.person.gait import walking_pose
+from handover_env.person.recording import Recording, position_array, skeleton_array
 from handover_env.person.rotations import mat_to_quat
 from handover_env.person.skeleton import (
     RIGHT_ARM,
@@ -196,7 +196,7 @@ def replay_input(source: Any) -> tuple[np.ndarray, np.ndarray | None, str]:
     """The checked ``(receiver_xy (T, 2), receiver_pose (T, 34, 3) or None, source_id)`` of a
     replay, one check for every form (:func:`recorded_motion`'s ``source``).
 
-    Tracks and skeletons go through :func:`handover_env.data.recording.position_array`: real
+    Tracks and skeletons go through :func:`handover_env.person.recording.position_array`: real
     numbers only, finite, within the +-MAX_ABS_COORD_M an :class:`Episode` may hold; a skeleton
     also needs every bone (:func:`handover_env.person.skeleton.shortest_bone`) at least MIN_BONE_M
     long.
@@ -234,7 +234,7 @@ def recorded_motion(source: Any, height: float | None = None) -> PersonMotion:
     """The nominal motion of a recorded receiver.
 
     Args:
-        source: a :class:`~handover_env.data.recording.Recording` (skeleton and episode), an
+        source: a :class:`~handover_env.person.recording.Recording` (skeleton and episode), an
             :class:`~handover_env.data.dataset.Episode`, or a dict with ``receiver_xy`` (T, 2) and
             optionally ``receiver_pose`` (T, 34, 3) and ``source_id``; 30 Hz.
         height: body height, m (default: measured from the skeleton, else 1.725).

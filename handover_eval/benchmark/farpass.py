@@ -35,8 +35,8 @@ LOW_Q, HIGH_Q = 0.05, 0.25
 def pelvis_y_at_transfer(path: str | Path) -> float:
     """The recorded receiver's smoothed pelvis y (m) at the detected transfer, NaN if none."""
     from handover_env.data.filtering import smooth_track
-    from handover_env.data.recording import load_recording
     from handover_env.data.transfer.detect import detect_transfer
+    from handover_env.person.recording import load_recording
 
     rec = load_recording(path)
     pose = smooth_track(rec.receiver_pose, RATE_HZ)

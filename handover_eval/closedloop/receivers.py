@@ -7,7 +7,7 @@ Every agent meets the same receivers, so that each can be paired with the reacti
 * **Replays** (set ``replay``): the episodes of chosen folds of Table I's stratified split
   (default: the held-out half, folds ``k//2 .. k-1``, i.e. 5-9 of 10, which the receiver was not
   calibrated on). From a public-dataset folder each is a
-  :class:`~handover_env.data.recording.Recording` (the whole BODY_34 skeleton drives the body);
+  :class:`~handover_env.person.recording.Recording` (the whole BODY_34 skeleton drives the body);
   from a ``.npz`` or the synthetic generator it is an :class:`~handover_env.data.dataset.Episode`
   (the body walks the recorded pelvis track with a scripted gait). The reset seed of a replay is
   its dataset index.
@@ -184,8 +184,8 @@ def other_replays(
 def recorded_transfer(path: str) -> tuple[float, float]:
     """``(time s, pelvis x m)`` of the recorded receiver's grasp, NaNs when none is detected."""
     from handover_env.data.filtering import smooth_track
-    from handover_env.data.recording import load_recording
     from handover_env.data.transfer.detect import detect_transfer
+    from handover_env.person.recording import load_recording
 
     rec = load_recording(path)
     pose = smooth_track(rec.receiver_pose, RATE_HZ)
@@ -198,7 +198,7 @@ def recorded_transfer(path: str) -> tuple[float, float]:
 def replay_source(spec: ReceiverSpec, dataset: HandoverDataset):
     """What ``reset(options={"episode": ...})`` replays: the Recording, else the dataset Episode."""
     if spec.path is not None:
-        from handover_env.data.recording import load_recording
+        from handover_env.person.recording import load_recording
 
         return load_recording(spec.path)
     assert spec.index is not None, "a replay spec needs a dataset index"

@@ -1,4 +1,4 @@
-"""A public recording with the receiver's whole skeleton, for replaying a person in the env.
+"""A public recording with the receiver's whole skeleton: the person's replay source in the env.
 
 :class:`handover_env.data.dataset.Episode` keeps what the planners learn from (pelvis xy, hand,
 object). Replaying a recorded *person* in the env also needs the rest of the body: the ZED
