@@ -9,7 +9,10 @@ command of ``train.py`` and ``evaluate.py`` that writes into an ``--out`` holds
   the pid holding it; nothing in the folder is touched.
 * The operating system drops the lock when its process dies, so a killed run never leaves a stale
   lock (only a harmless, unlocked ``.lock`` file, which the next run takes over).
-* A lock file that is a symbolic link (or anything but a regular file) is refused, never followed.
+* A lock file that is a symbolic link (or anything but a regular file) is refused, never followed;
+  so is one with more than one name (a hard link to a file elsewhere, which writing the pid would
+  truncate). Both are checked on the opened descriptor (``O_NOFOLLOW``, ``fstat``) before the
+  file is truncated or written, and again just before.
 * On release the lock file is deleted (still locked, so that no other run can hold a lock on a
   deleted file: :meth:`OutputLock.acquire` checks that the file it locked is still the one in the
   folder), and the folders the lock created are removed again if the run wrote nothing into them.
@@ -78,6 +81,11 @@ class OutputLock:
             os.close(fd)  # its last holder deleted it between our open and flock: start again
         else:
             raise OutputLockError(f"{self.flag} {self.folder}: {self.path} keeps being replaced")
+        try:
+            self._check_opened(fd)  # again, just before the only write
+        except OutputLockError:
+            os.close(fd)
+            raise
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
         self._fd, self._owner = fd, os.getpid()
@@ -128,12 +136,26 @@ class OutputLock:
                 f"{self.flag} {self.folder}: cannot open the lock file {self.path} "
                 f"({exc.strerror})"
             ) from None
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
+        try:
+            self._check_opened(fd)
+        except OutputLockError:
             os.close(fd)
+            raise
+        return fd
+
+    def _check_opened(self, fd: int) -> None:
+        """OutputLockError unless the open lock file ``fd`` is a regular file of at most one
+        name."""
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
             raise OutputLockError(
                 f"{self.flag} {self.folder}: the lock file {self.path} is not a regular file"
             )
-        return fd
+        if st.st_nlink > 1:  # 0: deleted by its last holder since; acquire() opens it again
+            raise OutputLockError(
+                f"{self.flag} {self.folder}: the lock file {self.path} has {st.st_nlink} names "
+                "(a hard link to another file?); refusing to write it (remove it)"
+            )
 
 
 def _missing(folder: Path) -> list[Path]:
