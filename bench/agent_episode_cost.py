@@ -44,7 +44,7 @@ from agents.null import NullAgent  # noqa: E402
 from agents.reactive import ReactiveAgent  # noqa: E402
 from agents.static import StaticAgent  # noqa: E402
 from handover_env.data.dataset import HandoverDataset  # noqa: E402
-from handover_env.data.synthetic import generate_synthetic  # noqa: E402
+from handover_env.person.synthetic import generate_synthetic  # noqa: E402
 
 DYNAMIC, STATIC = "handover_env/DynamicHandover-v0", "handover_env/StaticHandover-v0"
 AGENTS = ("reactive", "static", "ours", "iaal", "bc-mlp", "act", "giver-replay", "null")

@@ -39,8 +39,8 @@ sys.path.insert(0, str(ROOT))
 
 from baselines.act import ACTAgent, ACTAgentConfig  # noqa: E402
 from baselines.bc_mlp import BCMLPAgent, BCMLPConfig  # noqa: E402
-from handover_env.data import load_any  # noqa: E402
 from handover_env.data.dataset import Episode  # noqa: E402
+from handover_env.person.demos import load_any  # noqa: E402
 
 DEV_COPY = ROOT / ".." / "shared" / "data" / "dynamic_handover_dataset" / "whole_motions"
 

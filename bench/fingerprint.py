@@ -24,7 +24,7 @@ import numpy as np
 import handover_env  # noqa: F401  (registers the envs)
 from agents.null import NullAgent
 from agents.reactive import ReactiveAgent
-from handover_env.data.synthetic import generate_synthetic
+from handover_env.person.synthetic import generate_synthetic
 
 TASKS = ("handover_env/DynamicHandover-v0", "handover_env/StaticHandover-v0")
 PROFILES = ("ideal", "paper")

@@ -45,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from agents.nonparametric import NonparametricAgent, NonparametricConfig  # noqa: E402
 from baselines.iaal import IAALAgent  # noqa: E402
-from handover_env.data import load_any  # noqa: E402
+from handover_env.person.demos import load_any  # noqa: E402
 
 DEV_COPY = (
     Path(__file__).resolve().parents[1]

@@ -174,7 +174,7 @@ def test_failing_workers_are_named(tmp_path):
 
 
 def test_sample_efficiency_pretrains_every_fold_and_ratio(tmp_path):
-    from handover_env.data import generate_synthetic
+    from handover_env.person.synthetic import generate_synthetic
     from handover_eval.openloop.experiments import run_sample_efficiency
     from handover_eval.openloop.protocol import OpenLoopProtocol
 

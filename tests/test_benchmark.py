@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from handover_env.data import generate_synthetic
 from handover_env.data.dataset import HandoverDataset
+from handover_env.person.synthetic import generate_synthetic
 from handover_eval.benchmark import files, protocol
 from handover_eval.benchmark.files import BenchmarkFileError, read_episodes, read_result
 from handover_eval.benchmark.leaderboard import LeaderboardError, load_results

@@ -12,8 +12,8 @@ from agents.constant_velocity import ConstantVelocityAgent
 from agents.predictive import PredictiveAgent
 from agents.reactive import ReactiveAgent, ReactiveConfig
 from handover_env.config import HandoverParams
-from handover_env.data import generate_synthetic
 from handover_env.envs.observation import ObsLayout
+from handover_env.person.synthetic import generate_synthetic
 from handover_eval.methods import METHODS, MethodOptions, build_agent
 from handover_eval.openloop.protocol import episode_metrics, evaluate_openloop, summarise
 

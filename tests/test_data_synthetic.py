@@ -9,7 +9,7 @@ import pytest
 
 from handover_env.data import generate_synthetic, load_any, load_public_dataset
 from handover_env.data.stats import ACCEPTANCE_STATISTICS, compare_statistics, episode_statistics
-from handover_env.data.synthetic import NoiseModel, synthesize_episode
+from handover_env.person.synthetic import NoiseModel, synthesize_episode
 
 REAL = (
     Path(__file__).resolve().parents[1].parent

@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handover_env.data import DatasetError, Episode, HandoverDataset, generate_synthetic, load_any
+from handover_env.data import DatasetError, Episode, HandoverDataset
+from handover_env.person.demos import load_any
+from handover_env.person.synthetic import generate_synthetic
 
 
 @pytest.fixture(scope="module")

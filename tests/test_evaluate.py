@@ -13,7 +13,7 @@ import pytest
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from handover_env.data import generate_synthetic  # noqa: E402
+from handover_env.person.synthetic import generate_synthetic  # noqa: E402
 from handover_eval.cli import evaluate  # noqa: E402
 from handover_eval.methods import MethodOptions, build_agent, fit_agent  # noqa: E402
 

@@ -245,7 +245,7 @@ REAL = (
 @pytest.mark.skipif(not REAL.is_dir(), reason="development copy of the public dataset not present")
 def test_real_recordings_sparse_matches_iaal():
     from agents.gp import GPHyperparameters, exact_gp_reference, fitc_gp
-    from handover_env.data import load_any
+    from handover_env.person.demos import load_any
     from handover_eval import OpenLoopProtocol, evaluate_openloop, summarise
 
     ds = load_any(str(REAL))

@@ -30,7 +30,7 @@ def test_convert_to_a_folder_named_npz_leaves_no_temporary_file(tmp_path: Path, 
 def test_save_removes_its_temporary_file_on_failure(tmp_path: Path, monkeypatch) -> None:
     import numpy as np
 
-    from handover_env.data import generate_synthetic
+    from handover_env.person.synthetic import generate_synthetic
 
     def fail(*args, **kwargs):
         raise OSError("disk full")

@@ -51,8 +51,8 @@ from baselines.rl.envs import (  # noqa: E402
     make_handover_env,
 )
 from baselines.rl.files import env_action_space  # noqa: E402
-from handover_env.data.synthetic import generate_synthetic  # noqa: E402
 from handover_env.envs.observation import ObsLayout  # noqa: E402
+from handover_env.person.synthetic import generate_synthetic  # noqa: E402
 from handover_eval.cli import train  # noqa: E402
 from handover_eval.cli.closedloop import COUNTS  # noqa: E402
 from handover_eval.closedloop.receivers import FIRST_SEED, fold_of, held_out_folds  # noqa: E402

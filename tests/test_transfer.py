@@ -18,7 +18,6 @@ import pytest
 from handover_env.data.__main__ import build_parser, main
 from handover_env.data.dataset import HandoverDataset, stratified_fold_ids
 from handover_env.data.filtering import hampel, lowpass, smooth_track
-from handover_env.data.synthetic import generate_synthetic
 from handover_env.data.transfer.detect import (
     check_recording,
     detect_reach_onset,
@@ -29,6 +28,7 @@ from handover_env.data.transfer.detect import (
 )
 from handover_env.data.transfer.measures import analyse_recording
 from handover_env.data.transfer.report import analyse_file, assign_halves
+from handover_env.person.synthetic import generate_synthetic
 
 RATE = 30.0
 REAL = (

@@ -35,8 +35,8 @@ DEFAULT_KEYWORD = "synthetic"
 
 
 def _load(path: str, skip_bad: bool = False) -> HandoverDataset:
-    from handover_env.data import load_any
     from handover_env.data.public import LoadReport, load_public_dataset
+    from handover_env.person.demos import load_any
 
     if path == DEFAULT_KEYWORD and not Path(path).exists():
         return load_any(None)
@@ -103,7 +103,7 @@ def cmd_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    from handover_env.data.synthetic import generate_synthetic
+    from handover_env.person.synthetic import generate_synthetic
 
     _check_npz_output(args.out)
     start = time.perf_counter()

@@ -5,7 +5,7 @@ their side and takes the object on the move. A walker (:class:`WalkerParams`, dr
 :func:`sample_walker`) and its walk (:mod:`handover_env.person.trajectory`: the pelvis track,
 the shoulder and the hand along it) drive
 
-* the synthetic dataset (:mod:`handover_env.data.synthetic`), and
+* the synthetic dataset (:mod:`handover_env.person.synthetic`), and
 * the env's scripted ID/OOD receivers (:mod:`handover_env.person.receiver`),
 
 so the simulated people and the demonstrations cannot drift apart.

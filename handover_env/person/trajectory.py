@@ -5,7 +5,7 @@ track at a fixed rate (a smooth path onto the passing line, speed drift and ripp
 and meanders, gait sway); :func:`shoulder_position` and :func:`hand_position` place the right
 shoulder and hand on a body of a given height (proportions from
 :mod:`handover_env.person.motion`). Deterministic and pure numpy: the synthetic dataset
-(:mod:`handover_env.data.synthetic`) and the env's scripted receivers
+(:mod:`handover_env.person.synthetic`) and the env's scripted receivers
 (:mod:`handover_env.person.person`) share them.
 """
 

@@ -61,15 +61,22 @@ def _paired(
     return {"diff": d.diff, "low": d.low, "high": d.high, "n": d.n}
 
 
+def _by(rows: Sequence[dict], column: str) -> dict[Any, list[dict]]:
+    """Rows grouped by ``column`` in one pass: values in first-seen order, rows in file order."""
+    out: dict[Any, list[dict]] = {}
+    for r in rows:
+        out.setdefault(r[column], []).append(r)
+    return out
+
+
 def _groups(rows: Sequence[dict], sets: Sequence[str]) -> dict[tuple[str, str], list[dict]]:
-    agents = list(dict.fromkeys(r["agent"] for r in rows))
+    """(agent, set) -> rows, agents in first-seen order, sets in ``sets`` order, then ``all``."""
     out: dict[tuple[str, str], list[dict]] = {}
-    for agent in agents:
-        mine = [r for r in rows if r["agent"] == agent]
+    for agent, mine in _by(rows, "agent").items():
+        per_set = _by(mine, "set")
         for s in sets:
-            chosen = [r for r in mine if r["set"] == s]
-            if chosen:
-                out[(agent, s)] = chosen
+            if s in per_set:
+                out[(agent, s)] = per_set[s]
         out[(agent, ALL)] = mine
     return out
 
@@ -110,19 +117,19 @@ def closedloop_metrics(rows: Sequence[dict], n_boot: int, seed: int) -> dict[str
 def openloop_metrics(rows: Sequence[dict], n_boot: int, seed: int) -> dict[str, dict[str, Any]]:
     """agent -> set (id, ood, all) -> metric -> value, CI, n, fold mean and std."""
     out: dict[str, dict[str, Any]] = {}
-    for agent in dict.fromkeys(r["agent"] for r in rows):
-        mine = [r for r in rows if r["agent"] == agent]
+    for agent, mine in _by(rows, "agent").items():
         for rset, keep in (("id", False), ("ood", True), (ALL, None)):
             chosen = [r for r in mine if keep is None or r["is_ood"] == keep]
             if not chosen:
                 continue
             entry = {}
+            folds = _by(chosen, "fold").values()
             for metric in OPENLOOP_METRICS:
                 ci = _ci([r[metric] for r in chosen], "mean", n_boot,
                          stable_seed(agent, rset, metric, base=seed))
                 per_fold = []
-                for f in dict.fromkeys(r["fold"] for r in chosen):
-                    v = _finite([r[metric] for r in chosen if r["fold"] == f])
+                for fold_rows in folds:
+                    v = _finite([r[metric] for r in fold_rows])
                     if v.size:
                         per_fold.append(float(v.mean()))
                 fold_mean = float(np.mean(per_fold)) if per_fold else math.nan

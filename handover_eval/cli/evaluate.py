@@ -227,7 +227,8 @@ def build_parser() -> argparse.ArgumentParser:
 def load_dataset(path: str | None, quick: bool, seed: int, progress: bool = True):
     """``--data``: the synthetic default (with --quick), a canonical .npz or a public-dataset folder
     (``progress``: its loading bar)."""
-    from handover_env.data import generate_synthetic, load_any
+    from handover_env.person.demos import load_any
+    from handover_env.person.synthetic import generate_synthetic
 
     if path is not None and not Path(path).exists():
         raise FileNotFoundError(f"--data {path}: no such file or folder")

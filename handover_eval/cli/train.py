@@ -62,17 +62,17 @@ def load_data(path: str | None, smoke: bool, seed: int) -> HandoverDataset:
 
     from handover_env.data.dataset import HandoverDataset
     try:
-        from handover_env.data import load_any
+        from handover_env.person.demos import load_any
     except ImportError:
         load_any = None
     if path is None and smoke:
-        from handover_env.data.synthetic import generate_synthetic
+        from handover_env.person.synthetic import generate_synthetic
 
         return generate_synthetic(n=SMOKE_EPISODES, ood_fraction=0.125, seed=seed)
     if load_any is not None:
         data = load_any(path)
     elif path is None:
-        from handover_env.data.synthetic import generate_synthetic
+        from handover_env.person.synthetic import generate_synthetic
 
         data = generate_synthetic(n=1000, ood_fraction=0.1, seed=0)
     elif Path(path).is_dir():

@@ -5,7 +5,10 @@ Everything here is plain numpy and deterministic for a given seed:
 * :func:`wilson_interval`: the 95 % Wilson score interval of a success rate k / n (it stays inside
   [0, 1] and is sensible at k = 0 or k = n, where the normal interval collapses).
 * :func:`bootstrap_ci`: a percentile bootstrap CI of a statistic (median or mean) of one sample,
-  all resamples drawn at once as a (B, n) index matrix.
+  the resamples drawn as a (B, n) index matrix in blocks of rows of at most
+  :data:`BOOTSTRAP_BLOCK` indices, so memory stays bounded for any n; numpy's generator draws
+  the same integers in the same order whatever the blocks, so the CI is that of one (B, n) draw,
+  bit for bit (``tests/test_security_results.py``).
 * :func:`pair_up`: aligns two agents' per-episode values on the same receivers (by key, never
   by row order) and drops receivers where either value is undefined.
 * :func:`paired_difference`: the median (or mean) of the paired differences agent - reference,
@@ -25,6 +28,9 @@ import numpy as np
 
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
 N_BOOTSTRAP = 2000
+#: Most indices (rows x n) of one block of bootstrap resamples: 32 MiB of int64 indices and as
+#: much for the values they pick, whatever the sample size.
+BOOTSTRAP_BLOCK = 1 << 22
 
 
 def wilson_interval(k: int, n: int, z: float = Z95) -> tuple[float, float]:
@@ -77,8 +83,12 @@ def bootstrap_ci(
     if n_boot < 1 or not 0 < level < 1:
         raise ValueError(f"need n_boot >= 1 and 0 < level < 1, got {n_boot}, {level}")
     rng = np.random.default_rng(seed)
-    idx = rng.integers(0, v.size, size=(n_boot, v.size))
-    boot = _statistic(v[idx], stat, axis=1)
+    rows = max(1, BOOTSTRAP_BLOCK // v.size)
+    boot = np.empty(n_boot, dtype=np.float64)
+    for start in range(0, n_boot, rows):
+        idx = rng.integers(0, v.size, size=(min(rows, n_boot - start), v.size))
+        boot[start : start + idx.shape[0]] = _statistic(v[idx], stat, axis=1)
+        del idx
     alpha = (1.0 - level) / 2.0
     lo, hi = np.quantile(boot, [alpha, 1.0 - alpha])
     return est, float(lo), float(hi)

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 import handover_env  # noqa: E402,F401
 from agents.nonparametric import NonparametricAgent  # noqa: E402
 from agents.static import StaticAgent  # noqa: E402
-from handover_env.data import load_any  # noqa: E402
+from handover_env.person.demos import load_any  # noqa: E402
 from handover_env.rollout import run_episode  # noqa: E402
 
 VIDEO_FPS = 30

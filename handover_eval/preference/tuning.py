@@ -115,7 +115,7 @@ class EpisodeRunner:
     # ------------------------------------------------------------------ lazy pieces
     def dataset(self) -> Any:
         if self._dataset is None:
-            from handover_env.data import load_any
+            from handover_env.person.demos import load_any
 
             self._dataset = load_any(None)
         return self._dataset
