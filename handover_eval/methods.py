@@ -23,6 +23,7 @@ import numpy as np
 
 from agents.base import Agent
 from handover_env.data.dataset import HandoverDataset
+from handover_eval.reporting import write_text
 
 METHODS: tuple[str, ...] = ("ours", "iaal", "act", "bc_mlp", "cv")
 LEARNED: frozenset[str] = frozenset({"act", "bc_mlp"})
@@ -218,7 +219,7 @@ def is_complete(folder: str | os.PathLike, key_src: str) -> bool:
 
 def mark_complete(folder: str | os.PathLike, key_src: str) -> None:
     """Mark a checkpoint folder finished (written last, after the checkpoint itself)."""
-    (Path(folder) / COMPLETE).write_text(key_src)
+    write_text(key_src, Path(folder) / COMPLETE)
 
 
 def fresh_folder(folder: str | os.PathLike) -> Path:

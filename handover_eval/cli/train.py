@@ -44,6 +44,7 @@ from handover_eval.cli.args import (
     positive_float,
 )
 from handover_eval.output_lock import OutputLock
+from handover_eval.reporting import write_text
 
 if TYPE_CHECKING:  # heavy imports happen after argument parsing, so --help is instant
     from handover_env.data.dataset import HandoverDataset
@@ -126,7 +127,7 @@ def report(
                 f"{r['rms_3d_std']:.2f} mm, per axis {r['rms_axis_mm']:.2f} +- "
                 f"{r['rms_axis_std']:.2f} mm"
             )
-    (out / "train_summary.json").write_text(json.dumps(summary, indent=1))
+    write_text(json.dumps(summary, indent=1), out / "train_summary.json")
 
 
 # ---------------------------------------------------------------------------- commands

@@ -66,13 +66,9 @@ def load_episode_cache(runner: EpisodeRunner, path: Path) -> None:
 
 def save_episode_cache(runner: EpisodeRunner, path: Path) -> None:
     """Write ``runner``'s episode cache to ``path`` (JSON lines, each with its sensing profile)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    with tmp.open("w") as f:
-        for key, info in runner.cache.items():
-            f.write(json.dumps({"key": list(key[:-1]) + [list(key[-1])], "info": info,
-                                "sensing": runner.sensing}) + "\n")
-    tmp.replace(path)
+    write_text("".join(json.dumps({"key": list(key[:-1]) + [list(key[-1])], "info": info,
+                                   "sensing": runner.sensing}) + "\n"
+                       for key, info in runner.cache.items()), path)
 
 
 def run_check(config: CheckConfig, out: Path, progress: bool = True,
