@@ -44,15 +44,18 @@ CSP = ("default-src 'none'; img-src data:; style-src 'unsafe-inline'; "
        "script-src 'unsafe-inline'; base-uri 'none'; form-action 'none'")
 STYLE = """
 body { font: 14px/1.45 system-ui, -apple-system, "Segoe UI", sans-serif; margin: 1.5em auto;
-       max-width: 1300px; padding: 0 1em; color: #1b1f24; }
+       max-width: 1500px; padding: 0 1em; color: #1b1f24; }
+div.scroll { overflow-x: auto; }
 h1 { font-size: 1.6em; margin-bottom: 0.2em; } h1 small { color: #57606a; font-weight: normal; }
 h2 { border-bottom: 1px solid #d0d7de; padding-bottom: 0.2em; margin-top: 1.8em; }
 table { border-collapse: collapse; margin: 0.6em 0; font-variant-numeric: tabular-nums; }
 th, td { border: 1px solid #d0d7de; padding: 0.25em 0.55em; text-align: right; }
+td { white-space: nowrap; }
 th { background: #f6f8fa; vertical-align: bottom; }
+th.group { text-align: center; font-weight: normal; color: #57606a; }
 td.text, th.text { text-align: left; }
-table.sortable th { cursor: pointer; user-select: none; }
-table.sortable th::after { content: " \\2195"; color: #8c959f; }
+table.sortable th:not(.group) { cursor: pointer; user-select: none; }
+table.sortable th:not(.group)::after { content: " \\2195"; color: #8c959f; }
 table.sortable th[aria-sort=ascending]::after { content: " \\2191"; color: #1b1f24; }
 table.sortable th[aria-sort=descending]::after { content: " \\2193"; color: #1b1f24; }
 tbody tr:nth-child(even) { background: #f6f8fa; }
@@ -64,13 +67,13 @@ pre { background: #f6f8fa; padding: 0.6em; overflow-x: auto; max-width: 100%; }
 dl { display: grid; grid-template-columns: max-content auto; gap: 0.1em 1em; }
 dt { color: #57606a; } dd { margin: 0; word-break: break-all; }
 section.agent { margin-top: 1.4em; }
-small.sub { color: #57606a; }
+small.sub, span.ci { display: block; color: #57606a; font-size: 0.85em; }
 """
 #: Sorts a ``table.sortable`` by the clicked column: numbers as numbers, text as text, cells
 #: without a value last.
 SCRIPT = """
 document.querySelectorAll("table.sortable").forEach(function (table) {
-  var heads = table.tHead.rows[0].cells;
+  var heads = table.tHead.rows[table.tHead.rows.length - 1].cells;
   Array.prototype.forEach.call(heads, function (th, col) {
     th.tabIndex = 0;
     function sort() {
@@ -136,14 +139,33 @@ def _td(text: str, sort: str | None = None, cls: str = "", inner: str | None = N
     return f"<td{attrs}>{escape(text) if inner is None else inner}</td>"
 
 
+def _with_ci(text: str) -> str:
+    """A value cell's HTML: the value, then its CI on its own line (the text is unchanged)."""
+    value, sep, rest = text.partition(" [")
+    if not sep:
+        return escape(text)
+    return f'{escape(value)} <span class="ci">[{escape(rest)}</span>'
+
+
+def _td_ci(text: str, sort: str, inner_extra: str = "") -> str:
+    """A cell of a value and its CI (:func:`pct`, :func:`ci`), sorted by the value."""
+    return _td(text, sort, inner=_with_ci(text) + inner_extra)
+
+
 def _table(header: Sequence[str], rows: Iterable[str], table_id: str,
-           sortable: bool = True, text: Sequence[int] = (0,)) -> str:
-    """A table of already-built ``<tr>`` rows; the headers of columns ``text`` left-aligned."""
+           sortable: bool = True, text: Sequence[int] = (0,),
+           groups: Sequence[tuple[str, int]] = ()) -> str:
+    """A table of already-built ``<tr>`` rows; the headers of columns ``text`` left-aligned.
+
+    ``groups``: an optional first header row of (label, columns spanned); sorting uses the
+    last header row."""
     ths = "".join(f'<th class="text">{escape(h)}</th>' if i in text else f"<th>{escape(h)}</th>"
                   for i, h in enumerate(header))
+    top = ("<tr>" + "".join(f'<th class="group" colspan="{n}">{escape(label)}</th>'
+                            for label, n in groups) + "</tr>") if groups else ""
     attrs = f' id="{table_id}"' + (' class="sortable"' if sortable else "")
-    return (f"<table{attrs}><thead><tr>{ths}</tr></thead><tbody>\n" + "\n".join(rows)
-            + "\n</tbody></table>\n")
+    return (f'<div class="scroll"><table{attrs}><thead>{top}<tr>{ths}</tr></thead><tbody>\n'
+            + "\n".join(rows) + "\n</tbody></table></div>\n")
 
 
 def ranked(results: Sequence[tuple[str, dict]]) -> list[tuple[str, dict]]:
@@ -167,21 +189,24 @@ def _ranking(results: Sequence[tuple[str, dict]]) -> str:
                      f'<a href="#agent-{i}">{escape(name)}</a>')]
         for s in ("all", *CLOSEDLOOP_SETS):
             c = _get(cl, s, "success")
-            cells.append(_td(pct(c), _num(_get(c, "value"))))
+            cells.append(_td_ci(pct(c), _num(_get(c, "value"))))
         c = _get(cl, "all", "handover_time")
-        cells.append(_td(ci(c, 2), _num(_get(c, "value"))))
+        cells.append(_td_ci(ci(c, 2), _num(_get(c, "value"))))
         c = _get(cl, "far-pass", "paired", "success")
-        cells.append(_td(ci(c, 2, "diff"), _num(_get(c, "diff"))))
+        cells.append(_td_ci(ci(c, 2, "diff"), _num(_get(c, "diff"))))
         for m in ("rms_now_axis_mm", "ade_10_mm", "fde_10_mm"):
             c = _get(ol, "all", m)
-            cells.append(_td(ci(c, 1), _num(_get(c, "value"))))
+            cells.append(_td_ci(ci(c, 1), _num(_get(c, "value"))))
         rows.append(f'<tr id="rank-{i}">' + "".join(cells) + "</tr>")
     return _table(RANK_HEADER, rows, "ranking", text=(1,))
 
 
 CLOSED_HEADER = ["set", "episodes", "success", "successes", "handover time (s)",
                  f"success − {REFERENCE_AGENT}", f"handover time − {REFERENCE_AGENT} (s)",
-                 *(f"first failure: {c}" for c in CHECKS)]
+                 *CHECKS]
+#: The closed-loop table's header groups: the episode columns, then the first-failure counts.
+CLOSED_GROUPS = [("", len(CLOSED_HEADER) - len(CHECKS)),
+                 ("episodes by first failed check (docs/benchmark.md)", len(CHECKS))]
 
 
 def _closed_rows(cl: dict, rank: int) -> str:
@@ -193,15 +218,15 @@ def _closed_rows(cl: dict, rank: int) -> str:
         succ, ht = m.get("success"), m.get("handover_time")
         ps, pt = _get(m, "paired", "success"), _get(m, "paired", "handover_time")
         cells = [_td(s, s, "text"), _td(str(m["n"]), _num(m["n"])),
-                 _td(pct(succ), _num(_get(succ, "value"))),
+                 _td_ci(pct(succ), _num(_get(succ, "value"))),
                  _td(str(_get(succ, "k")), _num(_get(succ, "k"))),
-                 _td(ci(ht, 2), _num(_get(ht, "value"))),
-                 _td(ci(ps, 2, "diff"), _num(_get(ps, "diff"))),
-                 _td(ci(pt, 2, "diff"), _num(_get(pt, "diff")))]
+                 _td_ci(ci(ht, 2), _num(_get(ht, "value"))),
+                 _td_ci(ci(ps, 2, "diff"), _num(_get(ps, "diff"))),
+                 _td_ci(ci(pt, 2, "diff"), _num(_get(pt, "diff")))]
         ff = m.get("first_failure") or {}
         cells += [_td(str(ff.get(c, NONE)), _num(ff.get(c))) for c in CHECKS]
         rows.append(f'<tr data-set="{escape(s)}">' + "".join(cells) + "</tr>")
-    return _table(CLOSED_HEADER, rows, f"closed-{rank}")
+    return _table(CLOSED_HEADER, rows, f"closed-{rank}", groups=CLOSED_GROUPS)
 
 
 def _open_rows(ol: dict, rank: int) -> str:
@@ -217,9 +242,8 @@ def _open_rows(ol: dict, rank: int) -> str:
             folds = (f"folds {c['fold_mean']:.1f} ± {c['fold_std']:.1f}"
                      if c and c.get("fold_mean") is not None and c.get("fold_std") is not None
                      else "")
-            inner = escape(ci(c, 1)) + (f'<br><small class="sub">{escape(folds)}</small>'
-                                        if folds else "")
-            cells.append(_td(ci(c, 1), _num(_get(c, "value")), inner=inner))
+            cells.append(_td_ci(ci(c, 1), _num(_get(c, "value")),
+                                f' <small class="sub">{escape(folds)}</small>' if folds else ""))
         rows.append(f'<tr data-set="{escape(s)}">' + "".join(cells) + "</tr>")
     return _table(["set", "episodes", *(f"{v} (mm)" for v in OPENLOOP_METRICS.values())], rows,
                   f"open-{rank}")
