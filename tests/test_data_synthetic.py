@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handover_env.data import generate_synthetic, load_any, load_public_dataset
+from handover_env.data import load_public_dataset
 from handover_env.data.stats import ACCEPTANCE_STATISTICS, compare_statistics, episode_statistics
-from handover_env.person.synthetic import NoiseModel, synthesize_episode
+from handover_env.person.demos import load_any
+from handover_env.person.synthetic import NoiseModel, generate_synthetic, synthesize_episode
 
 REAL = (
     Path(__file__).resolve().parents[1].parent
