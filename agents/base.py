@@ -1,9 +1,15 @@
-"""The one agent interface that every planner and baseline implements.
+"""The two roles of an agent: a :class:`Predictor` and a :class:`Policy`, and :class:`Agent`,
+both.
 
-Open-loop (Table I, figures): ``fit(dataset)`` then ``predict(receiver_history) -> (H, 3)``, the
-predicted giver (= robot target) positions for the next H frames at the dataset rate.
-Closed-loop (the envs): ``reset()`` at episode start, then ``act(obs) -> (4,)`` once per 30 Hz
-env step, a Cartesian target (x, y, z, yaw) for the impedance controller.
+* :class:`Predictor`, open-loop (Table I, figures): ``fit(dataset)`` then
+  ``predict(receiver_history) -> (H, 3)``, the predicted giver (= robot target) positions for
+  the next H frames at the dataset rate.
+* :class:`Policy`, closed-loop (the envs): ``reset()`` at episode start, then
+  ``act(obs) -> (4,)`` once per 30 Hz env step, a Cartesian target (x, y, z, yaw) for the
+  impedance controller.
+* :class:`Agent`: a predictor that also acts (every planner and learned baseline here, and what a
+  benchmark plug-in is: it is scored on both tracks). A policy that only acts (the RL policy)
+  subclasses :class:`Policy` alone and has no ``predict``.
 """
 
 from __future__ import annotations
@@ -29,13 +35,27 @@ def validate_history(receiver_history: np.ndarray, min_frames: int = 1) -> np.nd
     return arr
 
 
-class Agent(ABC):
-    """Base class of all agents. Subclasses set ``horizon`` (H, frames at 30 Hz)."""
+class Policy(ABC):
+    """Acts in a handover env: ``reset()`` at each episode's start, ``act(obs)`` every step."""
+
+    @abstractmethod
+    def reset(self) -> None:
+        """Forget the previous episode (streaming state, ensemble buffers)."""
+
+    @abstractmethod
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """One 30 Hz decision in an env: (x, y, z, yaw) float32 Cartesian target."""
+
+
+class Predictor(ABC):
+    """Predicts the giver's next ``horizon`` positions (H frames at 30 Hz) from the receiver's
+    track, after ``fit`` on demonstrations."""
 
     horizon: int = 30
 
-    def fit(self, dataset: HandoverDataset) -> Agent:  # noqa: B027 - reactive agents need no data
-        """Learn from demonstrations; returns ``self``. Agents without a learned model skip it."""
+    def fit(self, dataset: HandoverDataset) -> Predictor:  # noqa: B027 - a rule learns nothing
+        """Learn from demonstrations; returns ``self``. A predictor without a learned model
+        keeps this default, which learns nothing."""
         return self
 
     @abstractmethod
@@ -74,10 +94,8 @@ class Agent(ABC):
         """
         return self.predict_sequence(episode.receiver_xy, query_times)
 
-    @abstractmethod
-    def reset(self) -> None:
-        """Forget the previous episode (streaming state, ensemble buffers)."""
 
-    @abstractmethod
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        """One 30 Hz decision in an env: (x, y, z, yaw) float32 Cartesian target."""
+class Agent(Predictor, Policy):
+    """A :class:`Predictor` that also acts as a :class:`Policy`: scored open-loop and
+    closed-loop. Subclasses set ``horizon`` (H, frames at 30 Hz) and implement ``predict``,
+    ``reset`` and ``act``."""

@@ -19,7 +19,7 @@ def run_episode(
 
     Args:
         env: a handover env (or any Gymnasium env whose actions ``agent.act`` produces).
-        agent: anything with ``reset()`` and ``act(obs)`` (an :class:`agents.base.Agent`).
+        agent: anything with ``reset()`` and ``act(obs)`` (an :class:`agents.base.Policy`).
         seed, options: passed to ``env.reset``.
         on_step: called after every step with the step index (0-based) and that step's ``info``.
 
