@@ -42,7 +42,7 @@ def test_importing_the_library_leaves_the_hugging_face_variables_alone():
     modules = [
         "handover_env",
         "handover_env.data.lerobot_export",
-        "handover_env.data.__main__",
+        "handover_eval.cli.data",
         "agents.nonparametric",
         "handover_eval.methods",
         "handover_eval.act_folds",

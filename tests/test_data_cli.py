@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from handover_env.data import HandoverDataset
-from handover_env.data.__main__ import build_parser, main
+from handover_eval.cli.data import build_parser, main
 
 REPO = Path(__file__).resolve().parents[1]
 COMMANDS = ("info", "convert", "synth", "compare", "export-lerobot", "plot")
@@ -125,7 +125,7 @@ def test_export_lerobot_calls_the_exporter(
 def test_module_runs_as_a_subprocess(tmp_path: Path) -> None:
     out = tmp_path / "s.npz"
     result = subprocess.run(
-        [sys.executable, "-m", "handover_env.data", "synth", "--n", "6", str(out)],
+        [sys.executable, "-m", "handover_eval.cli.data", "synth", "--n", "6", str(out)],
         cwd=REPO,
         capture_output=True,
         text=True,

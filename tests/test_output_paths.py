@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from handover_env.data.__main__ import main
+from handover_eval.cli.data import main
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -199,8 +199,8 @@ def _giver_replay_on_held_out(env) -> None:
     from handover_env.data.dataset import stratified_fold_ids
     from handover_env.data.filtering import smooth_track
     from handover_env.data.public import list_public_files
-    from handover_env.data.transfer.detect import detect_transfer
     from handover_env.person.recording import load_recording
+    from handover_eval.calibration.detect import detect_transfer
 
     files = list_public_files(DATA)
     folds = stratified_fold_ids(

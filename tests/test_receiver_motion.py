@@ -228,7 +228,7 @@ def test_ood_walkers_draw_their_calibrated_ranges_and_keep_away_from_the_giver()
 
 
 def test_walk_statistics_of_crafted_walks() -> None:
-    from handover_env.data.transfer.walks import PAUSE_SPEED, walk_statistics
+    from handover_eval.calibration.walks import PAUSE_SPEED, walk_statistics
 
     t = np.arange(0, 4.0, 1 / 30)
     straight = np.stack([2.0 - 0.8 * t, np.full_like(t, -0.9)], axis=-1)
@@ -262,7 +262,7 @@ def test_walk_statistics_of_crafted_walks() -> None:
 
 
 def test_scripted_ood_walks_differ_from_id_walks_as_the_recordings_do() -> None:
-    from handover_env.data.transfer.walks_report import measure_walkers, summary_of
+    from handover_eval.calibration.walks_report import measure_walkers, summary_of
 
     ident = summary_of(measure_walkers("id", 60, progress=False)[0])
     ood_walks, modes = measure_walkers("ood", 60, progress=False)
@@ -277,7 +277,7 @@ def test_scripted_ood_walks_differ_from_id_walks_as_the_recordings_do() -> None:
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="public dataset copy not found at ../shared/data")
 def test_scripted_ood_walkers_match_the_recorded_ood_walks_within_20_percent(tmp_path) -> None:
-    from handover_env.data.transfer.walks_report import CHOSEN, run_walk_stats
+    from handover_eval.calibration.walks_report import CHOSEN, run_walk_stats
 
     summary, written = run_walk_stats(DATA, tmp_path, walkers=400, progress=False)
     assert summary["recordings"] == 875 and summary["counts"]["recorded/calibration/ood"] == 40

@@ -2,7 +2,7 @@
 
 Pure functions of the person's remaining path (handover_env.person.receiver_rules) on walks
 built here: straight, pausing, turning back; plus the same rules run on synthetic recordings by
-the calibration analysis (handover_env.data.transfer.decisions).
+the calibration analysis (handover_eval.calibration.decisions).
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ import math
 import numpy as np
 import pytest
 
-from handover_env.data.transfer.decisions import reach_fit, rule_check
 from handover_env.person.receiver_rules import (
     MIN_TAKE,
     TAKE_CLOSEST,
@@ -23,6 +22,7 @@ from handover_env.person.receiver_rules import (
     meet,
     take_distance,
 )
+from handover_eval.calibration.decisions import reach_fit, rule_check
 
 RATE = 30.0
 BEHIND, WITHIN = 0.35, 1.2

@@ -23,9 +23,9 @@ torch.set_num_threads(1)
 from baselines_toy import toy_dataset  # noqa: E402
 
 from baselines.checkpoint_io import CheckpointError  # noqa: E402
-from handover_env.data.__main__ import main  # noqa: E402
 from handover_env.data.lerobot_export import export_lerobot, read_sidecar  # noqa: E402
 from handover_env.paths import UnsafePathError  # noqa: E402
+from handover_eval.cli.data import main  # noqa: E402
 
 TINY = {"policy": {"dim_model": 16, "n_heads": 2, "dim_feedforward": 32, "n_encoder_layers": 1,
                    "latent_dim": 4},

@@ -29,7 +29,7 @@ PICKLES = {
 CHILD = r"""
 import contextlib, io, json, resource, sys
 resource.setrlimit(resource.RLIMIT_AS, ({limit}, {limit}))
-from handover_env.data.__main__ import main
+from handover_eval.cli.data import main
 results = []
 for argv in json.loads(sys.argv[1]):
     err, out = io.StringIO(), io.StringIO()

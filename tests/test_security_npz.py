@@ -12,9 +12,9 @@ from crafted import lying_header_npy, many_members_npz, npz_members, write_npz
 
 from handover_env.data import DatasetError, HandoverDataset
 from handover_env.data import npz as npz_io
-from handover_env.data.__main__ import main
 from handover_env.data.dataset import MAX_RATE_HZ, MIN_RATE_HZ
 from handover_env.data.limits import MAX_ABS_COORD_M
+from handover_eval.cli.data import main
 
 
 @pytest.fixture()

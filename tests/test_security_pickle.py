@@ -20,9 +20,9 @@ from crafted import (
 )
 
 from handover_env.data import DatasetError, load_public_dataset
-from handover_env.data.__main__ import main
 from handover_env.data.limits import MAX_MEMO_ENTRIES, MAX_PICKLE_BYTES, MAX_PICKLE_DEPTH
 from handover_env.data.public import LoadReport, load_public_file
+from handover_eval.cli.data import main
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -36,7 +36,7 @@ def test_deep_nesting_is_refused_in_a_child_process_that_survives(tmp_path: Path
     write_good_pickle(folder / "motion_normal_0.pkl")
     write_good_pickle(folder / "motion_normal_2.pkl", seed=2)
     code = (
-        "import sys; from handover_env.data.__main__ import main; "
+        "import sys; from handover_eval.cli.data import main; "
         f"sys.exit(main(['convert', '--skip-bad', {str(folder)!r}, {str(tmp_path / 'out.npz')!r}]))"
     )
     result = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,

@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handover_env.data.__main__ import main
-from handover_env.data.sensing import sensing_figures, track_jitter
 from handover_env.person.motion import sample_walker
 from handover_env.person.trajectory import base_trajectory
 from handover_env.sensors import Camera, make_profile
+from handover_eval.calibration.sensing import sensing_figures, track_jitter
+from handover_eval.cli.data import main
 
 REAL = Path(os.environ.get("HANDOVER_PUBLIC_DIR", "") or (
     Path(__file__).resolve().parents[1].parent

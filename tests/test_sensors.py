@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from handover_env.data.sensing import ar1_highpass, track_jitter
 from handover_env.person.motion import sample_walker
 from handover_env.person.trajectory import base_trajectory
 from handover_env.sensors import (
@@ -19,6 +18,7 @@ from handover_env.sensors import (
     make_profile,
 )
 from handover_env.sensors.profiles import CAMERA_FIELDS, CONTROLLER_FIELDS, WRIST_FIELDS
+from handover_eval.calibration.sensing import ar1_highpass, track_jitter
 
 DT_TICK = 0.005  # the env's 200 Hz controller tick
 GRAVITY_SF = np.array([0.0, 0.0, 9.81])  # accelerometer reading of a payload at rest

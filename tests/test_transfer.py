@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handover_env.data.__main__ import build_parser, main
 from handover_env.data.dataset import HandoverDataset, stratified_fold_ids
 from handover_env.data.filtering import hampel, lowpass, smooth_track
-from handover_env.data.transfer.detect import (
+from handover_env.person.synthetic import generate_synthetic
+from handover_eval.calibration.detect import (
     check_recording,
     detect_reach_onset,
     detect_release,
@@ -26,9 +26,9 @@ from handover_env.data.transfer.detect import (
     to_body_frame,
     walking_frame,
 )
-from handover_env.data.transfer.measures import analyse_recording
-from handover_env.data.transfer.report import analyse_file, assign_halves
-from handover_env.person.synthetic import generate_synthetic
+from handover_eval.calibration.measures import analyse_recording
+from handover_eval.calibration.report import analyse_file, assign_halves
+from handover_eval.cli.data import build_parser, main
 
 RATE = 30.0
 REAL = (
@@ -307,7 +307,7 @@ def test_transfer_stats_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
 
 
 def test_figures(tmp_path: Path) -> None:
-    from handover_env.data.transfer.figures import write_figures
+    from handover_eval.calibration.figures import write_figures
 
     results = [analyse_file(p) for p in sorted(_write_folder(tmp_path / "whole_motions").iterdir())]
     assign_halves(results, folds=2, calibration_folds=1)

@@ -61,6 +61,41 @@ def curve_seed(k: int) -> int:
     return TRAIN_SEED_START + k
 
 
+#: Upper bounds of an :class:`RLConfig`, far above any real run (the defaults: 200 000 steps,
+#: 2 envs, a 64 x 64 network of 20 809 parameters, 30 frames of history) but low enough that a
+#: crafted ``config.json`` cannot make a load allocate more than about 40 MB or take more than a
+#: few seconds (tests/test_security_rl.py). Steps, envs and widths are train.py's own flag bounds.
+MAX_STEPS = 10_000_000
+MAX_ENVS = 64
+MAX_WIDTH = 4096
+MAX_LAYERS = 16
+#: The checkpoint's float32 values (2**23: 32 MiB; a 64 x 64 policy has 20 809 (PPO), 53 004 (SAC)).
+MAX_POLICY_PARAMS = 2**23
+#: 30 s of 30 Hz camera frames (the paper's observation holds 1 s, 30 frames).
+MAX_HISTORY = 900
+MAX_SEED = 2**32 - 1
+#: (low, high) of each integer field.
+INT_LIMITS = {
+    "steps": (1, MAX_STEPS), "n_envs": (1, MAX_ENVS), "seed": (0, MAX_SEED),
+    "n_steps": (1, 100_000), "batch_size": (1, 100_000), "n_epochs": (1, 1000),
+    "folds": (2, 100), "split_seed": (0, MAX_SEED), "curve_episodes": (1, CURVE_SEEDS),
+    "eval_every": (1, MAX_STEPS), "history": (2, MAX_HISTORY),
+}
+#: (low, high, low excluded) of each float field: m, rad, and plain numbers.
+FLOAT_LIMITS = {
+    "residual_xyz": (0.0, 2.0, True), "residual_yaw": (0.0, math.pi, True),
+    "learning_rate": (0.0, 1.0, True), "gamma": (0.0, 1.0, True),
+    "log_std_init": (-20.0, 2.0, False), "ent_coef": (-10.0, 10.0, False),
+    "shaping": (0.0, 1000.0, False),
+    "p_id": (0.0, 1.0, False), "p_ood": (0.0, 1.0, False), "p_replay": (0.0, 1.0, False),
+}
+
+
+def _short(arch: tuple) -> str:
+    """``net_arch`` for a message (a crafted one may hold millions of widths)."""
+    return repr(tuple(arch)) if len(arch) <= 8 else f"({', '.join(map(str, arch[:8]))}, ...)"
+
+
 #: A ``--quick`` run's settings (tests, smoke runs): never for reported numbers.
 QUICK = {"steps": 256, "n_envs": 1, "n_steps": 64, "batch_size": 32, "n_epochs": 2,
          "net_arch": (16, 16), "eval_every": 128, "curve_episodes": 2, "p_replay": 0.0}
@@ -144,28 +179,31 @@ class RLConfig:
             object.__setattr__(self, "base", "")
         if self.sensing not in SENSING:
             raise ValueError(f"sensing must be one of {list(SENSING)}, got {self.sensing!r}")
-        for name in ("residual_xyz", "residual_yaw", "learning_rate"):
+        for name, (low, high, open_low) in FLOAT_LIMITS.items():
             v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
-        if not (0 < self.gamma < 1) or not math.isfinite(self.shaping) or self.shaping < 0:
-            raise ValueError("gamma must be in (0, 1) and shaping a finite number >= 0")
-        if not math.isfinite(self.log_std_init) or not math.isfinite(self.ent_coef):
-            raise ValueError("log_std_init and ent_coef must be finite")
-        if not self.net_arch or any(w < 1 for w in self.net_arch):
-            raise ValueError(f"net_arch must be positive widths, got {self.net_arch!r}")
-        for name in ("steps", "n_envs", "n_steps", "batch_size", "n_epochs", "eval_every",
-                     "curve_episodes", "history"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)!r}")
-        if self.seed < 0 or self.split_seed < 0:
-            raise ValueError("seeds must be >= 0")
+            if not (math.isfinite(v) and (v > low if open_low else v >= low) and v <= high):
+                raise ValueError(f"{name} must be a finite number in {'(' if open_low else '['}"
+                                 f"{low:g}, {high:g}], got {v!r}")
+        if not self.gamma < 1:
+            raise ValueError(f"gamma must be in (0, 1), got {self.gamma!r}")
+        for name, (low, high) in INT_LIMITS.items():
+            v = getattr(self, name)
+            if not low <= v <= high:
+                raise ValueError(f"{name} must be in [{low:,}, {high:,}], got {v!r}")
+        if not 1 <= len(self.net_arch) <= MAX_LAYERS or any(
+                not 1 <= w <= MAX_WIDTH for w in self.net_arch):
+            raise ValueError(f"net_arch must be 1 to {MAX_LAYERS} positive widths of at most "
+                             f"{MAX_WIDTH}, got {_short(self.net_arch)}")
         training_folds(self.folds)
         probs = (self.p_id, self.p_ood, self.p_replay)
-        if any(not (math.isfinite(p) and p >= 0) for p in probs) or sum(probs) <= 0:
+        if sum(probs) <= 0:
             raise ValueError(f"p_id, p_ood, p_replay must be >= 0 and not all 0, got {probs}")
-        if self.curve_episodes > CURVE_SEEDS:
-            raise ValueError(f"curve_episodes must be <= {CURVE_SEEDS}")
+        from baselines.rl.layout import parameter_count
+
+        n = parameter_count(self)
+        if n > MAX_POLICY_PARAMS:
+            raise ValueError(f"net_arch {_short(self.net_arch)} with history {self.history} makes "
+                             f"a policy of {n:,} parameters, more than {MAX_POLICY_PARAMS:,}")
 
     def probabilities(self, with_replays: bool) -> dict[str, float]:
         """Each receiver kind's probability (normalised; ``replay`` dropped without replays)."""

@@ -46,11 +46,18 @@ def build_model(config: RLConfig, env: Any) -> Any:
 
 
 def build_policy(
-    config: RLConfig, observation_space: gym.spaces.Box, action_space: gym.spaces.Box
+    config: RLConfig, observation_space: gym.spaces.Box, action_space: gym.spaces.Box,
+    initialise: bool = True,
 ) -> BasePolicy:
-    """The policy :func:`build_model` makes, without an env or an algorithm (for loading)."""
+    """The policy :func:`build_model` makes, without an env or an algorithm (for loading).
+
+    ``initialise=False`` skips PPO's orthogonal initialisation (a QR decomposition per layer, the
+    bulk of the build's time for wide layers), for a policy whose every weight is then loaded
+    from a checkpoint (its state dict's keys and shapes are the same)."""
     cls = ALGORITHMS[config.algo].policy_aliases["MlpPolicy"]
-    policy = cls(observation_space, action_space, lambda _: config.learning_rate,
-                 **policy_kwargs(config))
+    kwargs = policy_kwargs(config)
+    if not initialise and config.algo == "ppo":
+        kwargs["ortho_init"] = False
+    policy = cls(observation_space, action_space, lambda _: config.learning_rate, **kwargs)
     policy.set_training_mode(False)
     return policy

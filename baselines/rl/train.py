@@ -56,11 +56,24 @@ from baselines.rl.config import (
     curve_seed,
 )
 from baselines.rl.envs import PolicyIO, make_handover_env, training_env
-from baselines.rl.files import TRAINING_STATE, WEIGHTS, read_record, record_of, write_checkpoint
+from baselines.rl.files import (
+    MAX_WALL_S,
+    TRAINING_STATE,
+    WEIGHTS,
+    check_training,
+    read_record,
+    read_weights,
+    record_of,
+    write_checkpoint,
+)
 from baselines.rl.policy import build_model
 
 RESUMABLE = frozenset({"steps", "eval_every"})
 CURVE_KEYS = ("steps", "success_rate", "handover_time", "return", "episodes", "wall_time_s")
+#: Bounds of a learning-curve point read back on resume: a mean handover time (s; an episode
+#: lasts seconds) and a mean return (HandoverReward: ±10 at the end, small per-step costs).
+MAX_HANDOVER_S = 3600.0
+MAX_RETURN = 1e6
 
 
 @dataclass
@@ -178,21 +191,66 @@ def receivers_record(config: RLConfig, data: TrainingData, state: dict) -> dict:
     }
 
 
-def check_state(state: Any, source: Path, config: RLConfig) -> dict:
-    """A ``training_state/state.json`` of this run, or a CheckpointError naming the file."""
+def check_state(state: Any, source: Path, config: RLConfig, training: dict) -> dict:
+    """A ``training_state/state.json`` of this run, or a CheckpointError naming the file and the
+    field: ``steps``, ``episodes`` (one whole count per env) and ``wall_time_s`` within what a
+    run of ``config`` reaches (:func:`~baselines.rl.files.check_training`) and equal to the
+    checkpoint's ``training`` record; every curve point's numbers finite and in range (a
+    handover time NaN when no curve episode succeeded), its steps rising to ``steps``."""
     keys = {"steps", "episodes", "curve", "wall_time_s"}
     if not isinstance(state, dict) or set(state) != keys:
         raise CheckpointError(f"{source}: expected the fields {sorted(keys)}")
     eps = state["episodes"]
-    ok = (isinstance(state["steps"], int) and not isinstance(state["steps"], bool)
-          and state["steps"] >= 0 and isinstance(eps, list) and len(eps) == config.n_envs
-          and all(isinstance(e, int) and not isinstance(e, bool) and e >= 0 for e in eps)
-          and isinstance(state["wall_time_s"], (int, float)) and state["wall_time_s"] >= 0
-          and isinstance(state["curve"], list)
-          and all(isinstance(r, dict) and set(r) == set(CURVE_KEYS) for r in state["curve"]))
-    if not ok:
-        raise CheckpointError(f"{source}: inconsistent RL training state")
+    if not (isinstance(eps, list) and len(eps) == config.n_envs
+            and all(_whole(e) and 0 <= e < RUN_STRIDE // config.n_envs for e in eps)):
+        raise CheckpointError(f"{source}: episodes must be {config.n_envs} whole counts in "
+                              f"[0, {RUN_STRIDE // config.n_envs:,})")
+    mine = {"steps": state["steps"], "episodes": sum(eps), "wall_time_s": state["wall_time_s"]}
+    check_training(mine, config, source)
+    if mine != training:
+        raise CheckpointError(f"{source}: steps, episodes or wall_time_s differ from the "
+                              f"checkpoint's config.json ({mine} != {training})")
+    curve = state["curve"]
+    if not isinstance(curve, list) or not curve:
+        raise CheckpointError(f"{source}: curve must be a non-empty list of points")
+    last = 0
+    for i, row in enumerate(curve):
+        why = _curve_problem(row, last, state["steps"])
+        if why is not None:
+            raise CheckpointError(f"{source}: curve[{i}]: {why}")
+        last = row["steps"]
+    if last != state["steps"]:
+        raise CheckpointError(f"{source}: the curve ends at step {last}, not at steps "
+                              f"{state['steps']}")
     return state
+
+
+def _whole(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _number(v: Any, low: float, high: float) -> bool:
+    return (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            and low <= v <= high)
+
+
+def _curve_problem(row: Any, previous: int, steps: int) -> str | None:
+    """Why ``row`` is not a learning-curve point after step ``previous`` of a run at ``steps``."""
+    if not isinstance(row, dict) or set(row) != set(CURVE_KEYS):
+        return f"expected the fields {sorted(CURVE_KEYS)}"
+    if not _whole(row["steps"]) or not previous <= row["steps"] <= steps:
+        return f"steps must be a whole number in [{previous}, {steps}]"
+    if not _whole(row["episodes"]) or row["episodes"] < 0:
+        return "episodes must be a whole number >= 0"
+    checks = {"success_rate": (0.0, 1.0), "return": (-MAX_RETURN, MAX_RETURN),
+              "wall_time_s": (0.0, MAX_WALL_S)}
+    for key, (low, high) in checks.items():
+        if not _number(row[key], low, high):
+            return f"{key} must be a finite number in [{low:g}, {high:g}]"
+    t = row["handover_time"]
+    if not (isinstance(t, float) and math.isnan(t)) and not _number(t, 0.0, MAX_HANDOVER_S):
+        return f"handover_time must be NaN (no success) or in [0, {MAX_HANDOVER_S:g}] s"
+    return None
 
 
 def save(out: Path, model: Any, io: PolicyIO, config: RLConfig, data: TrainingData,
@@ -219,18 +277,19 @@ def restore(out: Path, model: Any, config: RLConfig) -> dict:
     """Load the last checkpoint in ``out`` into ``model`` (weights, optimisers); its state."""
     recover(out)  # --resume is the command that wrote it: finish its interrupted commit (checked)
     check_loadable(out, [WEIGHTS, f"{TRAINING_STATE}/state.json"], "RL training")
-    _, saved = read_record(out)
+    record, saved = read_record(out)
     diff = sorted(k for k, v in asdict(config).items()
                   if k not in RESUMABLE and asdict(saved)[k] != v)
     if diff:
         raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
     ts = out / TRAINING_STATE
     state_file = ts / "state.json"
-    state = check_state(read_json(state_file, "RL training state", root=out), state_file, config)
-    expected = {f"policy.{k}": v for k, v in expected_of(model.policy.state_dict()).items()}
+    state = check_state(read_json(state_file, "RL training state", root=out), state_file, saved,
+                        record["training"])
+    layout = {k: shape for k, (shape, _) in expected_of(model.policy.state_dict()).items()}
     n = model.observation_space.shape[0]
-    expected["io.offset"] = expected["io.scale"] = ((n,), torch.float32)
-    tensors = load_tensors(out / WEIGHTS, expected)
+    layout = {**{f"policy.{k}": v for k, v in layout.items()}, "io.offset": (n,), "io.scale": (n,)}
+    tensors = read_weights(out / WEIGHTS, layout)
     model.policy.load_state_dict({k[7:]: v for k, v in tensors.items() if k.startswith("policy.")})
     for name, opt in _optimizers(model).items():
         load_optimizer(opt, ts / name)

@@ -4,7 +4,7 @@ how far contact pushed them off their path (``info`` keys ``reach_distance``,
 time lost to slowing down and the slowest speed factor).
 
 ``reach_distance`` is the one reach statistic of the project, defined as for the recordings
-(:func:`handover_env.data.transfer.measures.analyse_recording`'s ``object_shoulder_transfer``): the
+(:func:`handover_eval.calibration.measures.analyse_recording`'s ``object_shoulder_transfer``): the
 distance from the right shoulder joint to the object's centre at the moment the person takes the
 object. The recordings' median is 0.50 m, IQR 0.44-0.56 m
 (``docs/calibration/receiver_calibration.md``).

@@ -87,7 +87,7 @@ OOD_MODES = ("wander", "pause")
 # --------------------------------------------------------------------------------------------
 # OOD walkers (paper Sec. V-A: the receiver wanders or pauses), calibrated to the recorded OOD
 # walks ("motion_variation_*") of the calibration half (Table I folds 0-4) on the statistics of
-# handover_env.data.transfer.walks: total heading change, detour, speed CV, pause duration
+# handover_eval.calibration.walks: total heading change, detour, speed CV, pause duration
 # (docs/calibration/walkers.md, written by `python -m handover_env.data walk-stats`). Half of the
 # OOD walkers mainly wander (a wide looping meander), half mainly pause (a short stop on a path
 # that first swings out sideways): the recorded OOD walks range from loops without a stop to

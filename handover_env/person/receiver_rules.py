@@ -5,7 +5,7 @@ Pure functions of the person's **remaining nominal path** (:class:`PathAhead`: t
 shoulder and the walking direction at every frame still to come, as the person intends to walk
 it, pauses, loops and turn-backs included) and of the object's position and velocity now. The
 same functions decide for :class:`handover_env.person.receiver.Receiver` and are run on the
-recordings by the calibration analysis (:mod:`handover_env.data.transfer.decisions`), which shows
+recordings by the calibration analysis (:mod:`handover_eval.calibration.decisions`), which shows
 that they never declare a recorded object left behind while its recorded transfer is still to
 come (``docs/calibration/receiver_calibration.md``, section "Walks that are not straight").
 
@@ -22,7 +22,7 @@ come (``docs/calibration/receiver_calibration.md``, section "Walks that are not 
   person's comfortable reach), where ``closest`` is the nearest the remaining path comes to the
   object where it is at the reach onset: a person reaches as far as the object is held from
   their path, not always to full extension. The line is the least-squares fit on the
-  calibration half of the recordings (:func:`handover_env.data.transfer.decisions.reach_summary`).
+  calibration half of the recordings (:func:`handover_eval.calibration.decisions.reach_summary`).
   The object's speed toward the receiver before the transfer correlates with the recorded reach
   too (r = +0.51), but it is mostly the object already moving *with* the receiver (median
   -0.21 m/s, i.e. along the walk) around a transfer that the detector dates late, not something a

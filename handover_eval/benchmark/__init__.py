@@ -10,6 +10,8 @@
 * :mod:`.files`: result.json and the per-episode CSVs, written and read back with every field
   checked (reading runs no code).
 * :mod:`.leaderboard`: the ranked table and figure from result files.
-* :mod:`.farpass`: the far-pass stress set's lateral range, derived from the recordings.
 * :mod:`.run`: a whole benchmark run.
+
+The far-pass stress set's lateral range is derived from the recordings by
+:mod:`handover_eval.calibration.farpass` (``evaluate.py far-pass``).
 """

@@ -1,12 +1,13 @@
 """Argument types, checks and flags shared by the command lines of :mod:`handover_eval.cli`
-(``train.py``, ``evaluate.py``).
+(``train.py``, ``evaluate.py``, ``handover-data``).
 
 * :class:`IntRange` (made by :func:`int_in_range`) bounds every integer count flag (iterations,
   participants, walks, episodes, workers, seeds, epochs, steps, ...) by a stated minimum and
   maximum: as an argparse ``type`` it gives argparse's error naming the flag; :func:`check_counts`
   applies the same bounds after parsing for the commands whose bad values are one-line errors of
   the command itself (``evaluate.py``'s open- and closed-loop commands).
-* :func:`positive_float`, :func:`fraction`, :func:`theta_grid`: the other numeric option types.
+* :func:`positive_float`, :func:`fraction`, :func:`closed_fraction`, :func:`theta_grid`: the other
+  numeric option types.
 * :func:`add_backend_arguments`, :func:`backend_from_args`: ``--backend`` / ``--ray-address``.
 * :data:`SEEDS`, :data:`WORKERS`, :data:`FOLDS`, ...: the bounds shared by several commands.
 
@@ -112,6 +113,17 @@ def fraction(text: str) -> float:
     value = positive_float(text)
     if not value < 1:
         raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text}")
+    return value
+
+
+def closed_fraction(text: str) -> float:
+    """argparse type: a float in [0, 1] (a share that may be none or all, e.g. of OOD episodes)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a float, got {text!r}") from None
+    if not 0.0 <= value <= 1.0:  # NaN fails too
+        raise argparse.ArgumentTypeError(f"must be in [0, 1], got {text}")
     return value
 
 

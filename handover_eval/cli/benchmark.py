@@ -104,7 +104,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("far-pass", help="derive the far-pass set's lateral range from recordings",
                        description="Print the quantiles of the recorded pelvis y at the transfer "
                        "and the far-pass range [q05, q25] the protocol uses "
-                       "(handover_eval/benchmark/farpass.py).")
+                       "(handover_eval/calibration/farpass.py).")
     p.add_argument("--data", required=True, metavar="PATH",
                    help="a folder of public-dataset recordings (whole_motions/)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
@@ -169,7 +169,7 @@ def _rescore(args: argparse.Namespace) -> int:
 
 def _far_pass(args: argparse.Namespace) -> int:
     from handover_env.data.public import list_public_files
-    from handover_eval.benchmark.farpass import derivation_text, derive_range
+    from handover_eval.calibration.farpass import derivation_text, derive_range
 
     try:
         if not Path(args.data).is_dir():

@@ -1,6 +1,6 @@
 """Simulated against recorded reach on the replays (issue 23's acceptance on the reach).
 
-For each replayed recording, the recordings' own statistics (:mod:`handover_env.data.transfer`):
+For each replayed recording, the recordings' own statistics (:mod:`handover_eval.calibration`):
 ``object_shoulder_transfer`` (right shoulder to the object's centre when the receiver took it)
 and ``arm_extended`` (reach onset to the hand drawn back to the body); the env's are
 ``reach_distance`` (defined as the first, on the simulated body) and ``arm_extended_time`` (the
@@ -26,7 +26,7 @@ SIMULATED = ("reach_distance", "arm_extended_time")
 def recorded_measures(folder: str | Path, names: Iterable[str]) -> dict[str, dict[str, float]]:
     """``name -> {measure: value}`` of :data:`RECORDED` for each recording ``folder/name.pkl``
     (loaded with the dataset's safe unpickler; NaN where the recording has no transfer)."""
-    from handover_env.data.transfer.report import analyse_file
+    from handover_eval.calibration.report import analyse_file
 
     out = {}
     for name in sorted(set(names)):

@@ -1,11 +1,15 @@
 """The files of an RL run beside its checkpoint: ``train_log.csv`` (the learning curve),
 ``learning_curve.png`` and ``train_summary.json``, rewritten (atomically) after every checkpoint
-from the training state, which the checkpoint holds."""
+from the training state, which the checkpoint holds. ``train_summary.json`` is strict JSON: a
+number that is not finite (a curve point's handover time when none of its episodes succeeded)
+is written as ``null``, never as ``NaN`` or ``Infinity``."""
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
+from typing import Any
 
 from baselines.rl.config import RLConfig
 from handover_eval.reporting import write_csv, write_png, write_text
@@ -30,4 +34,17 @@ def write_summary(out: Path, state: dict, config: RLConfig, extra: dict) -> None
     body = {"steps": state["steps"], "episodes": sum(state["episodes"]),
             "wall_time_s": state["wall_time_s"], "start": c[0], "end": c[-1],
             "config": asdict(config), **extra}
-    write_text(json.dumps(body, indent=1, default=str), out / SUMMARY)
+    write_text(json.dumps(finite_or_null(body), indent=1, default=str, allow_nan=False),
+               out / SUMMARY)
+
+
+def finite_or_null(value: Any) -> Any:
+    """``value`` with every float that is not finite (NaN, ±inf) replaced by None, in dicts and
+    lists at any depth."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_or_null(v) for v in value]
+    return value

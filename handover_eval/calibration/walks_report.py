@@ -1,16 +1,16 @@
 """The walker calibration report: recorded and scripted walks measured alike, summarised as
-quantiles (``python -m handover_env.data walk-stats PUBLIC_DIR --out docs/calibration``).
+quantiles (``handover-data walk-stats PUBLIC_DIR --out docs/calibration``).
 
 :func:`run_walk_stats`
 
-1. measures every recording of the folder (:func:`~handover_env.data.transfer.walks.recorded_walk`
-   and :func:`~handover_env.data.transfer.walks.walk_statistics`; the safe loader, numpy arrays
+1. measures every recording of the folder (:func:`~handover_eval.calibration.walks.recorded_walk`
+   and :func:`~handover_eval.calibration.walks.walk_statistics`; the safe loader, numpy arrays
    only) and splits them into Table I's folds as the receiver calibration does
    (:func:`~handover_env.data.dataset.stratified_fold_ids` over the files in
    :func:`~handover_env.data.public.list_public_files` order, 10 folds, seed 0): folds 0-4 are the
    **calibration half**, 5-9 are **held out**;
 2. measures ``walkers`` scripted ID and OOD walkers with the closed-loop evaluation's seeds
-   (ID 0.., OOD 10000..) (:func:`~handover_env.data.transfer.walks.scripted_walk`);
+   (ID 0.., OOD 10000..) (:func:`~handover_eval.calibration.walks.scripted_walk`);
 3. writes ``walkers.json`` (the quantiles), ``walkers.md`` (the calibration table: recorded OOD
    median [IQR] on either half, scripted OOD median, their ratio, and whether it lies within
    :data:`TOLERANCE` of the calibration half's median) and ``walkers.png``.
@@ -36,8 +36,8 @@ from handover_env.data.public import (
     safe_load_pickle,
     validate_record,
 )
-from handover_env.data.transfer.report import write_json
-from handover_env.data.transfer.walks import (
+from handover_eval.calibration.report import write_json
+from handover_eval.calibration.walks import (
     PAUSE_MIN_TIME,
     PAUSE_SPEED,
     STATISTICS,
@@ -46,6 +46,7 @@ from handover_env.data.transfer.walks import (
     scripted_walk,
     walk_statistics,
 )
+from handover_eval.reporting import write_png, write_text
 
 JSON_NAME, MD_NAME, FIGURE_NAME = "walkers.json", "walkers.md", "walkers.png"
 DEFAULT_FOLDS, DEFAULT_SEED, DEFAULT_CALIBRATION_FOLDS = 10, 0, 5
@@ -396,12 +397,6 @@ def run_walk_stats(
             "scripted ID": scripted["id"],
             "scripted OOD": scripted["ood"],
         })
-        fig.savefig(out / FIGURE_NAME)
-        import matplotlib.pyplot as plt
-
-        plt.close(fig)
-        written.append(out / FIGURE_NAME)
-    path = out / MD_NAME
-    path.write_text(markdown(summary, FIGURE_NAME if figures else None))
-    written.append(path)
+        written.append(write_png(fig, out / FIGURE_NAME))
+    written.append(write_text(markdown(summary, FIGURE_NAME if figures else None), out / MD_NAME))
     return summary, written

@@ -6,7 +6,7 @@ Pure numpy detectors over one recording of the public Dynamic Handover Dataset (
 simulated receiver (issue 12, section 2; DESIGN.md "The simulated person"). Every threshold is a
 module constant, chosen from the 875-recording development copy as noted beside it. The inputs
 should already be smoothed (:func:`handover_env.data.filtering.smooth_track`);
-:func:`handover_env.data.transfer.measures.analyse_recording` does that.
+:func:`handover_eval.calibration.measures.analyse_recording` does that.
 
 What the recordings show, and so what is detected (aligned medians over the development copy):
 the giver offers the object, the receiver's right hand rises about 0.37 m within about 0.4 s and

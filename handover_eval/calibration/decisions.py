@@ -2,7 +2,7 @@
 the simulated person's left-behind rule run on the recorded walk, and what the reach extent
 depends on.
 
-:func:`walk_measures` adds to one recording's :data:`~handover_env.data.transfer.measures.MEASURES`
+:func:`walk_measures` adds to one recording's :data:`~handover_eval.calibration.measures.MEASURES`
 (every track already smoothed):
 
 * ``pause_before`` / ``longest_pause`` (s): time with the pelvis slower than :data:`PAUSE_SPEED`
@@ -31,11 +31,11 @@ import math
 
 import numpy as np
 
-from handover_env.data.transfer.detect import PELVIS, R_SHOULDER, WalkingFrame
 from handover_env.person.receiver_rules import PathAhead, closest_approach, left_behind
 from handover_env.person.settings import PASS_DISTANCE, ReceiverConfig
+from handover_eval.calibration.detect import PELVIS, R_SHOULDER, WalkingFrame
 
-#: Slower than this (m/s, the walking speed of :func:`~handover_env.data.transfer.detect.
+#: Slower than this (m/s, the walking speed of :func:`~handover_eval.calibration.detect.
 #: walking_frame`) the receiver pauses.
 PAUSE_SPEED = 0.2
 #: The simulated person's default ``give_up_behind`` (m).

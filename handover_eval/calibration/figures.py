@@ -10,8 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from handover_env.data.transfer.detect import RATE_HZ
-from handover_env.data.transfer.measures import trace_lags
+from handover_eval.calibration.detect import RATE_HZ
+from handover_eval.calibration.measures import trace_lags
+from handover_eval.reporting import write_png
 
 #: Plot a lag only where at least this many recordings have a value.
 MIN_RECORDINGS = 10
@@ -72,9 +73,7 @@ def write_figures(results: list, out_dir: str | Path) -> list[Path]:
     axes[-1].set_xlabel("time from the transfer (receiver's hand takes the object), s")
     fig.suptitle("Recorded handovers aligned on the transfer (calibration half)")
     fig.tight_layout()
-    aligned = out / ALIGNED_NAME
-    fig.savefig(aligned, dpi=110)
-    plt.close(fig)
+    aligned = write_png(fig, out / ALIGNED_NAME, dpi=110)
 
     panels = (
         (
@@ -100,7 +99,5 @@ def write_figures(results: list, out_dir: str | Path) -> list[Path]:
     axes[0].set_ylabel("density (values clipped to the axis)")
     fig.suptitle("When people start to reach (calibration half)")
     fig.tight_layout()
-    onset = out / ONSET_NAME
-    fig.savefig(onset, dpi=110)
-    plt.close(fig)
+    onset = write_png(fig, out / ONSET_NAME, dpi=110)
     return [aligned, onset]

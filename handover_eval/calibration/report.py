@@ -1,12 +1,12 @@
 """The receiver calibration report: every recording analysed, split into halves, summarised as
 quantiles.
 
-``python -m handover_env.data transfer-stats PATH/whole_motions --out docs/calibration`` runs
+``handover-data transfer-stats PATH/whole_motions --out docs/calibration`` runs
 :func:`run_transfer_stats`, which
 
 1. loads each ``motion_normal_*`` / ``motion_variation_*`` pickle with the safe loader
    (:func:`~handover_env.data.public.safe_load_pickle`, numpy arrays only) and analyses it with
-   :func:`~handover_env.data.transfer.measures.analyse_recording`;
+   :func:`~handover_eval.calibration.measures.analyse_recording`;
 2. splits the recordings into a **calibration half** and a **held-out half** with Table I's
    stratified folds (:func:`~handover_env.data.dataset.stratified_fold_ids` over the files in
    :func:`~handover_env.data.public.list_public_files` order, i.e. the order of
@@ -14,7 +14,7 @@ quantiles.
 3. writes ``receiver_calibration.json`` (quantiles 5/25/50/75/95 of every quantity, per half and
    ID / OOD / pooled, detection counts, track noise before and after the filter, the rules'
    constants) and ``receiver_calibration.md`` (the same as tables), plus the figures of
-   :mod:`handover_env.data.transfer.figures`.
+   :mod:`handover_eval.calibration.figures`.
 
 Only statistics over recordings leave this module; no per-recording value is written.
 """
@@ -39,14 +39,15 @@ from handover_env.data.public import (
     safe_load_pickle,
     validate_record,
 )
-from handover_env.data.transfer import decisions, detect
-from handover_env.data.transfer.measures import (
+from handover_eval.calibration import decisions, detect
+from handover_eval.calibration.measures import (
     HAND_JUMP,
     MEASURES,
     RecordingAnalysis,
     analyse_recording,
     track_noise,
 )
+from handover_eval.reporting import write_text
 
 QUANTILES = (5, 25, 50, 75, 95)
 #: Grasp radii (m) and quantiles (%) of the recorded-hand grasp table.
@@ -318,11 +319,8 @@ def summarise(
 
 
 def write_json(summary: dict, path: str | os.PathLike) -> Path:
-    """Write the summary as indented JSON."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(summary, indent=1) + "\n")
-    return path
+    """Write the summary as indented JSON (:func:`handover_eval.reporting.write_text`)."""
+    return write_text(json.dumps(summary, indent=1) + "\n", path)
 
 
 def run_transfer_stats(
@@ -342,7 +340,7 @@ def run_transfer_stats(
     Returns:
         ``(summary, written paths)``.
     """
-    from handover_env.data.transfer.markdown import write_markdown
+    from handover_eval.calibration.markdown import write_markdown
 
     results, skipped = analyse_folder(folder, skip_bad=skip_bad, progress=progress, limit=limit)
     assign_halves(results, folds, seed, calibration_folds)
@@ -356,7 +354,7 @@ def run_transfer_stats(
     written = [write_json(summary, out / JSON_NAME)]
     figure_names: list[str] = []
     if figures:
-        from handover_env.data.transfer.figures import write_figures
+        from handover_eval.calibration.figures import write_figures
 
         paths = write_figures(results, out)
         written += paths

@@ -18,17 +18,17 @@ module measures, at run time and from statistics only (nothing per recording is 
   only its total above 2 Hz is matched. The ZED SDK says its tracking filters the detections but
   not how, so no SDK smoothing is modelled on top: the recordings already are its output.
 * **Hand error** (:func:`carry_residual`): while the receiver carries the object away (from the
-  transfer, :func:`handover_env.data.transfer.detect_transfer`, to the end), the ZED right hand
+  transfer, :func:`handover_eval.calibration.detect_transfer`, to the end), the ZED right hand
   (joint 15) and the OptiTrack object move together; the hand-minus-object vector less its mean
   over that stretch (the grip offset) is the hand keypoint's error: its RMS and lag-1
   autocorrelation give the hand's AR(1) sigma and rho directly.
 * **Lost frames** (:func:`refit_bursts`): the ZED SDK keeps predicting a body it lost (tracking
   state SEARCHING) and re-fits it when found, so the recordings have no missing frames (no frame
   repeats the previous one) but show re-fit bursts: pelvis speeds over
-  :data:`handover_env.data.transfer.measures.PELVIS_SPIKE_SPEED` (2 m/s). Their fraction of frames
+  :data:`handover_eval.calibration.measures.PELVIS_SPIKE_SPEED` (2 m/s). Their fraction of frames
   and their mean run length stand in for the lost-frame rate.
 
-``python -m handover_env.data sensing PUBLIC_DIR`` prints every figure; the "paper" camera profile
+``handover-data sensing PUBLIC_DIR`` prints every figure; the "paper" camera profile
 (:mod:`handover_env.sensors.profiles`) quotes them.
 """
 
@@ -42,7 +42,7 @@ import numpy as np
 from scipy.signal import butter, sosfreqz
 
 from handover_env.data.filtering import CUTOFF_HZ, ORDER, lowpass, smooth_track
-from handover_env.data.transfer.measures import PELVIS_SPIKE_SPEED
+from handover_eval.calibration.measures import PELVIS_SPIKE_SPEED
 
 RATE_HZ = 30.0
 #: Frames left out at each end of a track (the filter's odd padding pins the end samples).
@@ -113,7 +113,7 @@ def carry_residual(receiver: np.ndarray, obj: np.ndarray, rate_hz: float = RATE_
 
     None when no transfer is detected or fewer than :data:`MIN_CARRY_FRAMES` frames follow it.
     """
-    from handover_env.data.transfer.detect import detect_transfer
+    from handover_eval.calibration.detect import detect_transfer
 
     det = detect_transfer(smooth_track(receiver, rate_hz), smooth_track(obj, rate_hz), rate_hz)
     if det.frame is None or receiver.shape[0] - det.frame < MIN_CARRY_FRAMES:

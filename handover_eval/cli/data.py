@@ -1,4 +1,5 @@
-"""Command line for handover datasets: ``python -m handover_env.data <command> ...``.
+"""Command line for handover datasets: ``handover-data <command> ...`` (also
+``python -m handover_eval.cli.data``).
 
 Commands (each has ``--help``)::
 
@@ -16,6 +17,12 @@ Commands (each has ``--help``)::
 
 Wherever a dataset is read, PATH may be a ``.npz``, a public-dataset folder, or ``synthetic``
 for the embedded default (900 ID + 100 OOD, seed 0).
+
+The argument types are :mod:`handover_eval.cli.args`'s; the calibration commands
+(``transfer-stats``, ``sensing``, ``walk-stats``) run :mod:`handover_eval.calibration`, whose
+files go through :mod:`handover_eval.reporting`'s writers. A dataset file is written by its
+format's own writer (:meth:`HandoverDataset.save`), a LeRobot export by LeRobot's, a plot by
+:func:`handover_env.data.plot.plot_paths` (PNG, PDF or SVG).
 """
 
 from __future__ import annotations
@@ -29,9 +36,17 @@ from pathlib import Path
 
 from handover_env.data.dataset import HandoverDataset
 from handover_env.data.errors import DatasetError
+from handover_env.data.limits import MAX_EPISODES
 from handover_env.offline import hub_offline
+from handover_eval.cli.args import FOLDS, FRAMES, SEEDS, closed_fraction, int_in_range
 
 DEFAULT_KEYWORD = "synthetic"
+#: Episodes (synthesised, drawn, or read per kind with --limit): as many as a dataset may hold.
+EPISODES = int_in_range(1, MAX_EPISODES)
+#: The Table I folds that form the calibration half (the rest are held out).
+CALIBRATION_FOLDS = int_in_range(1, FOLDS.high - 1)
+#: Scripted walkers per kind of walk-stats.
+WALKERS = int_in_range(1, 100_000)
 
 
 def _load(path: str, skip_bad: bool = False) -> HandoverDataset:
@@ -190,7 +205,7 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def cmd_transfer_stats(args: argparse.Namespace) -> int:
-    from handover_env.data.transfer.report import run_transfer_stats
+    from handover_eval.calibration.report import run_transfer_stats
 
     start = time.perf_counter()
     summary, written = run_transfer_stats(
@@ -215,14 +230,14 @@ def cmd_transfer_stats(args: argparse.Namespace) -> int:
 
 
 def cmd_sensing(args: argparse.Namespace) -> int:
-    from handover_env.data.sensing import format_figures, sensing_figures
+    from handover_eval.calibration.sensing import format_figures, sensing_figures
 
     print(format_figures(sensing_figures(args.public_dir, limit=args.limit)))
     return 0
 
 
 def cmd_walk_stats(args: argparse.Namespace) -> int:
-    from handover_env.data.transfer.walks_report import run_walk_stats
+    from handover_eval.calibration.walks_report import run_walk_stats
 
     summary, written = run_walk_stats(args.public_dir, args.out, walkers=args.walkers,
                                       skip_bad=args.skip_bad, figures=not args.no_figures)
@@ -234,24 +249,10 @@ def cmd_walk_stats(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fraction(text: str) -> float:
-    value = float(text)
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"must be in [0, 1], got {text}")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return value
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser with one subcommand per operation."""
     parser = argparse.ArgumentParser(
-        prog="python -m handover_env.data",
+        prog="handover-data",
         description="Handover datasets: inspect, convert the public dataset safely, synthesise, "
         "compare, export to LeRobot, plot, calibrate the simulated receiver (transfer-stats).",
     )
@@ -292,12 +293,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("out", help="output .npz")
     p.add_argument(
-        "--n", type=_positive_int, default=1000, help="number of episodes (default 1000)"
+        "--n", type=EPISODES, default=1000, help="number of episodes (default 1000)"
     )
     p.add_argument(
-        "--ood-fraction", type=_fraction, default=0.1, help="fraction of OOD episodes (default 0.1)"
+        "--ood-fraction", type=closed_fraction, default=0.1,
+        help="fraction of OOD episodes, in [0, 1] (default 0.1)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=SEEDS, default=0, help="random seed (default 0)")
     p.set_defaults(func=cmd_synth)
 
     p = sub.add_parser(
@@ -327,11 +329,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("root", help="output folder of the LeRobotDataset")
     p.add_argument("--repo-id", default="local/handover", help="repo id recorded in the metadata")
     p.add_argument(
-        "--history", type=_positive_int, default=10, help="frames of receiver history (default 10)"
+        "--history", type=FRAMES, default=10, help="frames of receiver history (default 10)"
     )
     p.add_argument(
         "--horizon",
-        type=_positive_int,
+        type=FRAMES,
         default=30,
         help="frames of future giver positions (default 30)",
     )
@@ -354,11 +356,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", help="output image (.png, .pdf or .svg), not a folder")
     p.add_argument(
         "--max-episodes",
-        type=_positive_int,
+        type=EPISODES,
         default=200,
         help="episodes drawn per kind (default 200)",
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the choice of episodes")
+    p.add_argument("--seed", type=SEEDS, default=0, help="seed of the choice of episodes")
     p.set_defaults(func=cmd_plot)
 
     p = sub.add_parser(
@@ -375,14 +377,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
     p.add_argument("--out", required=True, help="output folder (e.g. docs/calibration)")
     p.add_argument(
-        "--folds", type=_positive_int, default=10, help="number of Table I folds (default 10)"
+        "--folds", type=FOLDS, default=10, help="number of Table I folds (default 10)"
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="seed of the fold split (default 0, as Table I)"
+        "--seed", type=SEEDS, default=0, help="seed of the fold split (default 0, as Table I)"
     )
     p.add_argument(
         "--calibration-folds",
-        type=_positive_int,
+        type=CALIBRATION_FOLDS,
         default=5,
         help="folds 0 .. N-1 form the calibration half, the rest are held out (default 5)",
     )
@@ -392,7 +394,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-figures", action="store_true", help="write only the .md and .json")
     p.add_argument(
         "--limit",
-        type=_positive_int,
+        type=EPISODES,
         default=None,
         help="analyse only the first N ID and N OOD files (a quick look; not Table I's split)",
     )
@@ -406,7 +408,7 @@ def build_parser() -> argparse.ArgumentParser:
         "numbers of the 'paper' camera profile (handover_env.sensors). Prints them only.",
     )
     p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
-    p.add_argument("--limit", type=_positive_int, default=None,
+    p.add_argument("--limit", type=EPISODES, default=None,
                    help="use only the first N ID recordings (a quick look)")
     p.set_defaults(func=cmd_sensing)
 
@@ -420,7 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
     p.add_argument("--out", required=True, help="output folder (e.g. docs/calibration)")
-    p.add_argument("--walkers", type=_positive_int, default=400,
+    p.add_argument("--walkers", type=WALKERS, default=400,
                    help="scripted walkers per kind (ID seeds 0.., OOD 10000..; default 400)")
     p.add_argument("--skip-bad", action="store_true", help="skip files that fail to load")
     p.add_argument("--no-figures", action="store_true", help="write only the .md and .json")

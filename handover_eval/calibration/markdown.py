@@ -1,10 +1,12 @@
 """Markdown rendering of the receiver calibration summary
-(:mod:`handover_env.data.transfer.report`)."""
+(:mod:`handover_eval.calibration.report`)."""
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
+
+from handover_eval.reporting import write_text
 
 HALF_LABEL = {"calibration": "calibration", "held_out": "held-out", "all": "all"}
 KIND_LABEL = {"id": "ID", "ood": "OOD", "all": "pooled"}
@@ -309,7 +311,4 @@ def write_markdown(
     if skipped:
         lines += ["", "## Skipped files", ""] + [f"- {name}: {why}" for name, why in skipped]
     lines += ["", "## All quantiles (5/25/50/75/95 %)", "", *_full(summary), ""]
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines))
-    return path
+    return write_text("\n".join(lines), path)

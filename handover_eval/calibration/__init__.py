@@ -1,0 +1,17 @@
+"""The calibration of the simulated person against the recordings of the public dataset: analysis,
+not simulation (``handover-data transfer-stats``, ``walk-stats`` and ``sensing``, and
+``evaluate.py far-pass``).
+
+* :mod:`.detect`: the transfer, reach onset, giver release and the arm drawn back in a recording;
+* :mod:`.measures`: the per-recording measures at those events;
+* :mod:`.decisions`: the person's decision rules checked on the recordings, and the reach fit;
+* :mod:`.report`: the run over a dataset folder (calibration and held-out halves, quantiles);
+* :mod:`.markdown`, :mod:`.figures`: the report's Markdown table and PNG figures;
+* :mod:`.walks`, :mod:`.walks_report`: recorded and scripted walks measured alike;
+* :mod:`.sensing`: the camera model's numbers (jitter, hand error, re-fit bursts);
+* :mod:`.farpass`: the far-pass stress set's lateral range.
+
+Every file goes through :mod:`handover_eval.reporting`'s writers. The Markdown pages quote the
+command and module paths that generated ``docs/calibration/`` when they lived in
+``handover_env/data/``, so that a rerun writes the same bytes.
+"""
