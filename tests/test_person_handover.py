@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import handover_env  # noqa: F401
+from agents.base import Agent
 from agents.giver_replay import GiverReplayAgent
 from agents.null import DelayedAgent, NullAgent
 from agents.reactive import ReactiveAgent
@@ -126,14 +127,51 @@ def test_the_null_agent_makes_the_handover_slower_than_the_reactive_one(env):
     assert info["null"]["transfer_time"] > info["reactive"]["transfer_time"]
 
 
+class _Counting(Agent):
+    """Action k (from 0 since ``reset``) is ``(k, 0, 0, 0)``; a prediction's rows hold the number
+    of history frames it was given and that history's last x."""
+
+    horizon = 4
+
+    def __init__(self) -> None:
+        self.k = 0
+
+    def reset(self) -> None:
+        self.k = 0
+
+    def act(self, obs):
+        self.k += 1
+        return np.array([self.k - 1, 0.0, 0.0, 0.0], dtype=np.float32)
+
+    def predict(self, receiver_history):
+        hist = np.asarray(receiver_history, dtype=np.float64)
+        return np.tile([hist.shape[0], hist[-1, 0], 0.0], (self.horizon, 1))
+
+
 def test_a_delayed_agent_acts_half_a_second_late():
-    agent = DelayedAgent(ReactiveAgent(), delay=0.5)
-    assert agent.steps == 15
-    agent.reset()
+    agent = DelayedAgent(_Counting(), delay=0.5)
+    assert agent.steps == 15 and agent.horizon == 4
     obs = np.zeros(ReactiveAgent().layout.size, dtype=np.float32)
-    first = [agent.act(obs) for _ in range(16)]
-    np.testing.assert_allclose(first[0], agent.ready)
-    np.testing.assert_allclose(first[14], agent.ready)
+    for _episode in range(2):  # reset forgets the queue of the previous episode
+        agent.reset()
+        actions = np.array([agent.act(obs) for _ in range(40)])
+        # every action: the ready pose for 15 steps, then the wrapped agent's action k - 15
+        wanted = np.array(
+            [agent.ready if k < 15 else [k - 15, 0.0, 0.0, 0.0] for k in range(40)],
+            dtype=np.float32,
+        )
+        np.testing.assert_array_equal(actions, wanted)
+    np.testing.assert_allclose(agent.ready, (0.3, -0.4, 1.15, -math.pi / 2), rtol=1e-7)
+    # open loop: the prediction from the track as it was 15 frames ago (its first frame at least)
+    track = np.column_stack([np.arange(40.0), np.zeros(40)])
+    for t in (1, 10, 15, 16, 17, 40):
+        np.testing.assert_array_equal(
+            agent.predict(track[:t]), np.tile([max(1, t - 15), max(0, t - 16), 0.0], (4, 1)))
+    # no delay passes every action straight through
+    now = DelayedAgent(_Counting(), delay=0.0)
+    now.reset()
+    assert [float(now.act(obs)[0]) for _ in range(3)] == [0.0, 1.0, 2.0]
+    assert DelayedAgent(_Counting(), delay=0.1).steps == 3
     with pytest.raises(ValueError, match="delay"):
         DelayedAgent(ReactiveAgent(), delay=-1.0)
 

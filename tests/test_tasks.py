@@ -75,6 +75,82 @@ def test_reward_weights_are_constructor_arguments_and_leave_the_episode_alone():
     )
 
 
+#: Every end of an episode but success (``handover_env.envs.base_handover.OUTCOMES``).
+FAILURES = ("premature_release", "dropped", "unsafe_force", "missed", "unstable")
+
+
+def test_reward_terms_are_the_documented_formula_with_exact_numbers():
+    """``time = -time_cost dt``, ``force = -dt max(0, |F| - force_threshold f_r) / force_scale``,
+    ``outcome = +success`` on success and ``-failure`` on any other end (HandoverReward)."""
+    default = HandoverReward()
+    dt, f_r = 1.0 / 30.0, 5.0
+    # |F| = 25 N, 2 f_r = 10 N: 15 N of excess, costing 15 / 10 per second for 1/30 s
+    assert default.terms(dt, 25.0, f_r, "running") == {
+        "time": -1.0 / 30.0, "force": -(dt * 15.0 / 10.0), "outcome": 0.0}
+    assert default.terms(dt, 25.0, f_r, "running")["force"] == pytest.approx(-0.05, abs=1e-15)
+    # at or below the threshold the force costs nothing
+    assert default.terms(dt, 10.0, f_r, "running")["force"] == 0.0
+    assert default.terms(dt, 3.0, f_r, "running")["force"] == 0.0
+    assert default.terms(dt, 0.0, f_r, "success") == {"time": -dt, "force": 0.0, "outcome": 10.0}
+    for outcome in FAILURES:
+        assert default.terms(dt, 0.0, f_r, outcome) == {
+            "time": -dt, "force": 0.0, "outcome": -10.0}, outcome
+    # every weight, and dt, enter as documented
+    w = HandoverReward(time_cost=2.0, force_threshold=1.5, force_scale=4.0, success=3.0,
+                       failure=7.0)
+    for step in (0.005, 0.1):
+        terms = w.terms(step, 20.0, 4.0, "missed")  # 20 - 1.5 * 4 = 14 N of excess
+        assert terms["time"] == pytest.approx(-2.0 * step, rel=1e-15)
+        assert terms["force"] == pytest.approx(-step * 14.0 / 4.0, rel=1e-15)
+        assert terms["outcome"] == -7.0
+    assert w.terms(0.1, 20.0, 4.0, "success")["outcome"] == 3.0
+    assert w.terms(0.1, 20.0, 4.0, "running")["outcome"] == 0.0
+
+
+class _HoldLowAndAway:
+    """Holds the object low and away from the person's path: the person walks past it."""
+
+    def reset(self):
+        pass
+
+    def act(self, obs):
+        return np.array([-0.3, 0.1, 0.8, -math.pi / 2], dtype=np.float32)
+
+
+@pytest.mark.parametrize("failure", [10.0, 7.0])
+def test_a_missed_handover_costs_the_failure_penalty(failure):
+    """A real physics episode that ends ``missed``: its last step pays ``-failure``."""
+    env = gym.make(DYNAMIC, reward={"failure": failure})
+    steps = _episode(env, agent=_HoldLowAndAway())
+    r, info = steps[-1]
+    assert info["outcome"] == "missed" and len(steps) < 600  # terminated, not truncated
+    assert info["reward_outcome"] == -failure
+    assert info["reward_time"] == pytest.approx(-1.0 / 30.0)
+    assert r == info["reward_time"] + info["reward_force"] + info["reward_outcome"]
+    assert r < -failure
+    assert all(i["reward_outcome"] == 0.0 and i["outcome"] == "running" for _, i in steps[:-1])
+
+
+def test_the_force_term_of_a_real_episode_is_the_formula():
+    """Each step's ``reward_force`` is ``-dt max(0, |F| - threshold f_r) / force_scale`` of the
+    wrist force the step ended with."""
+    env = gym.make(DYNAMIC, task=DynamicHandover(reward=HandoverReward(force_threshold=0.0)))
+    u = env.unwrapped
+    agent = ReactiveAgent()
+    obs, _ = env.reset(seed=0, options={"receiver": "id"})
+    agent.reset()
+    got, wanted = [], []
+    while True:
+        obs, _, term, trunc, info = env.step(agent.act(obs))
+        got.append(info["reward_force"])
+        wanted.append(-(u.dt * max(0.0, u.wrist_force_magnitude()) / 10.0))
+        if term or trunc:
+            break
+    assert u.dt == pytest.approx(1.0 / 30.0)
+    assert min(got) < -1e-3  # the held bottle's weight is felt
+    np.testing.assert_array_equal(got, wanted)
+
+
 @dataclass
 class StandStill(HandoverTask):
     """A variant in a few lines: a person who never walks past (no 'missed'), nothing else
