@@ -46,7 +46,8 @@ class Field(NamedTuple):
     source: str
 
 
-#: ZED 2i + ZED SDK 4.0 body tracking (paper Sec. IV-A, V-B). Derived values: handover_eval/calibration/sensing.py.
+#: ZED 2i + ZED SDK 4.0 body tracking (paper Sec. IV-A, V-B). Derived values:
+#: handover_eval/calibration/sensing.py.
 CAMERA_FIELDS: dict[str, Field] = {
     "rate_hz": Field(1.0, 120.0, (30.0, 30.0), "Hz",
                      "paper Sec. V-B: base pose captured at 30 Hz"),

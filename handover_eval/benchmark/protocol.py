@@ -71,7 +71,8 @@ WALKER_KIND = {"walker-id": "id", "walker-ood": "ood", "far-pass": "id"}
 WALKERS_PER_SET = 50
 #: The far-pass passing lines, m: [q05, q25] of the recorded pelvis y at the transfer over the
 #: 848 development-copy recordings with a detected transfer, from ``evaluate.py far-pass``
-#: (:mod:`handover_eval.calibration.farpass`); walker i of N passes at ``linspace(low, high, N)[i]``.
+#: (:mod:`handover_eval.calibration.farpass`); walker i of N passes at
+#: ``linspace(low, high, N)[i]``.
 FAR_PASS_Y = (-1.275, -1.068)
 #: Replays: the held-out half of the split of ``--data`` (folds k//2 .. k-1), or every episode of
 #: ``--replay-data``.
