@@ -18,6 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from handover_env.config import THETA_RANGES, HandoverParams
+from handover_env.data.dataset import HandoverDataset
 from handover_env.paths import output_folder
 from handover_eval.backend import (
     JobError,
@@ -39,7 +40,7 @@ from handover_eval.cli.args import (
 from handover_eval.closedloop.output import write_closed_loop, write_theta_sweep
 from handover_eval.closedloop.receivers import SETS
 from handover_eval.closedloop.roster import AGENTS, default_agents
-from handover_eval.closedloop.run import ClosedLoopEvalConfig, run_closed_loop
+from handover_eval.closedloop.run import ClosedLoopEvalConfig, ClosedLoopRun, run_closed_loop
 from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers, with_test_data
 from handover_eval.output_lock import OutputLock
@@ -117,6 +118,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="recordings to replay that are not in --data (folder, .npz): the learning agents "
         "fit on all of --data and meet every episode of PATH (--replays-per-fold caps how many) "
         "instead of the held-out folds of --data",
+    )
+    p.add_argument(
+        "--rerun",
+        default=None,
+        metavar="FILE.rrd",
+        help="also log one episode for the Rerun viewer (`rerun FILE.rrd`): the first agent and "
+        "its first receiver, run again as in the run (the person's skeleton and body, the TCP, "
+        "the bottle, the wrist force, the outcome events); needs rerun-sdk (LeRobot installs it)",
     )
     p = sub.add_parser(
         "theta-sweep",
@@ -397,6 +406,10 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             if args.checkpoints is not None
             else Path("results") / ("table1-quick" if quick else "table1") / "checkpoints"
         )
+        if getattr(args, "rerun", None) is not None:
+            from handover_eval.closedloop.rerun_log import check_rerun_path
+
+            args.rerun = check_rerun_path(args.rerun)
         backend = backend_from_args(args)
         lock = OutputLock(out).acquire()  # held until the last file is written
     except (ValueError, OSError, RuntimeError) as exc:
@@ -445,6 +458,8 @@ def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cach
                 write_closed_loop(
                     run, receivers, shown, out, args.bootstrap, args.seed, args.quick
                 )
+                if getattr(args, "rerun", None) is not None:
+                    _rerun(args.rerun, receivers, run, shown, options, cache, replay is not None)
             else:
                 from handover_eval.closedloop.theta_sweep import run_sweep
 
@@ -459,3 +474,14 @@ def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cach
     startup = f" (Ray start-up {sess.startup_s:.1f} s)" if sess.started_here else ""
     print(f"wrote {out}/ in {time.perf_counter() - start:.0f} s{startup}")
     return 0
+
+
+def _rerun(path: Path, config: ClosedLoopEvalConfig, run: ClosedLoopRun,
+           dataset: HandoverDataset, options: MethodOptions, cache: Path, fit_all: bool) -> None:
+    """``--rerun``: the first agent's episode with its first receiver, logged to ``path``."""
+    from handover_eval.closedloop.rerun_log import first_job, log_job
+
+    job = first_job(config, run.receivers, dataset, options, cache, fit_all)
+    row = log_job(dataset, job, path)
+    print(f"wrote {path}: {row['agent']} meets {row['set']} {row['receiver']} "
+          f"(seed {row['seed']}): {row['outcome']}")
