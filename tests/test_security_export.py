@@ -1,5 +1,6 @@
-"""Issue 16 items 2, 3, 9 and issue 20 items 1, 7: the LeRobot export never deletes a user's
-folder (nor a file in an export, nor a folder named like its temporary ones), writes where it
+"""Issue 16 items 2, 3, 9, issue 20 items 1, 7 and issue 32 R14: the LeRobot export never deletes
+a user's folder (nor a file in an export, even one named like an export's own, nor a folder named
+like its temporary ones), writes where it
 checked (``~`` expanded once), never trains on stale data, and an interrupted export blocks
 nothing."""
 
@@ -295,6 +296,71 @@ def test_overwrite_of_a_real_export_with_anything_else_in_it_deletes_nothing(
     assert err.count("\n") == 1 and "nothing was deleted" in err, err
     assert re.search(rf"refusing to overwrite {re.escape(str(earlier))}: .*{reason}", err), err
     assert _snapshot(earlier) == before
+
+
+# ---------------------------------------------------------------------- issue 32 R14
+@pytest.mark.parametrize(
+    "planted, reason",
+    [
+        ("data/chunk-000/file-999.parquet",
+         r"it holds 'data/chunk-000/file-999\.parquet', which this export did not write \(not "
+         r"in meta/handover\.json files\)"),
+        ("meta/episodes/chunk-007/file-000.parquet",
+         r"it holds 'meta/episodes/chunk-007/file-000\.parquet', which this export did not write"),
+        ("data/chunk-000/file-000.parquet",
+         r"'data/chunk-000/file-000\.parquet' changed since this export wrote it"),
+        ("meta/tasks.parquet", r"'meta/tasks\.parquet' changed since this export wrote it"),
+    ],
+    ids=["new-data-file", "new-episodes-chunk", "replaced-data-file", "replaced-tasks"],
+)
+def test_overwrite_keeps_a_users_file_named_like_an_export_file(
+    tmp_path: Path, data, earlier: Path, capsys, planted: str, reason: str
+) -> None:
+    """``--overwrite`` checked names only: a user's file named like one an export writes, inside
+    an export, was deleted with it. Only the files the export's own sidecar lists (path, size,
+    SHA-256) are deleted; anything else is one error and nothing is lost."""
+    src = data.save(tmp_path / "d.npz")
+    assert read_sidecar(earlier)["files"]  # the export lists what it wrote
+    target = earlier / planted
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_bytes(b"the user's own table, named like an export's")
+    before = _snapshot(earlier)
+    assert main(["export-lerobot", str(src), str(earlier), "--overwrite"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.endswith("nothing was deleted (delete it yourself or "
+                                                   "choose another folder)\n"), err
+    assert re.search(rf"^error: refusing to overwrite {re.escape(str(earlier))}: it is not a "
+                     rf"handover LeRobot export \({reason}", err), err
+    with pytest.raises(ValueError, match=reason):
+        export_lerobot(data, earlier, history=4, overwrite=True)
+    assert _snapshot(earlier) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.npz", "ds"]  # no temporary left
+
+
+def test_the_sidecar_files_list_is_checked(tmp_path: Path, data, earlier: Path) -> None:
+    sidecar = earlier / "meta" / "handover.json"
+    meta = json.loads(sidecar.read_text())
+    assert set(meta["files"]) == {
+        str(p.relative_to(earlier)) for p in earlier.rglob("*")
+        if p.is_file() and p != sidecar
+    }
+    for bad, message in [
+        ({**meta["files"], "notes.txt": [1, "0" * 64]}, r"files lists 'notes\.txt'"),
+        ({k: [v[0], "x"] for k, v in meta["files"].items()},
+         r"files\['.*'\] must be \[size in bytes >= 0, SHA-256 as 64 hex digits\]"),
+        ({k: [True, v[1]] for k, v in meta["files"].items()}, r"must be \[size in bytes"),
+    ]:
+        sidecar.write_text(json.dumps({**meta, "files": bad}))
+        with pytest.raises(ValueError, match=message):
+            read_sidecar(earlier)
+    sidecar.write_text(json.dumps({**meta, "export_format": 2}))
+    with pytest.raises(ValueError, match="export format 2, this code reads 3"):
+        export_lerobot(data, earlier, history=4, overwrite=True)
+    sidecar.write_text(json.dumps(meta))
+    gone = sorted(meta["files"])[-1]  # a listed file that is gone is no loss
+    (earlier / gone).unlink()
+    export_lerobot(data, earlier, history=4, overwrite=True)
+    assert read_sidecar(earlier)["fingerprint"] == data.fingerprint()
 
 
 def test_overwrite_never_deletes_the_dataset_being_exported(

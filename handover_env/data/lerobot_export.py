@@ -32,6 +32,11 @@ folder under ``root``. ``root`` is ``~``-expanded once
   features);
 * it holds nothing but what LeRobot and this module write (:data:`EXPORT_FILES`,
   :data:`EXPORT_DIRS`): no other file or folder, no symbolic link;
+* every file in it is one the sidecar's ``files`` lists, with the size and SHA-256 the export
+  wrote (:func:`manifest_problem`): a file named like an export's
+  (``data/chunk-000/file-999.parquet``) that the export did not write, or one changed since, is
+  not the export's to delete (an export of format 2, which has no such list, is refused: delete
+  it yourself);
 * it does not hold the input the dataset is read from.
 
 Anything else is refused with a one-line error saying why, and nothing is deleted. The hidden
@@ -46,6 +51,7 @@ so a reuse can check that an export holds exactly the episodes it is about to tr
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -75,15 +81,16 @@ from handover_env.paths import (
 
 TASK = "hand the object over to the walking receiver"
 SIDECAR = "meta/handover.json"
-EXPORT_FORMAT = 2
+EXPORT_FORMAT = 3
 ROBOT_TYPE = "handover_giver"
 _MAX_SIDECAR_BYTES = 64 << 20
 #: The sidecar's fields and their JSON types, exactly what :func:`export_lerobot` writes.
 SIDECAR_FIELDS: dict[str, type] = {
     "export_format": int, "history": int, "horizon": int, "rate_hz": float, "name": str,
-    "source_id": list, "is_ood": list, "n_frames": int, "fingerprint": str,
+    "source_id": list, "is_ood": list, "n_frames": int, "fingerprint": str, "files": dict,
 }
 _FINGERPRINT = re.compile(r"[0-9a-f]{32}", re.ASCII)
+_SHA256 = re.compile(r"[0-9a-f]{64}", re.ASCII)
 #: Every file an export holds, relative to its root: LeRobot 0.4's metadata, episode index and
 #: frame tables with ``use_videos=False`` and no image features (``lerobot.datasets.utils``:
 #: ``INFO_PATH``, ``STATS_PATH``, ``DEFAULT_TASKS_PATH``, ``DEFAULT_EPISODES_PATH``,
@@ -226,7 +233,7 @@ def export_problem(
         except (OSError, ValueError) as exc:
             why = str(exc)
         else:
-            why = _info_problem(root, meta)
+            why = _info_problem(root, meta) or manifest_problem(root, meta)
     elif why is None and (root / "meta" / "info.json").exists():
         why = _info_problem(root, None)
     return None if why is None else f"it is not a handover LeRobot export ({why})"
@@ -258,6 +265,46 @@ def _unknown_entry(root: Path) -> str | None:
                 return f"{rel!r} is not a regular file"
             elif not EXPORT_FILES.fullmatch(rel):
                 return f"it holds {rel!r}, which an export does not write"
+    return None
+
+
+def file_manifest(root: str | os.PathLike) -> dict[str, list]:
+    """``{relative path: [size in bytes, SHA-256 hex]}`` of every file under ``root`` but the
+    sidecar (what the sidecar's ``files`` records; sorted by path)."""
+    root = Path(root)
+    out: dict[str, list] = {}
+    for path in sorted(p for p in root.rglob("*") if p.is_file() and not p.is_symlink()):
+        rel = path.relative_to(root).as_posix()
+        if rel != SIDECAR:
+            out[rel] = [path.stat().st_size, _sha256(path)]
+    return out
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def manifest_problem(root: str | os.PathLike, meta: dict) -> str | None:
+    """Why ``root`` holds a file its sidecar ``meta`` (:func:`read_sidecar`) does not list with
+    this size and SHA-256, i.e. one the export did not write or that changed since; None when
+    every file is the export's own. A listed file that is gone is no loss and is not a problem.
+    """
+    root = Path(root)
+    listed = meta["files"]
+    for path in sorted(p for p in root.rglob("*") if p.is_file() or p.is_symlink()):
+        rel = path.relative_to(root).as_posix()
+        if rel == SIDECAR:
+            continue
+        if rel not in listed:
+            return f"it holds {rel!r}, which this export did not write (not in {SIDECAR} files)"
+        size, digest = listed[rel]
+        if path.is_symlink() or path.stat().st_size != size or _sha256(path) != digest:
+            return f"{rel!r} changed since this export wrote it (size or SHA-256 differ from " \
+                f"{SIDECAR} files)"
     return None
 
 
@@ -349,6 +396,7 @@ def _write_export(
         "is_ood": [bool(ep.is_ood) for ep in dataset],
         "n_frames": int(dataset.n_frames),
         "fingerprint": dataset.fingerprint(),
+        "files": file_manifest(root),
     }
     (root / SIDECAR).write_text(json.dumps(sidecar, indent=1))
 
@@ -399,6 +447,20 @@ def read_sidecar(root: str | os.PathLike) -> dict:
     if len(meta["is_ood"]) != n or not all(isinstance(v, bool) for v in meta["is_ood"]) \
             or not all(isinstance(v, str) for v in meta["source_id"]):
         raise ValueError(f"{path}: source_id and is_ood must be {n} strings and {n} booleans")
+    files = meta["files"]
+    if len(files) > _MAX_EXPORT_ENTRIES:
+        raise ValueError(f"{path}: files lists more than {_MAX_EXPORT_ENTRIES:,} entries")
+    for rel, entry in files.items():
+        if rel == SIDECAR or not EXPORT_FILES.fullmatch(rel):
+            raise ValueError(f"{path}: files lists {rel[:80]!r}, which an export does not write")
+        if not (
+            isinstance(entry, list) and len(entry) == 2
+            and isinstance(entry[0], int) and not isinstance(entry[0], bool) and entry[0] >= 0
+            and isinstance(entry[1], str) and _SHA256.fullmatch(entry[1])
+        ):
+            raise ValueError(
+                f"{path}: files[{rel!r}] must be [size in bytes >= 0, SHA-256 as 64 hex digits]"
+            )
     return meta
 
 
