@@ -26,7 +26,7 @@ Per env step (paper Sec. IV-B/C):
 A decrease of ``receiver_frames_seen`` (a new env episode without ``reset()``) resets the
 agent. The current observation is available to the hooks as ``self.last_obs`` (agents that
 also condition on the robot's own TCP position, like the learned baselines, read ``ee_pos``
-from it with ``self.layout.unflatten``).
+from it with ``self.layout.part``).
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ class PredictiveAgent(Agent):
     """Base class of agents that predict giver chunks; provides ``reset``/``act``.
 
     Args:
-        params: Theta; ``forecast_time`` (t_f) is used here.
+        params: Θ; the agent reads its t_f (:data:`handover_env.config.AGENT_FIELDS`).
         closed_loop: ensembling, ready pose and yaw settings.
         layout: the env's observation layout.
     """
@@ -93,7 +93,6 @@ class PredictiveAgent(Agent):
         self.params = params or HandoverParams()
         self.closed_loop = closed_loop or ClosedLoopConfig()
         self.layout = layout or ObsLayout()
-        self._slices = self.layout.slices()
         self._ensembler: TemporalEnsembler | None = None
         self._history: list[np.ndarray] = []
         self._frames_seen = 0
@@ -133,24 +132,21 @@ class PredictiveAgent(Agent):
             raise ValueError(f"observation must have shape ({self.layout.size},), got {obs.shape}")
         if self._ensembler is None:
             self.reset()
-        seen = int(round(float(obs[self._slices["receiver_frames_seen"][0]][0])))
+        layout = self.layout
+        seen = layout.frames_seen(obs)
         if seen < self._frames_seen:
             self.reset()
         self.last_obs = obs
-        if obs[self._slices["gripper_open"][0]][0] > 0.5:
+        if layout.gripper_open(obs):
             # Released: hold the last target while the fingers open around the object (pulling
             # away now would drag it out of the person's hand), then go back to the ready pose.
-            if obs[self._slices["object_held"][0]][0] > 0.5 and self._last is not None:
+            if layout.object_held(obs) and self._last is not None:
                 return self._last.copy()
             return self._ready()
         if seen < 1:
             return self._ready()
         new = seen - self._frames_seen
-        hist_slice = self._slices["receiver_xy_history"][0]
-        track = obs[hist_slice].astype(np.float64).reshape(self.layout.history, 2)
-        track = track[
-            -min(self.layout.history, seen) :
-        ]  # the valid rows, as ObsLayout.receiver_track
+        track = layout.receiver_track(obs).astype(np.float64)
         if new > 0:
             for row in track[-min(new, track.shape[0]):]:
                 self.stream_update(row)

@@ -83,7 +83,7 @@ class ReactiveAgent(Agent):
     against).
 
     Args:
-        params: Θ; only ``forecast_time`` (t_f) is used here (K, B, f_r act in the env).
+        params: Θ; the agent reads its t_f (:data:`handover_env.config.AGENT_FIELDS`).
         config: offsets, height, ready pose and workspace.
         layout: the env's observation layout.
     """
@@ -94,7 +94,6 @@ class ReactiveAgent(Agent):
         self.config = config or ReactiveConfig()
         self.layout = layout or ObsLayout()
         self.horizon = self.config.horizon
-        self._slices = self.layout.slices()
         self._last: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -138,11 +137,10 @@ class ReactiveAgent(Agent):
     def act(self, obs: np.ndarray) -> np.ndarray:
         """(x, y, z, yaw) float32 target for this 30 Hz step."""
         c = self.config
-        obs = np.asarray(obs)
-        track = self.layout.receiver_track(obs)
-        released = obs[self._slices["gripper_open"][0]][0] > 0.5
-        held = obs[self._slices["object_held"][0]][0] > 0.5
-        frames = obs[self._slices["receiver_frames_seen"][0]][0]
+        layout = self.layout
+        track = layout.receiver_track(obs)
+        released, held = layout.gripper_open(obs), layout.object_held(obs)
+        frames = layout.frames_seen(obs)
         ready = np.array([*c.ready_pos, c.ready_yaw], dtype=np.float32)
         if released and held and self._last is not None:
             # The fingers are still opening: stay put instead of yanking the object back.

@@ -77,7 +77,6 @@ class StaticAgent(Agent):
         self.config = config or StaticConfig()
         self.layout = layout or ObsLayout()
         self.horizon = self.config.horizon
-        self._slices = {k: v[0] for k, v in self.layout.slices().items()}
         self._goal: np.ndarray | None = None
 
     def reset(self) -> None:
@@ -99,14 +98,13 @@ class StaticAgent(Agent):
     def act(self, obs: np.ndarray) -> np.ndarray:
         """(x, y, z, yaw) float32 target for this 30 Hz step."""
         c = self.config
-        obs = np.asarray(obs)
-        sl = self._slices
+        layout = self.layout
         ready = np.array([*c.ready_pos, c.ready_yaw], dtype=np.float32)
-        if obs[sl["gripper_open"]][0] > 0.5 and obs[sl["object_held"]][0] < 0.5:
+        if layout.gripper_open(obs) and not layout.object_held(obs):
             return ready  # released and let go: back to the ready pose
         if self._goal is None:
-            if obs[sl["robot_enabled"]][0] < 0.5:
+            if not layout.robot_enabled(obs):
                 return ready
-            hand = obs[sl["receiver_hand_xyz"]].astype(np.float64)
+            hand = layout.part(obs, "receiver_hand_xyz").astype(np.float64)
             self._goal = self._clip(hand + np.asarray(c.hand_offset))
         return np.array([*self._goal, c.ready_yaw], dtype=np.float32)

@@ -85,5 +85,5 @@ class GiverConditionedAgent(PredictiveAgent):
         """(x, y, z, yaw) target (``PredictiveAgent.act``), with ``ee_pos`` as the giver state."""
         obs = np.asarray(obs)
         if obs.shape == (self.layout.size,):
-            self._giver_now = obs[self._slices["ee_pos"][0]].astype(np.float64)
+            self._giver_now = self.layout.part(obs, "ee_pos").astype(np.float64)
         return super().act(obs)

@@ -27,7 +27,6 @@ beside the env's ``reward_time``, ``reward_force`` and ``reward_outcome``.
 
 from __future__ import annotations
 
-import inspect
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -133,18 +132,11 @@ class PolicyIO:
 
 
 def make_handover_env(config: RLConfig, **kwargs: Any) -> gym.Env:
-    """The dynamic handover env with the run's history and, if the env accepts it, its sensing
-    profile (``config.sensing``; ``""`` = the env's default)."""
+    """The dynamic handover env with the run's history and sensing profile (``config.sensing``;
+    ``""`` = the env's default)."""
     import handover_env  # noqa: F401 - registers the envs
 
     if config.sensing:
-        cls = gym.spec(ENV_ID).entry_point
-        if isinstance(cls, str):
-            module, name = cls.split(":")
-            cls = getattr(__import__(module, fromlist=[name]), name)
-        if "sensing" not in inspect.signature(cls.__init__).parameters:
-            raise ValueError(f"sensing={config.sensing!r}: this {ENV_ID} has no sensing "
-                             "profiles; leave the option at the env's default")
         kwargs["sensing"] = config.sensing
     return gym.make(ENV_ID, history=config.history, **kwargs)
 
@@ -153,15 +145,15 @@ class HandoverShaping:
     """The potential ``phi`` of the shaping term (module docstring), read from env observations."""
 
     def __init__(self, history: int, weight: float, gamma: float) -> None:
-        sl = ObsLayout(history).slices()
-        self.obj, self.hand = sl["object_pos"][0], sl["receiver_hand_xyz"][0]
-        self.held, self.open = sl["object_held"][0], sl["gripper_open"][0]
+        self.layout = ObsLayout(history)
         self.weight, self.gamma = weight, gamma
 
     def potential(self, obs: np.ndarray) -> float:
-        if self.weight == 0 or obs[self.held][0] < 0.5 or obs[self.open][0] > 0.5:
+        layout = self.layout
+        if self.weight == 0 or not layout.object_held(obs) or layout.gripper_open(obs):
             return 0.0
-        d = float(np.linalg.norm(obs[self.obj] - obs[self.hand]))
+        gap = layout.part(obs, "object_pos") - layout.part(obs, "receiver_hand_xyz")
+        d = float(np.linalg.norm(gap))
         return -self.weight * min(d if math.isfinite(d) else MAX_HAND_DISTANCE, MAX_HAND_DISTANCE)
 
     def term(self, phi: float, obs_next: np.ndarray, terminated: bool) -> tuple[float, float]:

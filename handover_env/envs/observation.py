@@ -1,7 +1,11 @@
 """The flat observation layout shared by both handover envs and every agent.
 
 The env returns one float32 vector (SB3 works out of the box); :class:`ObsLayout` names its
-parts. Agents call ``layout.unflatten(obs)`` instead of hard-coding offsets.
+parts. Agents read them through its views instead of hard-coding offsets: the flags
+(:meth:`~ObsLayout.object_held`, :meth:`~ObsLayout.gripper_open`,
+:meth:`~ObsLayout.robot_enabled`), the frame count (:meth:`~ObsLayout.frames_seen`), the valid
+receiver track (:meth:`~ObsLayout.receiver_track`), any one part (:meth:`~ObsLayout.part`) or
+all of them (:meth:`~ObsLayout.unflatten`).
 
 | key | shape | unit / meaning |
 |---|---|---|
@@ -124,9 +128,45 @@ class ObsLayout:
         low, high = self.bounds()
         return np.clip(out, low, high)
 
+    # ------------------------------------------------------------------ named views
+    def _checked(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs)
+        if obs.shape != (self.size,):
+            raise ValueError(f"observation must have shape ({self.size},), got {obs.shape}")
+        return obs
+
+    def _flag(self, obs: np.ndarray, name: str) -> bool:
+        return bool(self._checked(obs)[self._slices[name][0].start] > 0.5)  # type: ignore[attr-defined]
+
+    def part(self, obs: np.ndarray, name: str) -> np.ndarray:
+        """One named part of ``obs``, in its shape and ``obs``'s dtype (a copy)."""
+        if name not in self._slices:  # type: ignore[attr-defined]
+            raise KeyError(f"no observation part {name!r}; parts: {[f[0] for f in self.fields]}")
+        sl, shape = self._slices[name]  # type: ignore[attr-defined]
+        return self._checked(obs)[sl].reshape(shape).copy()
+
+    def object_held(self, obs: np.ndarray) -> bool:
+        """The gripper holds the object (``object_held`` > 0.5)."""
+        return self._flag(obs, "object_held")
+
+    def gripper_open(self, obs: np.ndarray) -> bool:
+        """The gripper has released (``gripper_open`` > 0.5)."""
+        return self._flag(obs, "gripper_open")
+
+    def robot_enabled(self, obs: np.ndarray) -> bool:
+        """The robot may move (``robot_enabled`` > 0.5)."""
+        return self._flag(obs, "robot_enabled")
+
+    def frames_seen(self, obs: np.ndarray) -> int:
+        """Camera frames of the receiver delivered so far (``receiver_frames_seen``, rounded)."""
+        sl = self._slices["receiver_frames_seen"][0]  # type: ignore[attr-defined]
+        return int(round(float(self._checked(obs)[sl.start])))
+
     def receiver_track(self, obs: np.ndarray) -> np.ndarray:
         """The valid part of the receiver history in ``obs``: (n, 2) with n = min(W, frames
-        seen)."""
-        parts = self.unflatten(obs)
-        n = int(min(self.history, max(1, round(float(parts["receiver_frames_seen"][0])))))
-        return parts["receiver_xy_history"][-n:]
+        seen), at least 1 (before the first frame: the placeholder row); ``obs``'s dtype, a
+        copy."""
+        obs = self._checked(obs)
+        n = min(self.history, max(1, self.frames_seen(obs)))
+        sl = self._slices["receiver_xy_history"][0]  # type: ignore[attr-defined]
+        return obs[sl].reshape(self.history, 2)[-n:].copy()
