@@ -17,11 +17,21 @@ THETA_RANGES: dict[str, tuple[float, float]] = {
 }
 
 
+#: Θ's fields the robot reads, in the env: K and B in the impedance controller (Eq. 1), f_r in
+#: the release (tests/test_theta_split.py: the env reads these and no other).
+ROBOT_FIELDS: tuple[str, ...] = ("stiffness", "damping", "release_force")
+#: Θ's field the agent reads: t_f, how far ahead its target x_d(t + t_f) is (no agent reads a
+#: robot field).
+AGENT_FIELDS: tuple[str, ...] = ("forecast_time",)
+
+
 @dataclass(frozen=True)
 class HandoverParams:
     """The jointly tuned handover parameters Theta (paper Sec. IV-B).
 
-    Defaults are the paper's learned Theta-hat = [114.3, 17.1, 0.14, 7.1].
+    Defaults are the paper's learned Theta-hat = [114.3, 17.1, 0.14, 7.1]. One value travels to
+    both sides of the closed loop: the env reads :data:`ROBOT_FIELDS`, the agent
+    :data:`AGENT_FIELDS`.
 
     Args:
         stiffness: translational Cartesian stiffness K in N/m (Eq. 1).

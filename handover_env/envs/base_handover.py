@@ -55,24 +55,17 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
-from handover_env.config import HandoverParams
+from handover_env.envs.config import EnvConfig
 from handover_env.envs.contacts import ContactMonitor
-from handover_env.envs.observation import ObsLayout
 from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
 from handover_env.envs.tasks.dynamic import DynamicHandover
 from handover_env.envs.wrist import WristSensor
 from handover_env.person.motion import check_overrides
 from handover_env.person.receiver import CAMERA_RATE, Receiver
-from handover_env.person.settings import person_config
 from handover_env.robot.controller import ControllerConfig, ImpedanceController, inverse_kinematics
-from handover_env.robot.scene import (
-    SceneConfig,
-    build_model,
-    place_object_in_gripper,
-    scene_ids,
-)
+from handover_env.robot.scene import build_model, place_object_in_gripper, scene_ids
 from handover_env.sensors import Camera, SensorProfile, make_profile
-from handover_env.sensors.profiles import profile_summary, sensing_settings
+from handover_env.sensors.profiles import profile_summary
 
 CLEAR_DISTANCE = 0.06  # m, object centre to TCP: the 6.6 cm bottle is out from between the pads
 FRAME_SKIP = 20  # physics steps per env step (1/30 s at dt = 1/600 s)
@@ -109,7 +102,12 @@ RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode", "walker"
 class HandoverEnvBase(gym.Env, EzPickle):
     """Common implementation; use ``DynamicHandoverEnv`` or ``StaticHandoverEnv``.
 
-    ``task`` (a :class:`~handover_env.envs.tasks.base.HandoverTask`) replaces the env's own
+    Built from an :class:`~handover_env.envs.config.EnvConfig`: ``config=``, or its fields as
+    keywords (what ``gym.make`` passes). Θ is ``params=`` (a
+    :class:`~handover_env.config.HandoverParams` or a dict of its fields); ``gym.make`` users
+    may give its four fields as the loose keywords ``stiffness``, ``damping``,
+    ``forecast_time`` and ``release_force`` instead (not both). ``task`` (a
+    :class:`~handover_env.envs.tasks.base.HandoverTask`) replaces the env's own
     (:meth:`default_task`); ``reward`` (a :class:`~handover_env.envs.tasks.base.HandoverReward`
     or a dict of its fields) sets the default task's reward weights.
     """
@@ -117,55 +115,50 @@ class HandoverEnvBase(gym.Env, EzPickle):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
 
     def __init__(
-        self,
-        render_mode: str | None = None,
-        stiffness: float = 114.3,
-        damping: float = 17.1,
-        forecast_time: float = 0.14,
-        release_force: float = 7.1,
-        safety_force: float = 140.0,
-        history: int = 30,
-        obs_noise: float | None = None,
-        obs_latency: int | None = None,
-        default_receiver: str = "id",
-        stabilisation_delay: float = 2.0,
-        object_mass: float = 0.4,
-        miss_distance: float = 0.35,
-        force_filter_tau: float | None = None,
-        width: int = 640,
-        height: int = 480,
-        camera: str = "overview",
-        person: dict[str, float] | None = None,
-        task: HandoverTask | None = None,
-        reward: HandoverReward | dict[str, float] | None = None,
-        sensing: str = "paper",
-        sensors: dict[str, dict[str, float]] | None = None,
+        self, render_mode: str | None = None, config: EnvConfig | None = None, **keywords: Any
     ) -> None:
-        EzPickle.__init__(
-            self,
-            render_mode,
-            stiffness,
-            damping,
-            forecast_time,
-            release_force,
-            safety_force,
-            history,
-            obs_noise,
-            obs_latency,
-            default_receiver,
-            stabilisation_delay,
-            object_mass,
-            miss_distance,
-            force_filter_tau,
-            width,
-            height,
-            camera,
-            person,
-            task,
-            reward,
-            sensing,
-            sensors,
+        EzPickle.__init__(self, render_mode, config, **keywords)
+        self._check_render_mode(render_mode)
+        self.config = cfg = EnvConfig.of(config, **keywords)
+        self.sensing, self.sensor_overrides = cfg.sensing, cfg.sensor_overrides
+        # "paper" and "ideal" are fixed; "randomized" is drawn at each reset.
+        self.sensor_profile: SensorProfile = cfg.sensor_profile()
+        self.params = cfg.params
+        self.stabilisation_delay = cfg.stabilisation_delay
+        self.render_mode = render_mode
+        self.safety_force, self.miss_distance = cfg.safety_force, cfg.miss_distance
+        self.default_receiver = cfg.default_receiver
+        self.clear_distance = CLEAR_DISTANCE
+        self.width, self.height, self.camera = cfg.width, cfg.height, cfg.camera
+        self.task = cfg.task if cfg.task is not None else self.default_task(
+            cfg.reward or HandoverReward()
         )
+        self.model = build_model(cfg.scene)
+        self.data = mujoco.MjData(self.model)
+        self.ids = scene_ids(self.model)
+        self.layout = cfg.layout
+        self.controller = ImpedanceController(
+            self.model, self.ids, self.params, ControllerConfig(ticks=self._controller_ticks())
+        )
+        self.receiver = Receiver(self.model, self.ids.receiver, cfg.receiver)
+        self.dt = self.model.opt.timestep * FRAME_SKIP
+        self._ticks = self.controller.config.ticks
+        self._schedule_ticks()
+        self.wrist = WristSensor(
+            self.model, self.data, self.ids, self._ticks, self.sensor_profile.wrist.filter_tau
+        )
+        self._make_spaces()
+        self.contacts = ContactMonitor(
+            self.model, self.ids, tick=self.model.opt.timestep * self._ticks
+        )
+        self._bind_data()
+        self._init_state, self._ready_q = self._settled_start()
+        self._renderer: Any = None
+        self._viewer: Any = None
+        self._global_step = 0
+        self._reset_episode_state()
+
+    def _check_render_mode(self, render_mode: str | None) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']} or None, got "
@@ -180,59 +173,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 "render_mode='human' needs a display (DISPLAY is not set); use "
                 "render_mode='rgb_array' (with MUJOCO_GL=egl or osmesa) on a headless machine"
             )
-        if default_receiver not in ("id", "ood"):
-            raise ValueError(f"default_receiver must be 'id' or 'ood', got {default_receiver!r}")
-        for name, v in (
-            ("safety_force", safety_force),
-            ("stabilisation_delay", stabilisation_delay),
-            ("miss_distance", miss_distance),
-        ):
-            if not math.isfinite(v) or v < 0:
-                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
-        self.sensing, self.sensor_overrides = sensing_settings(
-            sensing, sensors, obs_noise, obs_latency, force_filter_tau
-        )
-        # "paper" and "ideal" are fixed; "randomized" is drawn at each reset (checked here).
-        self.sensor_profile: SensorProfile = make_profile(
-            "paper" if sensing == "randomized" else sensing, self.sensor_overrides
-        )
-        rate = self.sensor_profile.camera.rate_hz
-        if rate != CAMERA_RATE:
-            raise ValueError(
-                f"camera rate_hz must be the env's {CAMERA_RATE:g} Hz step, got {rate:g}"
-            )
-        if isinstance(history, bool) or int(history) != history:
-            raise ValueError(f"history must be a whole number of frames, got {history!r}")
-        for name, v in (("width", width), ("height", height)):
-            if isinstance(v, bool) or int(v) != v or v <= 0:
-                raise ValueError(f"{name} must be a positive whole number of pixels, got {v!r}")
-        self.params = HandoverParams(stiffness, damping, forecast_time, release_force)
-        self.stabilisation_delay = float(stabilisation_delay)
-        if task is not None and reward is not None:
-            raise ValueError(
-                "pass the reward weights to the task (task=...(reward=...)) or reward=, not both"
-            )
-        if isinstance(reward, dict):
-            reward = HandoverReward(**reward)
-        if reward is not None and not isinstance(reward, HandoverReward):
-            raise ValueError(
-                "reward must be a HandoverReward or a dict of its fields, got "
-                f"{type(reward).__name__}"
-            )
-        if task is not None and not isinstance(task, HandoverTask):
-            raise ValueError(f"task must be a HandoverTask, got {type(task).__name__}")
-        self.task = task if task is not None else self.default_task(reward or HandoverReward())
-        self.render_mode = render_mode
-        self.safety_force = float(safety_force)
-        self.default_receiver = default_receiver
-        self.miss_distance = float(miss_distance)
-        self.clear_distance = CLEAR_DISTANCE
-        self.width, self.height, self.camera = int(width), int(height), camera
 
-        self.model = build_model(SceneConfig(object_mass=object_mass))
-        self.data = mujoco.MjData(self.model)
-        self.ids = scene_ids(self.model)
-        self.layout = ObsLayout(history=int(history))
+    def _controller_ticks(self) -> int:
+        """Physics steps per controller tick (the profile's rate must divide the physics')."""
         ctrl_rate, dt_phys = self.sensor_profile.controller.control_rate_hz, self.model.opt.timestep
         ticks = round(1.0 / (dt_phys * ctrl_rate))
         if ticks < 1 or abs(ticks * dt_phys * ctrl_rate - 1.0) > 1e-9:
@@ -240,14 +183,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 f"controller control_rate_hz must divide the {1 / dt_phys:g} Hz physics rate "
                 f"(600, 300, 200, 150, 120, 100, ... Hz), got {ctrl_rate:g}"
             )
-        self.controller = ImpedanceController(
-            self.model, self.ids, self.params, ControllerConfig(ticks=ticks)
-        )
-        self.receiver = Receiver(
-            self.model, self.ids.receiver, person_config(person, miss_distance=self.miss_distance)
-        )
-        self.dt = self.model.opt.timestep * FRAME_SKIP
-        self._ticks = self.controller.config.ticks
+        return ticks
+
+    def _schedule_ticks(self) -> None:
+        """Where the controller ticks fall in an env step, by the global step's phase."""
         # Fractions of an env step at which ticks fall, by the global step phase at its start.
         self._tick_alphas = [
             [k / FRAME_SKIP for k in range(FRAME_SKIP) if (phase + k) % self._ticks == 0]
@@ -261,25 +200,15 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self._segments.append(
                 [(lo in starts, hi - lo) for lo, hi in zip(bounds[:-1], bounds[1:])]
             )
-        self.wrist = WristSensor(
-            self.model, self.data, self.ids, self._ticks, self.sensor_profile.wrist.filter_tau
-        )
 
+    def _make_spaces(self) -> None:
+        """The observation and action Boxes, and the buffers the observation is built in."""
         low, high = self.layout.bounds()
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.action_space = spaces.Box(ACTION_LOW.copy(), ACTION_HIGH.copy(), dtype=np.float32)
         self._obs_low, self._obs_high = low, high
         self._slices = {k: v[0] for k, v in self.layout.slices().items()}
         self._obs = np.zeros(self.layout.size, dtype=np.float64)
-
-        self.contacts = ContactMonitor(
-            self.model, self.ids, tick=self.model.opt.timestep * self._ticks
-        )
-        self._gripper_qpos = self.ids.gripper_driver_qpos
-        self._object_body = self.ids.object_body
-        arm_act = np.asarray(self.ids.arm_act)
-        contiguous = arm_act.size and np.all(np.diff(arm_act) == 1)
-        self._arm_act = slice(int(arm_act[0]), int(arm_act[-1]) + 1) if contiguous else arm_act
         self._act_low, self._act_high = (
             ACTION_LOW.astype(np.float64).tolist(),
             ACTION_HIGH.astype(np.float64).tolist(),
@@ -288,12 +217,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._obs_out = np.zeros(self.layout.size, dtype=np.float64)
         self._obs_views = {k: self._obs[v] for k, v in self._slices.items()}
         self._vel6 = np.zeros(6)
-        self._bind_data()
-        self._init_state, self._ready_q = self._settled_start()
-        self._renderer: Any = None
-        self._viewer: Any = None
-        self._global_step = 0
-        self._reset_episode_state()
 
     def default_task(self, reward: HandoverReward) -> HandoverTask:
         """The task of this env when none is given (the dynamic handover here)."""
@@ -306,6 +229,11 @@ class HandoverEnvBase(gym.Env, EzPickle):
         valid; they save the attribute lookups and index arithmetic in the hot loop.
         """
         d, ids = self.data, self.ids
+        self._gripper_qpos = ids.gripper_driver_qpos
+        self._object_body = ids.object_body
+        arm_act = np.asarray(ids.arm_act)
+        contiguous = arm_act.size and np.all(np.diff(arm_act) == 1)
+        self._arm_act = slice(int(arm_act[0]), int(arm_act[-1]) + 1) if contiguous else arm_act
         self._qpos_v = d.qpos
         self._eq_active_v = d.eq_active
         self._object_pos_v = d.xpos[ids.object_body]

@@ -110,9 +110,13 @@ class DynamicHandoverEnv(HandoverEnvBase):
     Values not yet defined (no release, no grasp) are ``None``.
 
     ## Arguments
+    The fields of :class:`handover_env.envs.config.EnvConfig` (validated there), as keywords or
+    as one ``config=EnvConfig(...)``:
+
     | Argument | Default | Meaning |
     |---|---|---|
-    | stiffness, damping, forecast_time, release_force | 114.3, 17.1, 0.14, 7.1 | Θ (paper's Θ-hat) |
+    | params | ``HandoverParams()`` | Θ (the paper's Θ-hat 114.3, 17.1, 0.14, 7.1), or a dict of its fields; the env reads K, B (Eq. 1) and f_r (``handover_env.config.ROBOT_FIELDS``), t_f is the agent's |
+    | stiffness, damping, forecast_time, release_force | | Θ's fields as loose keywords, for ``gym.make`` users (instead of ``params``, not beside it) |
     | safety_force | 140.0 | N, ISO/TS 15066 quasi-static hand limit |
     | history | 30 | camera frames of receiver history |
     | sensing | "paper" | sensor profile: "paper", "ideal" or "randomized" (see Sensing) |

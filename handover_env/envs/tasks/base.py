@@ -14,6 +14,8 @@ from typing import Any, Protocol
 import mujoco
 import numpy as np
 
+from handover_env.config import HandoverParams
+
 #: How far below where it was last held (m) an object that nobody holds counts as dropped.
 DROP_DISTANCE = 0.15
 #: Height (m) below which an object is on the floor.
@@ -84,7 +86,7 @@ class HandoverState(Protocol):
     data: mujoco.MjData
     receiver: Any  # handover_env.person.receiver.Receiver: the simulated person
     contacts: Any  # handover_env.envs.contacts.ContactMonitor: robot/object contacts on the body
-    params: Any  # handover_env.config.HandoverParams: Θ (f_r is ``params.release_force``)
+    params: HandoverParams  # Θ; a task reads f_r (``params.release_force``), a robot field
     dt: float
     safety_force: float
     outcome: str
