@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import json
 import re
+import shutil
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -201,6 +202,8 @@ def test_strings_from_result_files_are_escaped(runs, tmp_path) -> None:
     data["software"]["handover_env"] = "<i>9</i>"
     bad = tmp_path / "result.json"
     bad.write_text(json.dumps(data))
+    for entry in data["episodes"].values():  # the episode files the result was computed from
+        shutil.copy(runs["reactive"] / entry["file"], tmp_path / entry["file"])
     _run(["leaderboard", str(runs["cv"] / "result.json"), str(bad), "--html",
           "--out", str(tmp_path / "lb")])
     text = (tmp_path / "lb" / "leaderboard.html").read_text(encoding="utf-8")
