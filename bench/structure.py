@@ -1,19 +1,19 @@
 """The structure of the tree, counted from the code's own imports: units, layers and import edges.
 
-The module graph is the layer test's own (:func:`test_layers.import_graph`, every import at
+The module graph is the layer test's own (:func:`test_layers.imported_modules`, every import at
 module level or in a function, read with :mod:`ast`; ``TYPE_CHECKING`` imports left out). At a
 level (the whole tree, or one package such as ``handover_env``), the **units** are its direct
 parts: the subpackages and modules of a package (its ``__init__`` counts as one), or, for the
 whole tree, the top-level packages, ``bench`` and the scripts ``train.py`` and ``evaluate.py``.
 An **edge** ``a -> b`` is one pair of distinct units where some module in ``a`` imports some
-module in ``b``. A **back-arrow** is an edge inside an import circle of units (``a -> b`` while
-``b`` reaches ``a``). The **layers** are the levels of the circle-free graph of units (each
-circle counted as one unit): a unit that imports no other unit is in layer 1, any other unit one
-above the highest it imports.
+module in ``b`` (:func:`test_layers.folder_edges`). A **back-arrow** is an edge inside an import
+circle of units, ``a -> b`` while ``b`` reaches ``a`` (:func:`test_layers.back_arrows`). The
+**layers** are the levels of the circle-free graph of units (each circle counted as one unit): a
+unit that imports no other unit is in layer 1, any other unit one above the highest it imports.
 
     python bench/structure.py                       # this tree
     python bench/structure.py --root /path/to/tree  # another checkout (its own code, this script)
-    python bench/structure.py --edges               # and every edge, back-arrows marked
+    python bench/structure.py --edges               # and every edge
 """
 
 from __future__ import annotations
@@ -24,7 +24,15 @@ from collections.abc import Iterable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_layers import LAYERS, SCRIPTS, imported_modules, module_name  # noqa: E402
+from test_layers import (  # noqa: E402
+    LAYERS,
+    SCRIPTS,
+    back_arrows,
+    folder_edges,
+    imported_modules,
+    module_name,
+)
+from test_layers import unit_of as part_of  # noqa: E402
 
 #: The packages reported one by one (besides the whole tree).
 PACKAGES = ("handover_env", "handover_env.data", "handover_env.person", "handover_eval")
@@ -42,27 +50,15 @@ def module_graph(root: Path) -> dict[str, set[str]]:
 
 def unit_of(module: str, package: str | None) -> str | None:
     """The unit of ``package`` (None: the whole tree) that holds ``module``, None if outside."""
-    parts = module.split(".")
-    if package is None:
-        return parts[0]
-    prefix = package.split(".")
-    if parts[: len(prefix)] != prefix:
-        return None
-    return parts[len(prefix)] if len(parts) > len(prefix) else "__init__"
+    return module.split(".")[0] if package is None else part_of(module, package)
 
 
 def unit_edges(graph: dict[str, set[str]], package: str | None) -> set[tuple[str, str]]:
     """The edges between the units of ``package`` (None: the whole tree)."""
-    edges = set()
-    for module, deps in graph.items():
-        a = unit_of(module, package)
-        if a is None:
-            continue
-        for dep in deps:
-            b = unit_of(dep, package)
-            if b is not None and b != a:
-                edges.add((a, b))
-    return edges
+    if package is not None:
+        return folder_edges(graph, package)
+    return {(a, b) for m, deps in graph.items() for d in deps
+            if (a := m.split(".")[0]) != (b := d.split(".")[0])}
 
 
 def circles(units: Iterable[str], edges: set[tuple[str, str]]) -> list[set[str]]:
@@ -123,8 +119,7 @@ def describe(graph: dict[str, set[str]], package: str | None) -> dict:
     """Units, edges, back-arrows and layers of ``package`` (None: the whole tree)."""
     units = {u for m in graph if (u := unit_of(m, package)) is not None}
     edges = unit_edges(graph, package)
-    component = {u: i for i, c in enumerate(circles(units, edges)) for u in c}
-    back = sorted((a, b) for a, b in edges if component[a] == component[b])
+    back = back_arrows(edges)
     level = layers(units, edges)
     return {
         "units": sorted(units),
@@ -151,8 +146,8 @@ def main() -> None:
               f"{len(d['edges'])} import edges, {len(d['back_arrows'])} back-arrows")
         for n, members in reversed(d["by_layer"].items()):
             print(f"  layer {n}: {' '.join(members)}")
-        for a, b in d["back_arrows"]:
-            print(f"  back-arrow: {a} -> {b}")
+        for arrow in d["back_arrows"]:
+            print(f"  back-arrow: {arrow}")
         if args.edges:
             for a, b in d["edges"]:
                 print(f"  {a} -> {b}")
