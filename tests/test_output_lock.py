@@ -108,6 +108,27 @@ def test_a_symlinked_lock_file_is_refused_and_not_followed(tmp_path, capsys):
     assert sorted(p.name for p in out.iterdir()) == [".lock"]
 
 
+def test_a_hard_linked_lock_file_is_refused_and_its_other_file_kept(tmp_path, capsys):
+    """Issue 32 R2: writing the pid would truncate the file the lock shares its inode with."""
+    from handover_eval.cli import evaluate
+
+    out = tmp_path / "out"
+    out.mkdir()
+    target = tmp_path / "precious.txt"
+    target.write_text("keep me")
+    os.link(target, out / ".lock")
+    with pytest.raises(OutputLockError, match="has 2 names"):
+        OutputLock(out).acquire()
+    assert evaluate.main(["rescore", str(tmp_path / "none.csv"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        f"evaluate.py: error: --out {out}: the lock file {out / '.lock'} has 2 names (a hard "
+        "link to another file?); refusing to write it (remove it)"
+    )
+    assert target.read_text() == "keep me" and (out / ".lock").stat().st_nlink == 2
+    assert sorted(p.name for p in out.iterdir()) == [".lock"]
+
+
 def test_train_refuses_an_out_in_use_and_loses_nothing(tmp_path, capsys):
     """Without the lock, the second run's --overwrite would delete the first run's checkpoint."""
     from handover_eval.cli import train
