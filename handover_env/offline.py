@@ -2,7 +2,7 @@
 
 LeRobot reads datasets through ``huggingface_hub`` and ``datasets``, which would try the Hub for a
 file they do not find locally. Everything this project reads is local, so every command
-(``train.py``, ``evaluate.py``, ``python -m handover_env.data``, the benches) calls
+(``train.py``, ``evaluate.py``, ``handover-data``, the benches) calls
 :func:`hub_offline` first. Library modules never do: importing them leaves the process's
 environment alone, and a program that imports them decides for itself.
 """

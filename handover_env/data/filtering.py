@@ -29,7 +29,7 @@ reach (about 0.4 s) and removes the step harmonics and the tracker's bursts: pel
 practically no isolated one-frame spikes (the ZED SDK already smooths; of the 2,851 hand steps
 over 0.1 m, one goes out and straight back), so the outlier pass is a guard for other downloads
 and rarely changes a sample here; the report
-(``python -m handover_env.data transfer-stats``) prints what each stage does.
+(``handover-data transfer-stats``) prints what each stage does.
 """
 
 from __future__ import annotations

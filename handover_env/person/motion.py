@@ -88,7 +88,7 @@ OOD_MODES = ("wander", "pause")
 # OOD walkers (paper Sec. V-A: the receiver wanders or pauses), calibrated to the recorded OOD
 # walks ("motion_variation_*") of the calibration half (Table I folds 0-4) on the statistics of
 # handover_eval.calibration.walks: total heading change, detour, speed CV, pause duration
-# (docs/calibration/walkers.md, written by `python -m handover_env.data walk-stats`). Half of the
+# (docs/calibration/walkers.md, written by `handover-data walk-stats`). Half of the
 # OOD walkers mainly wander (a wide looping meander), half mainly pause (a short stop on a path
 # that first swings out sideways): the recorded OOD walks range from loops without a stop to
 # stops on a path with a single wide detour. Uniform ranges (low, high) per mode (a fixed value

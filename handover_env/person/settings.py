@@ -63,7 +63,7 @@ class ReceiverConfig:
     """How the person reaches, grasps, holds, slows down and pulls (see the module docstring).
 
     The defaults are calibrated on the calibration half (Table I folds 0-4) of the development
-    copy's ID recordings by ``python -m handover_env.data transfer-stats``
+    copy's ID recordings by ``handover-data transfer-stats``
     (``docs/calibration/receiver_calibration.md``; medians unless said otherwise):
 
     Args:

@@ -11,7 +11,7 @@ paper's constant M, the command delay, the UR5e's speed limits). Every number's 
 Profiles (:func:`make_profile`):
 
 * ``"paper"``: every field at its documented value (vendor documents, or derived from the
-  recordings by ``python -m handover_env.data sensing``).
+  recordings by ``handover-data sensing``).
 * ``"ideal"``: today's simulated world exactly: no latency, noise, lost frames or drift, the exact
   payload, no zeroing, the controller's Λ(q) inertia, no command delay, no extra limits.
 * ``"randomized"``: each numeric field drawn once, uniformly from its ``random`` range, with the

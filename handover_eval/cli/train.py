@@ -9,7 +9,7 @@
     python train.py preference-check                             # CoSpar vs a brute-forced optimum
     python train.py rl --out runs/rl                             # SB3 PPO in the env (residual)
 
-PATH is a canonical ``.npz`` (``python -m handover_env.data convert``/``synth``), a folder of the
+PATH is a canonical ``.npz`` (``handover-data convert``/``synth``), a folder of the
 public dataset's pickles, or omitted for the embedded synthetic default. The checkpoint folder
 (``--out``) holds safetensors weights plus JSON config and is loaded by ``BCMLPAgent.load(dir)`` /
 ``ACTAgent.load(dir)``; ``--resume`` continues an interrupted or finished run from it (with more
