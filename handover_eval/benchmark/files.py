@@ -3,22 +3,27 @@ every field checked.
 
 Reading runs no code: the CSVs go through :mod:`csv` and the JSON through :func:`json.loads`
 (size-bounded, duplicate keys, NaN and Infinity refused), and every field is checked for its
-exact type and range against the schemas below. Any problem is a :class:`BenchmarkFileError`
-whose message is one line naming the file and the field.
+exact type and range against the schemas below (every pattern matched in full, so no trailing
+newline slips through). An episode file holds at most :data:`MAX_ROWS` rows of at most
+:data:`MAX_AGENTS` agents: bounds that keep ``rescore`` of the largest file admitted under 2 GB
+of memory and a minute (``tests/test_security_results.py``). The values of a result.json are
+then checked against each other (:mod:`.result_values`). Any problem is a
+:class:`BenchmarkFileError` whose message is one line naming the file and the field (and, in an
+episode file, the line).
 """
 
 from __future__ import annotations
 
 import csv
 import hashlib
-import io
 import json
 import math
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from handover_env.regular_file import read_regular_file
 from handover_eval.benchmark.outcomes import CHECKS, EVENTS
 from handover_eval.benchmark.plugin import NAME_RE
 from handover_eval.benchmark.protocol import (
@@ -27,22 +32,27 @@ from handover_eval.benchmark.protocol import (
     OPENLOOP_METRICS,
     TRACKS,
 )
+from handover_eval.benchmark.result_values import value_problem
 from handover_eval.reporting import write_csv, write_text
 
 RESULT_FORMAT = "handover_env-benchmark-result"
 RESULT_NAME = "result.json"
 EPISODE_FILES = {"openloop": "openloop_episodes.csv", "closedloop": "closedloop_episodes.csv"}
-MAX_JSON_BYTES = 2_000_000
+#: Bounds on what leaderboard and rescore read (a full run's result.json is ~15 kB, its episode
+#: files ~0.5 MB and ~1,200 rows of 2 agents).
+MAX_JSON_BYTES = 256_000
 MAX_CSV_BYTES = 200_000_000
-MAX_ROWS = 2_000_000
+MAX_ROWS = 100_000
+MAX_AGENTS = 1_000
 MAX_FIELD_CHARS = 200
 OUTCOME_NAMES = (
     "success", "premature_release", "dropped", "unsafe_force", "missed", "unstable", "timeout"
 )
-KEY_RE = re.compile(r"^[A-Za-z0-9_.\-]{1,128}$")
-INT_RE = re.compile(r"^-?[0-9]{1,12}$")
-FLOAT_RE = re.compile(r"^(nan|-?([0-9]+\.?[0-9]*|\.[0-9]+)(e[-+]?[0-9]{1,3})?)$")
-HEX32, HEX64 = re.compile(r"^[0-9a-f]{32}$"), re.compile(r"^[0-9a-f]{64}$")
+# Matched with fullmatch: ``$`` alone would also accept a trailing newline.
+KEY_RE = re.compile(r"[A-Za-z0-9_.\-]{1,128}")
+INT_RE = re.compile(r"-?[0-9]{1,12}")
+FLOAT_RE = re.compile(r"nan|-?([0-9]+\.?[0-9]*|\.[0-9]+)(e[-+]?[0-9]{1,3})?")
+HEX32, HEX64 = re.compile(r"[0-9a-f]{32}"), re.compile(r"[0-9a-f]{64}")
 
 
 class BenchmarkFileError(ValueError):
@@ -52,7 +62,7 @@ class BenchmarkFileError(ValueError):
 # ------------------------------------------------------------------------------ CSV schemas
 def _parse_str(pattern: re.Pattern) -> Callable[[str], str]:
     def parse(text: str) -> str:
-        if not pattern.match(text):
+        if not pattern.fullmatch(text):
             raise ValueError(f"{text[:40]!r} is not allowed here")
         return text
 
@@ -60,13 +70,28 @@ def _parse_str(pattern: re.Pattern) -> Callable[[str], str]:
 
 
 def _parse_int(text: str) -> int:
-    if not INT_RE.match(text):
+    if not INT_RE.fullmatch(text):
         raise ValueError(f"{text[:40]!r} is not an integer")
     return int(text)
 
 
-def _parse_opt_int(text: str) -> int | str:
-    return "" if text == "" else _parse_int(text)
+def _int_from(low: int) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        value = _parse_int(text)
+        if value < low:
+            raise ValueError(f"{value} is below {low}")
+        return value
+
+    return parse
+
+
+def _opt_int_from(low: int) -> Callable[[str], int | str]:
+    parse_int = _int_from(low)
+
+    def parse(text: str) -> int | str:
+        return "" if text == "" else parse_int(text)
+
+    return parse
 
 
 def _parse_bool(text: str) -> bool:
@@ -76,9 +101,17 @@ def _parse_bool(text: str) -> bool:
 
 
 def _parse_float(text: str) -> float:
-    value = float(text) if FLOAT_RE.match(text) else math.inf
+    value = float(text) if FLOAT_RE.fullmatch(text) else math.inf
     if math.isinf(value):
         raise ValueError(f"{text[:40]!r} is not a finite number or nan")
+    return value
+
+
+def _parse_amount(text: str) -> float:
+    """A time, force, length or error: nan (undefined) or a finite number >= 0."""
+    value = _parse_float(text)
+    if value < 0:
+        raise ValueError(f"{text[:40]!r} is negative")
     return value
 
 
@@ -93,35 +126,40 @@ def _one_of(names: Sequence[str]) -> Callable[[str], str]:
 
 _NAME = _parse_str(NAME_RE)
 _KEY = _parse_str(KEY_RE)
-#: column -> parser, in the order the CSV holds them.
+#: column -> parser, in the order the CSV holds them. Times (s from the episode's start or the
+#: receiver's departure), forces, lengths and errors are nan or >= 0; seeds, steps and counts
+#: >= 0; a model fold >= -1 (-1: fitted on all of ``--data``); only ``pass_y`` and the replay
+#: deltas ``delta_t``, ``delta_x`` may be negative.
 CLOSEDLOOP_COLUMNS: dict[str, Callable[[str], Any]] = {
     "agent": _NAME,
     "set": _one_of(CLOSEDLOOP_SETS),
     "receiver": _KEY,
-    "seed": _parse_int,
-    "fold": _parse_opt_int,
-    "model_fold": _parse_opt_int,
+    "seed": _int_from(0),
+    "fold": _opt_int_from(0),
+    "model_fold": _opt_int_from(-1),
     "is_ood": _parse_bool,
     "pass_y": _parse_float,
     "outcome": _one_of(OUTCOME_NAMES),
     "success": _parse_bool,
     "first_failure": _one_of(("", *CHECKS)),
     **{f"ev_{e}": _parse_bool for e in EVENTS},
-    **{c: _parse_float for c in (
+    **{c: _parse_amount for c in (
         "handover_time", "transfer_time", "reach_onset_time", "release_time", "release_force",
         "peak_contact_force", "body_contact_force", "penetration", "time_lost", "reach_distance",
-        "arm_extended_time", "pull_force", "robot_jerk_rms", "delta_t", "delta_x",
+        "arm_extended_time", "pull_force", "robot_jerk_rms",
     )},
-    "sim_unstable": _parse_int,
-    "steps": _parse_int,
+    "delta_t": _parse_float,
+    "delta_x": _parse_float,
+    "sim_unstable": _int_from(0),
+    "steps": _int_from(0),
 }
 OPENLOOP_COLUMNS: dict[str, Callable[[str], Any]] = {
     "agent": _NAME,
-    "fold": _parse_int,
+    "fold": _int_from(0),
     "source_id": _KEY,
     "is_ood": _parse_bool,
-    "n_queries": _parse_int,
-    **{m: _parse_float for m in OPENLOOP_METRICS},
+    "n_queries": _int_from(0),
+    **{m: _parse_amount for m in OPENLOOP_METRICS},
 }
 SCHEMAS = {"closedloop": CLOSEDLOOP_COLUMNS, "openloop": OPENLOOP_COLUMNS}
 UNIQUE = {"closedloop": ("agent", "set", "receiver"), "openloop": ("agent", "source_id")}
@@ -137,17 +175,27 @@ def write_episodes(rows: Sequence[Mapping[str, Any]], track: str, path: Path) ->
 
 
 def _read_bounded(path: Path, limit: int) -> bytes:
+    """The bytes of a regular file (no link) of at most ``limit`` bytes, checked and read on one
+    descriptor (:func:`handover_env.regular_file.read_regular_file`)."""
     path = Path(path)
+    if not (path.exists() or path.is_symlink()):
+        raise BenchmarkFileError(f"{path}: no such file")
     if path.is_symlink() or not path.is_file():
-        raise BenchmarkFileError(f"{path}: not a regular file")
+        raise BenchmarkFileError(f"{path}: not a regular file (a link, folder or device)")
     size = path.stat().st_size
     if size > limit:
         raise BenchmarkFileError(f"{path}: {size} bytes, more than the {limit} allowed")
-    with path.open("rb") as fh:
-        data = fh.read(limit + 1)
-    if len(data) > limit:
-        raise BenchmarkFileError(f"{path}: more than the {limit} bytes allowed")
-    return data
+    return read_regular_file(path, limit, path.parent, error=BenchmarkFileError)
+
+
+def _lines(text: str) -> Iterator[str]:
+    """The lines of ``text``, each with its ``\n``, without a copy of the whole text."""
+    start, end = 0, len(text)
+    while start < end:
+        stop = text.find("\n", start)
+        stop = end if stop < 0 else stop + 1
+        yield text[start:stop]
+        start = stop
 
 
 def read_episodes(path: str | Path) -> tuple[str, list[dict]]:
@@ -157,7 +205,7 @@ def read_episodes(path: str | Path) -> tuple[str, list[dict]]:
         text = _read_bounded(path, MAX_CSV_BYTES).decode("utf-8")
     except UnicodeDecodeError as exc:
         raise BenchmarkFileError(f"{path}: not UTF-8 text ({exc.reason})") from None
-    reader = csv.reader(io.StringIO(text, newline=""))
+    reader = csv.reader(_lines(text))
     try:
         header = next(reader)
     except StopIteration:
@@ -171,7 +219,7 @@ def read_episodes(path: str | Path) -> tuple[str, list[dict]]:
             f"{EPISODE_FILES['closedloop']} or {EPISODE_FILES['openloop']})"
         )
     schema = SCHEMAS[track]
-    rows, seen = [], set()
+    rows, seen, agents = [], set(), set()
     try:
         for line, cells in enumerate(reader, start=2):
             if len(rows) >= MAX_ROWS:
@@ -192,6 +240,10 @@ def read_episodes(path: str | Path) -> tuple[str, list[dict]]:
             if key in seen:
                 raise BenchmarkFileError(f"{path}: line {line}: {key} appears twice")
             seen.add(key)
+            agents.add(row["agent"])
+            if len(agents) > MAX_AGENTS:
+                raise BenchmarkFileError(f"{path}: line {line}, agent: more than {MAX_AGENTS} "
+                                         "agents in one file")
             if track == "closedloop":
                 _check_closed_row(path, line, row)
             rows.append(row)
@@ -210,10 +262,19 @@ def _check_closed_row(path: Path, line: int, row: dict) -> None:
         )
     if row["success"] and row["outcome"] != "success":
         raise BenchmarkFileError(f"{path}: line {line}, success: outcome is {row['outcome']!r}")
+    if row["success"] and math.isnan(row["handover_time"]):
+        raise BenchmarkFileError(f"{path}: line {line}, handover_time: nan on a success (every "
+                                 "success has a handover time)")
 
 
 def sha256_file(path: str | Path) -> str:
+    """The SHA-256 of a file we just wrote."""
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def sha256_episode_file(path: str | Path) -> str:
+    """The SHA-256 of an episode file we did not write (a regular file within the size limit)."""
+    return hashlib.sha256(_read_bounded(Path(path), MAX_CSV_BYTES)).hexdigest()
 
 
 # ------------------------------------------------------------------------------ result.json
@@ -277,8 +338,9 @@ def read_result(path: str | Path) -> dict:
 # A tiny schema language: dict = exactly these keys; ("map", keys, spec) = a subset of keys;
 # ("list", spec); ("json",) any JSON of bounded size; callables check a leaf.
 def _num_or_null(v: Any) -> bool:
-    return v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)
-                         and math.isfinite(v))
+    if isinstance(v, int) and not isinstance(v, bool):
+        return abs(v) <= 2**53  # exactly a float; a 400-digit integer is not a number of ours
+    return v is None or (isinstance(v, float) and math.isfinite(v))
 
 
 def _int(v: Any) -> bool:
@@ -297,12 +359,12 @@ def _leaf(check: Callable[[Any], bool], what: str) -> Callable[[Any, str, str], 
 NUM = _leaf(_num_or_null, "a finite number or null")
 INT = _leaf(_int, "an integer in [0, 1e9]")
 BOOL = _leaf(lambda v: isinstance(v, bool), "true or false")
-NAME = _leaf(lambda v: isinstance(v, str) and bool(NAME_RE.match(v)), "an agent name")
-HEX32_OR_NULL = _leaf(lambda v: v is None or (isinstance(v, str) and bool(HEX32.match(v))),
+NAME = _leaf(lambda v: isinstance(v, str) and bool(NAME_RE.fullmatch(v)), "an agent name")
+HEX32_OR_NULL = _leaf(lambda v: v is None or (isinstance(v, str) and bool(HEX32.fullmatch(v))),
                       "32 hex digits or null")
-H32 = _leaf(lambda v: isinstance(v, str) and bool(HEX32.match(v)), "32 hex digits")
-H64 = _leaf(lambda v: isinstance(v, str) and bool(HEX64.match(v)), "64 hex digits")
-H64_OR_EMPTY = _leaf(lambda v: isinstance(v, str) and (v == "" or bool(HEX64.match(v))),
+H32 = _leaf(lambda v: isinstance(v, str) and bool(HEX32.fullmatch(v)), "32 hex digits")
+H64 = _leaf(lambda v: isinstance(v, str) and bool(HEX64.fullmatch(v)), "64 hex digits")
+H64_OR_EMPTY = _leaf(lambda v: isinstance(v, str) and (v == "" or bool(HEX64.fullmatch(v))),
                      "64 hex digits or empty")
 TEXT = _leaf(lambda v: isinstance(v, str) and len(v) <= 4096 and v.isprintable(),
              "printable text of at most 4096 characters")
@@ -328,7 +390,10 @@ def _json_any(v: Any, where: str, file: str, depth: int = 0) -> None:
             _json_any(x, f"{where}[{i}]", file, depth + 1)
     elif isinstance(v, str):
         TEXT(v, where, file)
-    elif not (v is None or isinstance(v, bool) or _num_or_null(v)):
+    elif isinstance(v, (int, float)) and not isinstance(v, bool) and not _num_or_null(v):
+        raise BenchmarkFileError(f"{file}: field {where} must be a finite number of magnitude at "
+                                 f"most 2**53, got {repr(v)[:40]}")
+    elif not (v is None or isinstance(v, (bool, int, float))):
         raise BenchmarkFileError(f"{file}: field {where} is not JSON data")
 
 
@@ -424,3 +489,6 @@ def check_result(data: Any, file: str) -> None:
         if data["fingerprints"][track]["protocol_version"] != data["protocol_version"]:
             raise BenchmarkFileError(f"{file}: field fingerprints.{track}.protocol_version differs "
                                      "from protocol_version")
+    problem = value_problem(data)
+    if problem is not None:
+        raise BenchmarkFileError(f"{file}: field {problem}")

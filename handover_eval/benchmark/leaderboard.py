@@ -6,6 +6,11 @@ data, the same scoring data and receivers, the same protocol settings); otherwis
 :class:`LeaderboardError` says which files differ and how, in one line. Rank: by closed-loop
 success over all test receivers, then far-pass success, then the median handover time; results
 with the open-loop track only follow, by current-frame RMS.
+
+A result is ranked only beside the episode files it was computed from: each file its
+``episodes`` field names must lie beside it with the SHA-256 recorded there (a run that failed
+half-way, or an edited file, is refused). At most :data:`MAX_RESULTS` files are ranked at once,
+each checked as soon as it is parsed, so memory stays bounded.
 """
 
 from __future__ import annotations
@@ -15,7 +20,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from handover_eval.benchmark.files import check_result, load_json, protocol_version_of
+from handover_eval.benchmark.files import (
+    BenchmarkFileError,
+    check_result,
+    load_json,
+    protocol_version_of,
+    sha256_episode_file,
+)
 from handover_eval.benchmark.protocol import CLOSEDLOOP_SETS, REFERENCE_AGENT, TRACKS
 from handover_eval.reporting import markdown_table
 
@@ -24,21 +35,29 @@ class LeaderboardError(ValueError):
     """Results that cannot be ranked together (one line: which files, why)."""
 
 
+MAX_RESULTS = 100
+
+
 def load_results(paths: Sequence[str | Path]) -> list[tuple[str, dict]]:
-    """Every file parsed, the protocol versions compared, then every field checked."""
+    """Every file parsed, its protocol version compared with the first's, every field checked;
+    then the fingerprints, the agents and the episode files beside each (module docstring)."""
     if not paths:
         raise LeaderboardError("no result file given")
-    raw = [(str(p), load_json(p)) for p in paths]
-    versions = [(f, protocol_version_of(d, f)) for f, d in raw]
-    first_file, first = versions[0]
-    for f, v in versions[1:]:
-        if v != first:
+    if len(paths) > MAX_RESULTS:
+        raise LeaderboardError(f"{len(paths)} result files: at most {MAX_RESULTS} are ranked at "
+                               "once")
+    raw: list[tuple[str, dict]] = []
+    for p in paths:
+        f, d = str(p), load_json(p)
+        v = protocol_version_of(d, f)
+        if raw and v != raw[0][1]["protocol_version"]:
             raise LeaderboardError(
-                f"{f} is protocol version {v!r} but {first_file} is {first!r}: results of "
-                "different protocol versions are not comparable"
+                f"{f} is protocol version {v!r} but {raw[0][0]} is "
+                f"{raw[0][1]['protocol_version']!r}: results of different protocol versions are "
+                "not comparable"
             )
-    for f, d in raw:
         check_result(d, f)
+        raw.append((f, d))
     for track in TRACKS:
         have = [(f, d["fingerprints"][track]) for f, d in raw if track in d["tracks"]]
         for f, fp in have[1:]:
@@ -53,7 +72,30 @@ def load_results(paths: Sequence[str | Path]) -> list[tuple[str, dict]]:
     dup = next((n for n in names if names.count(n) > 1), None)
     if dup is not None:
         raise LeaderboardError(f"two results are for agent {dup!r}: rank each agent once")
+    for f, d in raw:
+        check_episode_files(f, d)
     return raw
+
+
+def check_episode_files(file: str, result: dict) -> None:
+    """The episode files ``result`` (read from ``file``) names lie beside it with the SHA-256 it
+    records; else a :class:`LeaderboardError` naming the file and the field."""
+    for track, entry in result["episodes"].items():
+        path = Path(file).parent / entry["file"]
+        if not (path.exists() or path.is_symlink()):
+            raise LeaderboardError(
+                f"{file}: field episodes.{track}.file: {path} is missing (a result is ranked "
+                "only beside the episode files it was computed from)"
+            )
+        try:
+            digest = sha256_episode_file(path)
+        except BenchmarkFileError as exc:
+            raise LeaderboardError(f"{file}: field episodes.{track}.file: {exc}") from None
+        if digest != entry["sha256"]:
+            raise LeaderboardError(
+                f"{file}: field episodes.{track}.sha256 is {entry['sha256'][:12]}… but {path} "
+                f"beside it hashes to {digest[:12]}… (another run's, or edited, files)"
+            )
 
 
 def _what_differs(a: dict, b: dict) -> str:
@@ -163,8 +205,10 @@ def leaderboard_figure(results: list[tuple[str, dict]]) -> Any:
             c = _get(r, "metrics", "closedloop", s, "success")
             v = 100 * c["value"] if c and c["value"] is not None else math.nan
             vals.append(v)
-            lo.append(v - 100 * c["low"] if c and c["low"] is not None else 0.0)
-            hi.append(100 * c["high"] - v if c and c["high"] is not None else 0.0)
+            # max(0, ...): a Wilson bound at a rate of 0 or 1 can miss it by a rounding error
+            # (25/25 gives a high of 0.9999999999999999)
+            lo.append(max(0.0, v - 100 * c["low"]) if c and c["low"] is not None else 0.0)
+            hi.append(max(0.0, 100 * c["high"] - v) if c and c["high"] is not None else 0.0)
         pos = x + (k - (len(sets) - 1) / 2) * width
         axes[0].bar(pos, vals, width, label=s)
         axes[0].errorbar(pos, vals, yerr=[lo, hi], fmt="none", ecolor="k", capsize=2, lw=0.7)

@@ -4,6 +4,11 @@
 (:func:`.files.read_episodes`), so a run (:func:`write_benchmark`) and ``rescore`` on the same
 files write the same bytes. Tables: ``closedloop_table.csv``, ``openloop_table.csv`` and
 ``benchmark.md`` (the tracks present).
+
+A run removes an earlier run's ``result.json`` from ``--out`` before it writes any file and
+writes its own last, so a run that fails half-way leaves no result file beside episode files it
+does not describe (and :func:`.leaderboard.load_results` refuses a result whose episode files'
+hashes differ).
 """
 
 from __future__ import annotations
@@ -77,8 +82,20 @@ def rescore(paths: list[Path], out: Path) -> tuple[dict, list[Path]]:
     return write_tables(track_rows, out)
 
 
+def remove_result(out: Path) -> None:
+    """Remove ``out``'s result.json (a link is removed, never followed); a folder of that name
+    is refused."""
+    path = out / RESULT_NAME
+    if path.is_symlink() or path.is_file():
+        path.unlink()
+    elif path.exists():
+        raise ValueError(f"{path}: not a file; a benchmark run writes its result there")
+
+
 def write_benchmark(run: BenchmarkRun, out: Path) -> dict:
-    """Episode CSVs, tables and result.json of ``run`` into ``out``; returns the result."""
+    """Episode CSVs, tables and result.json of ``run`` into ``out`` (an earlier result.json
+    removed first); returns the result."""
+    remove_result(out)
     episodes, track_rows = {}, {}
     for track in run.tracks:
         path = write_episodes(run.rows[track], track, out / EPISODE_FILES[track])

@@ -2,19 +2,25 @@
 
 Open loop: :func:`.open_loop.run_openloop`. Closed loop: the receivers of the protocol
 (:func:`receivers_of`) for the agent and the reactive reference,
-:func:`.closed_loop.run_closedloop`. The files are written by :mod:`.output`.
+:func:`.closed_loop.run_closedloop`. Each track's rows are checked as their episode file would
+hold them as soon as the track ends (:func:`check_rows`), so a value the file cannot hold stops
+the run naming the agent and the episode before any file is written. The files are written by
+:mod:`.output`.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from handover_env.data.dataset import HandoverDataset
 from handover_eval.benchmark.closed_loop import run_closedloop
+from handover_eval.benchmark.files import SCHEMAS, UNIQUE
 from handover_eval.benchmark.open_loop import run_openloop
 from handover_eval.benchmark.plugin import AgentSource, agent_config, build_plugin
 from handover_eval.benchmark.protocol import (
@@ -52,6 +58,32 @@ class BenchmarkRun:
     fingerprints: dict[str, dict]
     config: dict
     seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _cell_text(value: Any) -> str:
+    """A value as :func:`handover_eval.reporting.write_csv` writes it (floats ``.6g``)."""
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return "" if value is None else str(value)
+
+
+def check_rows(track: str, rows: Sequence[Mapping[str, Any]]) -> None:
+    """Every value of a run's rows as its episode file would hold it, before the file is written.
+
+    A value the file could not hold (a metric made infinite by an agent's huge predictions, a
+    negative time) is a ValueError naming the agent, the episode and the column, so that a run
+    never writes an episode file that it would then refuse.
+    """
+    schema, keys = SCHEMAS[track], UNIQUE[track][1:]
+    for row in rows:
+        for col, parse in schema.items():
+            try:
+                parse(_cell_text(row.get(col)))
+            except ValueError as exc:
+                episode = " ".join(str(row[k]) for k in keys)
+                raise ValueError(f"agent {row['agent']!r}, {track} episode {episode}: {col}: {exc} "
+                                 "(the agent's output gave a value its episode file cannot hold)"
+                                 ) from None
 
 
 def receivers_of(
@@ -113,6 +145,7 @@ def run_benchmark(
         rows["openloop"] = run_openloop(source, dataset, settings.folds, settings.openloop,
                                         options, cache_dir, replay, progress)
         seconds["openloop"] = time.perf_counter() - t0
+        check_rows("openloop", rows["openloop"])
     if "closedloop" in tracks:
         t0 = time.perf_counter()
         receivers, splits, shared = receivers_of(settings, dataset, data_path, replay, replay_path)
@@ -120,5 +153,6 @@ def run_benchmark(
         rows["closedloop"] = run_closedloop(sources, receivers, dataset, shared, splits, THETA,
                                             options, cache_dir, progress)
         seconds["closedloop"] = time.perf_counter() - t0
+        check_rows("closedloop", rows["closedloop"])
     prints = fingerprints(settings, dataset, replay, receivers, tracks)
     return BenchmarkRun(source, tracks, settings, rows, prints, config, seconds)
