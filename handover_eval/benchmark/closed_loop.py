@@ -11,7 +11,9 @@ a chunk of receivers of one agent; its episodes are seeded and the agent reset, 
 depend on the workers. A row is the closed loop's episode row
 (:func:`handover_eval.closedloop.worker.episode_row`) reduced to
 :data:`.files.CLOSEDLOOP_COLUMNS`, with the first failure and the event flags of
-:mod:`.outcomes`.
+:mod:`.outcomes`. Every episode, and a plug-in's ``fit``, runs under
+:func:`.guard.agent_guard`, with the scored agent's time limit for every agent of the run (the
+reference too); an agent stopped by it stops its later episodes in the same process at once.
 """
 
 from __future__ import annotations
@@ -31,8 +33,9 @@ from agents.base import Agent
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
 from handover_eval.backend import map_folds
+from handover_eval.benchmark.guard import AgentError, agent_guard, forget_stopped
 from handover_eval.benchmark.outcomes import EVENTS, events, first_failure
-from handover_eval.benchmark.plugin import ROSTER_NAME, AgentSource, build_plugin
+from handover_eval.benchmark.plugin import ROSTER_NAME, AgentSource, fit_plugin
 from handover_eval.benchmark.protocol import ENV_ID, SENSING, BenchReceiver
 from handover_eval.closedloop.receivers import FIT_ALL, replay_source
 from handover_eval.closedloop.roster import fold_model, make_agent, prepare_models
@@ -60,6 +63,12 @@ class BenchJob:
     model_fold: int | None = None
     train_idx: np.ndarray | None = None
     hand_mode: str = "reach"
+    time_limit: float | None = None
+
+    @property
+    def guard_key(self) -> tuple[str, str]:
+        """The key a stop of this job's agent is remembered under (this run, this agent)."""
+        return (self.token, self.source.name)
 
 
 def learns(source: AgentSource) -> bool:
@@ -109,9 +118,7 @@ def _agent(dataset: HandoverDataset, job: BenchJob) -> Agent:
         return make_agent(name, job.params, model)
     key = (job.token, src, job.model_fold)
     if key not in _PLUGINS:
-        agent = build_plugin(src)
-        fitted = agent.fit(dataset.subset(job.train_idx))
-        _PLUGINS[key] = fitted if isinstance(fitted, Agent) else agent
+        _PLUGINS[key] = fit_plugin(src, dataset.subset(job.train_idx))
         while len(_PLUGINS) > CACHE_SIZE:
             _PLUGINS.popitem(last=False)
     return make_agent(_PLUGINS[key], job.params)
@@ -147,7 +154,9 @@ def run_bench_job(dataset: HandoverDataset, job: BenchJob) -> list[dict]:
     """Run ``job``'s episodes (in a worker or in-process); one benchmark row each."""
     from handover_env.rollout import run_episode
 
-    agent = _agent(dataset, job)
+    name = job.source.name
+    with agent_guard(name, "building and fitting", key=job.guard_key):
+        agent = _agent(dataset, job)
     env = track_env(job.params)
     rows = []
     for rec in job.receivers:
@@ -165,7 +174,13 @@ def run_bench_job(dataset: HandoverDataset, job: BenchJob) -> list[dict]:
             steps[0] = step + 1
 
         t0 = time.perf_counter()
-        info = run_episode(env, agent, seed=spec.seed, options=options, on_step=count)
+        what = f"closed-loop episode {rec.bench_set}/{spec.key} (seed {spec.seed})"
+        try:
+            with agent_guard(name, what, job.time_limit, job.guard_key):
+                info = run_episode(env, agent, seed=spec.seed, options=options, on_step=count)
+        except (AgentError, KeyboardInterrupt):
+            clear_state()  # the env may have stopped mid-step: a later job builds a fresh one
+            raise
         ep_job = EpisodeJob(job.token, job.source.name, (spec,), job.params, job.hand_mode,
                             job.options, job.cache_dir, job.model_fold, job.train_idx)
         row = episode_row(ep_job, spec, info, steps[0], time.perf_counter() - t0)
@@ -183,8 +198,10 @@ def plan(
     cache_dir: Path,
     token: str,
 ) -> list[BenchJob]:
-    """Chunks of :data:`CHUNK` receivers per agent and model fold, agents in ``sources`` order."""
+    """Chunks of :data:`CHUNK` receivers per agent and model fold, agents in ``sources`` order;
+    every job has the time limit of the scored agent, ``sources[0]``."""
     fit_all = FIT_ALL in splits
+    limit = sources[0].episode_limit_s if sources else None
     jobs = []
     for src in sources:
         groups: dict[tuple[str, int | None], list[BenchReceiver]] = {}
@@ -196,7 +213,8 @@ def plan(
         for (_, fold), recs in groups.items():
             for i in range(0, len(recs), CHUNK):
                 jobs.append(BenchJob(token, src, tuple(recs[i:i + CHUNK]), params, options,
-                                     cache_dir, fold, None if fold is None else splits[fold][0]))
+                                     cache_dir, fold, None if fold is None else splits[fold][0],
+                                     time_limit=limit))
     return jobs
 
 
@@ -239,4 +257,5 @@ def run_closedloop(
         if torch is not None:
             torch.set_num_threads(threads)
         clear_state()
+        forget_stopped()
     return [row for rows in results for row in rows]

@@ -18,7 +18,8 @@ import numpy as np
 from agents.base import Agent
 from handover_env.data.dataset import HandoverDataset
 from handover_eval.backend import map_folds
-from handover_eval.benchmark.plugin import AgentSource, build_plugin
+from handover_eval.benchmark.guard import agent_guard
+from handover_eval.benchmark.plugin import AgentSource, fit_plugin
 from handover_eval.benchmark.protocol import OPENLOOP_METRICS, OPENLOOP_SEED
 from handover_eval.methods import MethodOptions, build_agent, fit_agent, with_test_data
 from handover_eval.openloop.protocol import OpenLoopProtocol, episode_metrics, query_times
@@ -46,9 +47,7 @@ def fitted_agent(
         agent, _ = fit_agent(source.target, build_agent(source.target, options), train, cache_dir)
         return agent
     if source.kind == "plugin":
-        agent = build_plugin(source)
-        fitted = agent.fit(train)
-        return fitted if isinstance(fitted, Agent) else agent
+        return fit_plugin(source, train)
     raise ValueError(
         f"{source.name} is a closed-loop-only agent: it has no open-loop predictor "
         "(its extrapolation is the 'cv' method)"
@@ -61,7 +60,9 @@ def run_fold(dataset: HandoverDataset, job: OpenLoopJob) -> list[dict]:
     rows = []
     for i in job.test_idx:
         ep = dataset[int(i)]
-        m = episode_metrics(agent, ep, job.protocol)
+        with agent_guard(job.source.name, f"open-loop episode {ep.source_id} (fold {job.fold})",
+                         job.source.episode_limit_s, job.source.guard_key):
+            m = episode_metrics(agent, ep, job.protocol)
         if m["n_rows"] == 0:
             continue
         rows.append(

@@ -6,12 +6,18 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from handover_eval.backend import JobError, session
+from handover_eval.benchmark.guard import (
+    DEFAULT_EPISODE_LIMIT_S,
+    MAX_EPISODE_LIMIT_S,
+    AgentError,
+)
 from handover_eval.cli.args import (
     EPOCHS,
     STEPS,
@@ -51,7 +57,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "an agents.base.Agent. A plug-in's code runs (it is loaded in every worker)",
     )
     p.add_argument("--agent-config", default=None, metavar="JSON",
-                   help="a JSON object of keyword arguments for FACTORY (default: {})")
+                   help="a JSON object of keyword arguments for FACTORY (default: {}; every "
+                   "number finite)")
+    p.add_argument("--episode-time-limit", type=episode_seconds, default=DEFAULT_EPISODE_LIMIT_S,
+                   metavar="SECONDS",
+                   help="stop the run, naming the agent and the episode, when one episode (every "
+                   "act() of a closed-loop episode, or every predict() of an open-loop one) takes "
+                   f"longer (default {DEFAULT_EPISODE_LIMIT_S:g} s, far above any real agent's "
+                   f"episode; at most {MAX_EPISODE_LIMIT_S:g})")
     p.add_argument("--name", default=None, help="the agent's name in the tables (default: the "
                    "built-in name, or FILE_STEM:FACTORY)")
     p.add_argument("--tracks", nargs="+", default=["openloop", "closedloop"],
@@ -108,6 +121,18 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--data", required=True, metavar="PATH",
                    help="a folder of public-dataset recordings (whole_motions/)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+
+
+def episode_seconds(text: str) -> float:
+    """argparse type of ``--episode-time-limit``: seconds in (0, MAX_EPISODE_LIMIT_S]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
+    if not (math.isfinite(value) and 0 < value <= MAX_EPISODE_LIMIT_S):
+        raise argparse.ArgumentTypeError(
+            f"must be a number of seconds in (0, {MAX_EPISODE_LIMIT_S:g}], got {text!r}")
+    return value
 
 
 def _error(exc: BaseException) -> int:
@@ -186,7 +211,7 @@ def _benchmark(args: argparse.Namespace, load_dataset: Callable) -> int:
     from handover_eval.benchmark.protocol import BenchmarkSettings
 
     try:
-        source = resolve(args.agent, args.name, args.agent_config)
+        source = resolve(args.agent, args.name, args.agent_config, args.episode_time_limit)
         tracks = tuple(dict.fromkeys(args.tracks))
         settings = BenchmarkSettings(quick=args.quick)
         options = MethodOptions(
@@ -208,6 +233,9 @@ def _benchmark(args: argparse.Namespace, load_dataset: Callable) -> int:
         return _error(exc)
     try:
         return _run(args, load_dataset, source, tracks, settings, options, out, cache, backend)
+    except KeyboardInterrupt as exc:  # Ctrl-C, or the agent's own (AgentInterrupted names it)
+        print(f"evaluate.py: interrupted{': ' + str(exc) if str(exc) else ''}", file=sys.stderr)
+        return 130
     finally:
         lock.release()
 
@@ -233,7 +261,7 @@ def _run(args, load_dataset, source, tracks, settings, options, out, cache, back
             result = write_benchmark(run, out)
     except (ValueError, TypeError) as exc:
         return _error(exc)
-    except (JobError, ConnectionError) as exc:
+    except (JobError, ConnectionError, AgentError) as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 1
     print((out / "benchmark.md").read_text())
