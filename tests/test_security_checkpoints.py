@@ -9,6 +9,7 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -39,19 +40,27 @@ def data():
     return toy_dataset(n=6, length=40, seed=5)
 
 
+#: The agent each checkpoint folder was saved from, to compare the loaded one's predictions with.
+_SAVED_FROM: dict[Path, ACTAgent | BCMLPAgent] = {}
+
+
 @pytest.fixture(scope="module")
 def act_dir(data, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("act") / "ckpt"
-    ACTAgent(ACTAgentConfig(**ACT_TINY)).fit(data, out_dir=out).save(out)
+    agent = ACTAgent(ACTAgentConfig(**ACT_TINY)).fit(data, out_dir=out)
+    agent.save(out)
+    _SAVED_FROM[out] = agent
     return out
 
 
 @pytest.fixture(scope="module")
 def bc_dir(data, tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("bc") / "ckpt"
-    BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=2, use_giver_state=True)).fit(
+    agent = BCMLPAgent(BCMLPConfig(hidden=(16,), max_epochs=2, use_giver_state=True)).fit(
         data, out_dir=out
-    ).save(out)
+    )
+    agent.save(out)
+    _SAVED_FROM[out] = agent
     return out
 
 
@@ -315,6 +324,12 @@ def test_use_giver_state_is_cross_checked_with_lerobots_config(act_dir, tmp_path
 
 def test_untampered_checkpoints_still_round_trip(act_dir, bc_dir, data):
     ep = data[0]
-    for agent in (ACTAgent.load(act_dir), BCMLPAgent.load(bc_dir)):
+    for folder, agent in ((act_dir, ACTAgent.load(act_dir)), (bc_dir, BCMLPAgent.load(bc_dir))):
         pred = agent.predict(ep.receiver_xy[:12], ep.giver_xyz[11])
         assert pred.shape == (30, 3) and torch.isfinite(torch.as_tensor(pred)).all()
+        saved = _SAVED_FROM[folder]
+        np.testing.assert_array_equal(pred, saved.predict(ep.receiver_xy[:12], ep.giver_xyz[11]))
+        np.testing.assert_array_equal(  # a later moment too: the same weights, not one answer
+            agent.predict(ep.receiver_xy[:30], ep.giver_xyz[29]),
+            saved.predict(ep.receiver_xy[:30], ep.giver_xyz[29]),
+        )
