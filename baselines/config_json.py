@@ -1,7 +1,9 @@
 """Config dataclasses from checkpoint JSON: every field present and of its exact JSON type.
 
-``"no"`` is not a bool, a float is not an int, a bool is not an int; a refused field is a
-:class:`~baselines.checkpoint_io.CheckpointError` naming the file and the field.
+``"no"`` is not a bool, a float is not an int, a bool is not an int, a list holds at most
+:data:`MAX_LIST` items (checked before its items: a crafted 16 MB list of millions of numbers
+is refused at once); a refused field is a :class:`~baselines.checkpoint_io.CheckpointError`
+naming the file and the field.
 """
 
 from __future__ import annotations
@@ -12,6 +14,9 @@ from dataclasses import fields
 from typing import Any
 
 from baselines.checkpoint_io import CheckpointError
+
+#: The most items a list field of a config may hold (our longest: a few layer widths).
+MAX_LIST = 1000
 
 
 def json_type_ok(value: Any, hint: Any) -> bool:
@@ -33,8 +38,9 @@ def json_type_ok(value: Any, hint: Any) -> bool:
         return isinstance(value, str)
     if origin is dict or hint is dict:  # a JSON object; its contents are the config's to check
         return isinstance(value, dict) and all(isinstance(k, str) for k in value)
-    if origin is tuple:  # tuple[int, ...] stored as a JSON list
-        return isinstance(value, (list, tuple)) and all(json_type_ok(v, args[0]) for v in value)
+    if origin is tuple:  # tuple[int, ...] stored as a JSON list, of at most MAX_LIST items
+        return (isinstance(value, (list, tuple)) and len(value) <= MAX_LIST
+                and all(json_type_ok(v, args[0]) for v in value))
     return False
 
 
@@ -59,8 +65,14 @@ def config_from_dict(cls: type, d: Any, source: str, ignore: frozenset[str] = fr
         )
     for name in names:
         if name in d and not json_type_ok(d[name], hints[name]):
+            value = d[name]
+            if isinstance(value, list) and len(value) > MAX_LIST:
+                raise CheckpointError(f"{source}: config field {name} is a list of {len(value):,} "
+                                      f"items, more than {MAX_LIST}")
+            shown = repr(value)
+            shown = shown if len(shown) <= 60 else shown[:57] + "..."
             raise CheckpointError(
-                f"{source}: config field {name} = {d[name]!r} is not a "
+                f"{source}: config field {name} = {shown} is not a "
                 f"{getattr(hints[name], '__name__', hints[name])}"
             )
     try:
