@@ -189,10 +189,12 @@ def mutual_imports(graph: dict[str, set[str]]) -> list[str]:
 
 
 def cli_importers(graph: dict[str, set[str]]) -> list[str]:
-    """Modules outside ``handover_eval.cli`` that import it (the scripts are not in the graph)."""
+    """Modules outside ``handover_eval.cli`` that import it (the scripts are not in the graph; a
+    package's ``__main__``, what ``python -m`` runs, is a script too)."""
     return sorted(f"{m} imports {d}" for m, deps in graph.items() for d in deps
                   if d.split(".")[:2] == ["handover_eval", "cli"]
-                  and m.split(".")[:2] != ["handover_eval", "cli"])
+                  and m.split(".")[:2] != ["handover_eval", "cli"]
+                  and m.split(".")[-1] != "__main__")
 
 
 def env_importers_below(graph: dict[str, set[str]]) -> list[str]:
