@@ -48,10 +48,15 @@ FAST_S = 3.0
 QUICK_ARGS = ["rl", "--quick", "--no-progress"]
 
 
-def snapshot(folder: Path) -> dict[str, str]:
-    """Every file under ``folder`` (but the lock) and its SHA-256."""
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file() and p.name != ".lock"}
+def snapshot(folder: Path) -> dict[str, tuple]:
+    """Every file under ``folder`` (but the lock): its size, mtime and (under 64 MiB) SHA-256."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if p.is_file() and p.name != ".lock":
+            st = p.stat()
+            digest = hashlib.sha256(p.read_bytes()).hexdigest() if st.st_size < 1 << 26 else ""
+            out[str(p.relative_to(folder))] = (st.st_size, st.st_mtime_ns, digest)
+    return out
 
 
 def _record(config: RLConfig, io: PolicyIO, training: dict) -> dict:
@@ -349,6 +354,9 @@ TAMPERED_STATE = {
                       r"state\.json: curve\[0\]: success_rate must be a finite number in \[0, 1\]"),
     "curve-time": (_state_edit("handover_time", -1.0, row=0),
                    r"state\.json: curve\[0\]: handover_time must be NaN"),
+    "optimizer-4gib": (lambda f: os.truncate(
+        f / "training_state" / "optimizer" / "optimizer_state.safetensors", 4 << 30),
+        r"optimizer_state\.safetensors: 4,294,967,296 bytes, more than the .* an optimiser"),
     "lr-1e300": (lambda f: edit_config(f, "config", "learning_rate", 1e300),
                  r"config\.json: invalid config \(learning_rate must be a finite number in"),
     "residual-1e300": (lambda f: edit_config(f, "config", "residual_xyz", 1e300),

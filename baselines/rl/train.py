@@ -16,10 +16,13 @@ env returns results in env order, and the curve evaluations draw no random numbe
 
 **Resume** continues from the last checkpoint: the policy weights, the optimiser states, the
 step counter, the curve and each env's receiver stream (its episode counter; its kind generator
-is reseeded from it). The episodes under way when the run stopped start afresh, and SAC's replay
-buffer refills from empty, so a resumed run is a valid continuation but not bit-identical to an
-uninterrupted one. ``steps`` and ``eval_every`` may change on resume (to extend a run); any
-other config field may not.
+is reseeded from it). The episodes under way when the run stopped start afresh, the sampling's
+random stream starts afresh and SAC's replay buffer refills from empty, so a resumed run is a
+valid continuation but not bit-identical to an uninterrupted one. ``steps`` and ``eval_every``
+may change on resume (to extend a run); any other config field may not. Nothing is restored
+before all of it is checked: ``config.json`` (bounded fields, :mod:`baselines.rl.files`),
+``state.json`` against it (:func:`check_state`), the weights against the policy's tensors and
+the optimiser files' sizes against its parameters (before they are read).
 """
 
 from __future__ import annotations
@@ -39,13 +42,12 @@ from baselines.checkpoint_io import (
     CheckpointError,
     check_loadable,
     expected_of,
-    load_tensors,
     read_json,
     recover,
     staged_write,
     write_json,
 )
-from baselines.optimizer_state import load_optimizer, save_optimizer
+from baselines.optimizer_state import OPTIMIZER_STATE, load_optimizer, save_optimizer
 from baselines.rl.agent import RLAgent, make_base
 from baselines.rl.config import (
     CURVE_SEEDS,
@@ -57,6 +59,7 @@ from baselines.rl.config import (
 )
 from baselines.rl.envs import PolicyIO, make_handover_env, training_env
 from baselines.rl.files import (
+    HEADER_BYTES_PER_KEY,
     MAX_WALL_S,
     TRAINING_STATE,
     WEIGHTS,
@@ -292,14 +295,27 @@ def restore(out: Path, model: Any, config: RLConfig) -> dict:
     tensors = read_weights(out / WEIGHTS, layout)
     model.policy.load_state_dict({k[7:]: v for k, v in tensors.items() if k.startswith("policy.")})
     for name, opt in _optimizers(model).items():
+        check_optimizer_size(ts / name / OPTIMIZER_STATE, opt)
         load_optimizer(opt, ts / name)
     if hasattr(model, "log_ent_coef"):
         shape = tuple(model.log_ent_coef.shape)
-        saved_coef = load_tensors(ts / "sac.safetensors", {"log_ent_coef": (shape, torch.float32)},
-                                  root=out)
+        saved_coef = read_weights(ts / "sac.safetensors", {"log_ent_coef": shape})
         with torch.no_grad():
             model.log_ent_coef.copy_(saved_coef["log_ent_coef"])
     return state
+
+
+def check_optimizer_size(path: Path, opt: torch.optim.Optimizer) -> None:
+    """Refuse an optimiser state file larger than Adam's state of ``opt``'s parameters can be
+    (two moments a value and a step a tensor, 8 bytes each, plus a header of at most
+    :data:`~baselines.rl.files.HEADER_BYTES_PER_KEY` a key), from its size on disk, before it is
+    read (its contents are checked by :func:`~baselines.optimizer_state.load_optimizer`)."""
+    params = [p for group in opt.param_groups for p in group["params"]]
+    values = sum(p.numel() for p in params)
+    limit = 8 + HEADER_BYTES_PER_KEY * 3 * len(params) + 8 * (2 * values + len(params))
+    if path.is_file() and path.stat().st_size > limit:
+        raise CheckpointError(f"{path}: {path.stat().st_size:,} bytes, more than the {limit:,} "
+                              "an optimiser state of this policy may have")
 
 
 def train_policy(
