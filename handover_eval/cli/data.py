@@ -341,8 +341,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--overwrite",
         action="store_true",
         help="replace an existing ROOT, only if it is an earlier export and nothing else: its "
-        "meta/handover.json validates, it holds only the files LeRobot and the export write, and "
-        "not DATASET; any other folder is refused and nothing is deleted",
+        "meta/handover.json validates, it holds only the files that export wrote (listed there "
+        "with their size and SHA-256), and not DATASET; any other folder is refused and nothing "
+        "is deleted",
     )
     p.set_defaults(func=cmd_export_lerobot)
 
