@@ -1,5 +1,7 @@
-"""The methods compared in Table I and the figures, built and fitted the same way for every run.
+"""The methods compared in Table I and the figures, configured, fitted and cached the same way for
+every run.
 
+The methods are the open-loop entries of :mod:`handover_eval.roster` (which builds them):
 ``ours`` is the paper's SPGP planner (inducing ratio 0.4 by default), ``iaal`` the same model with
 exact GPs, ``bc_mlp`` and ``act`` the learned baselines, and ``cv`` the constant-velocity predictor
 (:mod:`agents.constant_velocity`: the reactive agent's extrapolation, nothing learned), the simple
@@ -23,10 +25,11 @@ import numpy as np
 
 from agents.base import Agent
 from handover_env.data.dataset import HandoverDataset
+from handover_eval import roster
 from handover_eval.reporting import write_text
 
-METHODS: tuple[str, ...] = ("ours", "iaal", "act", "bc_mlp", "cv")
-LEARNED: frozenset[str] = frozenset({"act", "bc_mlp"})
+#: The open-loop methods in Table I's row order, read from the roster.
+METHODS: tuple[str, ...] = roster.openloop_methods()
 COMPLETE = "evaluate_complete.json"
 
 ACT_EVAL_STEPS = 3_000
@@ -84,60 +87,25 @@ class MethodOptions:
         if self.act_steps is not None and self.act_steps < 1:
             raise ValueError(f"act_steps must be positive, got {self.act_steps!r}")
 
+    @property
+    def act_budget(self) -> int:
+        """ACT's optimisation steps: ``act_steps``, else :data:`ACT_EVAL_STEPS` (40 with
+        ``quick``)."""
+        return self.act_steps or (QUICK_ACT_STEPS if self.quick else ACT_EVAL_STEPS)
+
 
 def check_methods(names: list[str] | tuple[str, ...]) -> list[str]:
-    """Validate method names (clear error naming the unknown ones); keeps the given order."""
-    unknown = [n for n in names if n not in METHODS]
-    if unknown:
-        raise ValueError(f"unknown method(s) {unknown}; choose from {list(METHODS)}")
-    if not names:
-        raise ValueError(f"no method selected; choose from {list(METHODS)}")
-    return list(dict.fromkeys(names))
+    """Validate method names (:func:`handover_eval.roster.check_methods`: a clear error naming the
+    unknown ones, other spellings as the entry's name); keeps the given order."""
+    return roster.check_methods(names)
 
 
 def build_agent(name: str, options: MethodOptions, inducing_ratio: float | None = None) -> Agent:
-    """A fresh, unfitted agent for ``name``."""
-    check_methods([name])
-    if name == "cv":
-        from agents.constant_velocity import ConstantVelocityAgent
-        from agents.reactive import ReactiveConfig
-
-        return ConstantVelocityAgent(ReactiveConfig(horizon=options.horizon))
-    if name in ("ours", "iaal"):
-        from agents.nonparametric import NonparametricAgent, NonparametricConfig
-        from baselines.iaal import IAALAgent
-
-        ratio = options.inducing_ratio if inducing_ratio is None else inducing_ratio
-        config = NonparametricConfig(inducing_ratio=ratio, horizon=options.horizon)
-        return NonparametricAgent(config) if name == "ours" else IAALAgent(config)
-    if name == "bc_mlp":
-        from baselines.bc_mlp import BCMLPAgent, BCMLPConfig
-
-        epochs = options.bc_epochs or (3 if options.quick else None)
-        kwargs = {
-            "seed": options.seed,
-            "horizon": options.horizon,
-            "use_giver_state": options.giver_state,
-        }
-        if epochs:
-            kwargs["max_epochs"] = epochs
-        return BCMLPAgent(BCMLPConfig(**kwargs))
-    from baselines.act import ACTAgent, ACTAgentConfig
-
-    kwargs = {
-        "seed": options.seed,
-        "horizon": options.horizon,
-        "use_giver_state": options.giver_state,
-    }
-    steps = options.act_steps or (QUICK_ACT_STEPS if options.quick else ACT_EVAL_STEPS)
-    kwargs["steps"] = steps
-    kwargs["eval_every"] = max(1, steps // 8)  # 8 validation passes pick the best checkpoint
-    if options.quick:
-        kwargs.update(
-            policy=dict(dim_model=32, dim_feedforward=64, n_heads=2, n_encoder_layers=1),
-            batch_size=32,
-        )
-    return ACTAgent(ACTAgentConfig(**kwargs))
+    """A fresh, unfitted open-loop method ``name`` (its roster entry's builder)."""
+    (name,) = check_methods([name])
+    agent = roster.build(name, options, inducing_ratio=inducing_ratio)
+    assert isinstance(agent, Agent), f"{name} is an open-loop method, so it predicts"
+    return agent
 
 
 def dataset_fingerprint(dataset: HandoverDataset) -> str:
@@ -245,8 +213,9 @@ def fit_agent(
     Returns:
         ``(fitted agent, reused)`` where ``reused`` is True when a checkpoint was loaded.
     """
-    if name not in LEARNED or cache_dir is None:
-        kwargs = {"progress": progress} if name in LEARNED else {}
+    cached = roster.entry(name).checkpoints
+    if not cached or cache_dir is None:
+        kwargs = {"progress": progress} if cached else {}
         return agent.fit(train, **kwargs), False
     folder, key_src = checkpoint_slot(name, agent, train, cache_dir)
     cls = type(agent)

@@ -21,7 +21,7 @@ from typing import Any, BinaryIO
 from handover_env.atomic_write import UnsafeTargetError, atomic_write, atomic_write_bytes
 
 __all__ = [
-    "METHOD_LABELS", "PAPER_TABLE1", "UnsafeTargetError", "atomic_write_bytes", "markdown_table",
+    "PAPER_TABLE1", "UnsafeTargetError", "atomic_write_bytes", "markdown_table",
     "mean_std", "read_csv", "write_csv", "write_png", "write_text",
 ]
 
@@ -32,14 +32,6 @@ PAPER_TABLE1: dict[str, dict[str, tuple[float, float]]] = {
     "act": {"id": (67.57, 5.06), "ood": (71.04, 7.14)},
     "iaal": {"id": (55.10, 2.28), "ood": (61.82, 4.82)},
     "ours": {"id": (55.13, 2.48), "ood": (61.83, 5.32)},
-}
-
-METHOD_LABELS: dict[str, str] = {
-    "bc_mlp": "BC-MLP",
-    "act": "ACT",
-    "iaal": "IAAL",
-    "ours": "Ours (SPGP)",
-    "cv": "Constant velocity",
 }
 
 

@@ -24,14 +24,11 @@ from handover_eval.closedloop.receivers import (
     walkers,
 )
 from handover_eval.closedloop.report import GROUPS, groups_of
-from handover_eval.closedloop.roster import AGENTS
-from handover_eval.closedloop.run import (
-    ClosedLoopEvalConfig,
-    EpisodeJob,
-    episode_row,
-    plan_jobs,
-)
+from handover_eval.closedloop.run import ClosedLoopEvalConfig, plan_jobs
+from handover_eval.closedloop.worker import EpisodeJob
+from handover_eval.episodes import episode_row
 from handover_eval.methods import MethodOptions
+from handover_eval.roster import compared_agents
 
 DATA = (
     Path(__file__).resolve().parents[1].parent
@@ -60,7 +57,7 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
     receivers = {(r["set"], r["receiver"]) for r in rows}
     assert {s for s, _ in receivers} == {"id", "ood", "replay"}
     assert len(receivers) == 2 + 2 + 3  # --quick: 2 walkers per set, 3 replays of fold 0
-    for agent in AGENTS:
+    for agent in compared_agents():
         mine = {(r["set"], r["receiver"]) for r in rows if r["agent"] == agent}
         expected = (
             {k for k in receivers if k[0] == "replay"} if agent == "giver-replay" else receivers
@@ -106,7 +103,7 @@ def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Pat
             sum(r["outcome"] == "success" for r in mine) / len(mine))
         assert float(a["success_low"]) <= float(a["success_rate"]) <= float(a["success_high"])
     pairs = _rows(quick_run / "closed_loop_paired.csv")
-    assert {p["agent"] for p in pairs} == set(AGENTS) - {"reactive"}
+    assert {p["agent"] for p in pairs} == set(compared_agents()) - {"reactive"}
     assert {p["metric"] for p in pairs} >= {
         "success",
         "handover_time",
@@ -196,7 +193,7 @@ def test_replays_of_fold_f_meet_the_fold_f_model() -> None:
         assert len({s.set for s in job.receivers}) == 1 and len(job.receivers) <= 3
         if job.agent == "giver-replay":
             assert all(s.set == "replay" for s in job.receivers)
-    per_agent = {a: sum(len(j.receivers) for j in jobs if j.agent == a) for a in AGENTS}
+    per_agent = {a: sum(len(j.receivers) for j in jobs if j.agent == a) for a in compared_agents()}
     assert per_agent["giver-replay"] == 4 and per_agent["reactive"] == 8
     assert [s.fold for s in specs if s.set == "replay"] == [1, 1, 2, 2]
     assert [s.seed for s in specs if s.set != "replay"] == [0, 1, 10_000, 10_001]
@@ -305,14 +302,14 @@ def test_bad_input_gives_a_clean_error(argv: list[str], message: str, capsys: py
 
 
 def test_theta_needs_four_numbers(capsys: pytest.CaptureFixture) -> None:
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^2$") as exc:
         evaluate.main(["closed-loop", "--theta", "114.3", "17.1"])
     assert exc.value.code == 2 and "--theta" in capsys.readouterr().err
 
 
 def test_help_explains_every_flag(capsys: pytest.CaptureFixture) -> None:
     for command in ("closed-loop", "theta-sweep"):
-        with pytest.raises(SystemExit):
+        with pytest.raises(SystemExit, match="^0$"):
             evaluate.main([command, "--help"])
         text = capsys.readouterr().out
         for flag in (
@@ -369,7 +366,7 @@ def test_mujoco_auto_resets_are_counted(monkeypatch, tmp_path: Path) -> None:
 
     monkeypatch.chdir(tmp_path)  # MuJoCo's warning writes MUJOCO_LOG.TXT into the cwd
 
-    from handover_eval.closedloop.worker import instabilities
+    from handover_eval.episodes import instabilities
 
     model = mujoco.MjModel.from_xml_string(
         "<mujoco><worldbody><body><freejoint/><geom size='.1'/></body></worldbody></mujoco>")

@@ -4,23 +4,25 @@ Receivers (:mod:`.protocol`): the test-seed scripted walkers (walker-id, walker-
 and the replays. Models: an agent that learns meets a replay of fold f with the model fitted on
 the other folds of ``--data`` and the walkers with the fold-0 model, or, with ``--replay-data``,
 every receiver with one model fitted on all of ``--data``
-(:data:`handover_eval.closedloop.receivers.FIT_ALL`). Built-in learning agents use the closed
-loop's fold models (:func:`handover_eval.closedloop.roster.fold_model`, Table I's checkpoint
-cache); a plug-in is built by its factory and fitted once per worker and model fold. Each job is
-a chunk of receivers of one agent; its episodes are seeded and the agent reset, so rows do not
-depend on the workers. A row is the closed loop's episode row
-(:func:`handover_eval.closedloop.worker.episode_row`) reduced to
-:data:`.files.CLOSEDLOOP_COLUMNS`, with the first failure and the event flags of
-:mod:`.outcomes`. Every episode, and a plug-in's ``fit``, runs under
+(:data:`handover_eval.closedloop.receivers.FIT_ALL`). Built-in agents are the roster's
+(:mod:`handover_eval.roster`); those that learn use the closed loop's fold models
+(:func:`handover_eval.closedloop.models.fold_model`, Table I's checkpoint cache); a plug-in is
+built by its factory and fitted once per worker and model fold. Each job is a chunk of receivers
+of one agent; each receiver is run by the one closed-loop episode runner
+(:func:`handover_eval.episodes.run_receiver`: this process's env of the track's Θ on the
+:data:`.protocol.SENSING` profile, the seeded episode, its row), so rows do not depend on the
+workers. A row is the closed loop's episode row reduced to :data:`.files.CLOSEDLOOP_COLUMNS`,
+with the first failure and the event flags of :mod:`.outcomes`. Every episode, and a plug-in's
+``fit``, runs under
 :func:`.guard.agent_guard`, with the scored agent's time limit for every agent of the run (the
 reference too); an agent stopped by it stops its later episodes in the same process at once.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
-import time
 import uuid
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -29,18 +31,19 @@ from typing import Any
 
 import numpy as np
 
-from agents.base import Agent
+from agents.base import Agent, Policy
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
+from handover_eval import roster
 from handover_eval.backend import map_folds
 from handover_eval.benchmark.guard import AgentError, agent_guard, forget_stopped
 from handover_eval.benchmark.outcomes import EVENTS, events, first_failure
-from handover_eval.benchmark.plugin import ROSTER_NAME, AgentSource, fit_plugin
+from handover_eval.benchmark.plugin import AgentSource, fit_plugin
 from handover_eval.benchmark.protocol import ENV_ID, SENSING, BenchReceiver
-from handover_eval.closedloop.receivers import FIT_ALL, replay_source
-from handover_eval.closedloop.roster import fold_model, make_agent, prepare_models
-from handover_eval.closedloop.worker import EpisodeJob, episode_row, instabilities
-from handover_eval.methods import MethodOptions, build_agent
+from handover_eval.closedloop.models import fold_model, prepare_models
+from handover_eval.closedloop.receivers import FIT_ALL
+from handover_eval.episodes import ENV_IDS, Setting, clear_envs, env_for, run_receiver
+from handover_eval.methods import MethodOptions
 
 FLOATS = (
     "handover_time", "transfer_time", "reach_onset_time", "release_time", "release_force",
@@ -48,6 +51,10 @@ FLOATS = (
     "arm_extended_time", "pull_force", "robot_jerk_rms", "delta_t", "delta_x",
 )
 CHUNK = 4
+#: The track's env: DynamicHandover-v0 (:data:`.protocol.ENV_ID`) on the :data:`.protocol.SENSING`
+#: profile.
+ENV_KIND = next(kind for kind, env_id in ENV_IDS.items() if env_id == ENV_ID)
+ENV_KWARGS = json.dumps({"sensing": SENSING})
 
 
 @dataclass(frozen=True)
@@ -72,56 +79,42 @@ class BenchJob:
 
 
 def learns(source: AgentSource) -> bool:
-    """True for agents fitted on data (built-in learned methods and every plug-in)."""
-    return source.kind == "plugin" or (source.kind == "method" and source.target != "cv")
+    """True for agents fitted on data (the roster's learning entries and every plug-in)."""
+    return source.kind == "plugin" or roster.entry(source.target).learns
 
 
-_ENVS: OrderedDict[tuple, Any] = OrderedDict()
 _PLUGINS: OrderedDict[tuple, Agent] = OrderedDict()
 CACHE_SIZE = 4
 
 
-def track_env(params: HandoverParams):
-    """This process's env of the closed-loop track at Θ ``params`` (cached, on :data:`SENSING`)."""
-    key = params.as_array()
-    if key not in _ENVS:
-        import gymnasium as gym
-
-        import handover_env  # noqa: F401 - registers the envs
-
-        _ENVS[key] = gym.make(ENV_ID, stiffness=params.stiffness, damping=params.damping,
-                              forecast_time=params.forecast_time,
-                              release_force=params.release_force, sensing=SENSING)
-        while len(_ENVS) > CACHE_SIZE:
-            _ENVS.popitem(last=False)[1].close()
-    return _ENVS[key]
+def track_env(params: HandoverParams) -> Any:
+    """This process's env of the closed-loop track at Θ ``params`` (:data:`ENV_KIND` on
+    :data:`ENV_KWARGS`, the env :func:`run_bench_job`'s episodes run in)."""
+    return env_for(ENV_KIND, params, ENV_KWARGS)
 
 
 def clear_state() -> None:
     """Close this process's envs and forget its plug-in models."""
-    while _ENVS:
-        _ENVS.popitem()[1].close()
+    clear_envs()
     _PLUGINS.clear()
 
 
-def _agent(dataset: HandoverDataset, job: BenchJob) -> Agent:
+def _agent(dataset: HandoverDataset, job: BenchJob) -> Policy:
     src = job.source
-    if src.kind == "roster":
-        return make_agent(src.target, job.params)
-    if src.kind == "method" and src.target == "cv":
-        return make_agent(build_agent("cv", job.options), job.params)
+    if src.kind != "plugin":
+        model = None
+        if roster.entry(src.target).learns:
+            assert job.model_fold is not None and job.train_idx is not None
+            model, _ = fold_model(src.target, job.model_fold, dataset, job.train_idx,
+                                  job.options, job.cache_dir, job.token)
+        return roster.make_agent(src.target, job.params, job.options, model)
     assert job.model_fold is not None and job.train_idx is not None
-    if src.kind == "method":
-        name = ROSTER_NAME[src.target]
-        model, _ = fold_model(name, job.model_fold, dataset, job.train_idx, job.options,
-                              job.cache_dir, job.token)
-        return make_agent(name, job.params, model)
     key = (job.token, src, job.model_fold)
     if key not in _PLUGINS:
         _PLUGINS[key] = fit_plugin(src, dataset.subset(job.train_idx))
         while len(_PLUGINS) > CACHE_SIZE:
             _PLUGINS.popitem(last=False)
-    return make_agent(_PLUGINS[key], job.params)
+    return roster.make_agent(_PLUGINS[key], job.params, job.options)
 
 
 def bench_row(job: BenchJob, rec: BenchReceiver, row: dict) -> dict:
@@ -151,40 +144,30 @@ def bench_row(job: BenchJob, rec: BenchReceiver, row: dict) -> dict:
 
 
 def run_bench_job(dataset: HandoverDataset, job: BenchJob) -> list[dict]:
-    """Run ``job``'s episodes (in a worker or in-process); one benchmark row each."""
-    from handover_env.rollout import run_episode
+    """Run ``job``'s episodes (in a worker or in-process); one benchmark row each.
 
+    Each receiver runs through :func:`handover_eval.episodes.run_receiver` under
+    :func:`.guard.agent_guard` (the job's time limit; a stopped episode closes this process's
+    envs, so a later job builds fresh ones)."""
     name = job.source.name
     with agent_guard(name, "building and fitting", key=job.guard_key):
         agent = _agent(dataset, job)
-    env = track_env(job.params)
+    setting = Setting(name, job.params, ENV_KIND, ENV_KWARGS, job.hand_mode, job.model_fold)
+    builtin = None if job.source.kind == "plugin" else roster.entry(job.source.target)
     rows = []
     for rec in job.receivers:
         spec = rec.spec
-        if rec.kind == "replay":
-            options: dict[str, Any] = {"receiver": "replay", "hand_mode": job.hand_mode,
-                                       "episode": replay_source(spec, dataset)}
-        else:
-            options = {"receiver": rec.kind}
-            if rec.pass_y is not None:
-                options["walker"] = {"pass_y": rec.pass_y}
-        steps = [0]
-
-        def count(step: int, info: dict, steps: list[int] = steps) -> None:
-            steps[0] = step + 1
-
-        t0 = time.perf_counter()
+        if rec.kind != spec.set:
+            raise ValueError(f"{rec.bench_set}/{spec.key}: receiver kind {rec.kind!r} is not "
+                             f"its spec's set {spec.set!r}")
+        walker = {"pass_y": rec.pass_y} if rec.pass_y is not None else None
         what = f"closed-loop episode {rec.bench_set}/{spec.key} (seed {spec.seed})"
         try:
             with agent_guard(name, what, job.time_limit, job.guard_key):
-                info = run_episode(env, agent, seed=spec.seed, options=options, on_step=count)
+                row = run_receiver(setting, agent, spec, dataset, builtin, walker)
         except (AgentError, KeyboardInterrupt):
             clear_state()  # the env may have stopped mid-step: a later job builds a fresh one
             raise
-        ep_job = EpisodeJob(job.token, job.source.name, (spec,), job.params, job.hand_mode,
-                            job.options, job.cache_dir, job.model_fold, job.train_idx)
-        row = episode_row(ep_job, spec, info, steps[0], time.perf_counter() - t0)
-        row["sim_unstable"] = instabilities(env.unwrapped.data)
         rows.append(bench_row(job, rec, row))
     return rows
 
@@ -237,8 +220,8 @@ def run_closedloop(
     token = f"{os.getpid()}-{uuid.uuid4().hex}"
     jobs = plan(sources, receivers, splits, params, options, cache_dir, token)
     needed = sorted({j.model_fold for j in jobs if j.model_fold is not None})
-    learned = [ROSTER_NAME[s.target] for s in sources
-               if s.kind == "method" and s.target in ("act", "bc_mlp")]
+    learned = [s.target for s in sources
+               if s.kind != "plugin" and roster.entry(s.target).checkpoints]
     if learned:
         prepare_models(dataset, learned, splits, needed, options, cache_dir, progress)
     try:

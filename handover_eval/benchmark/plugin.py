@@ -2,9 +2,10 @@
 
 ``--agent`` is one of
 
-* a built-in name: a method of the open-loop evaluations (``ours``, ``iaal``, ``act``,
-  ``bc_mlp``, ``cv``; scored on both tracks), or a closed-loop-only agent (``reactive``,
-  ``null``, ``lagging``);
+* a built-in name (:func:`handover_eval.roster.benchmark_agents`, any spelling the roster
+  accepts): a method of the open-loop evaluations (``ours``, ``iaal``, ``act``, ``bc_mlp``,
+  ``cv``; scored on both tracks), or a closed-loop-only agent (``reactive``, ``null``,
+  ``lagging``);
 * ``PKG.MODULE:FACTORY``: ``FACTORY`` of an importable module;
 * ``path/to/file.py:FACTORY``: ``FACTORY`` of a Python file anywhere (no package needed).
 
@@ -36,18 +37,13 @@ from pathlib import Path
 from typing import Any
 
 from agents.base import Agent
+from handover_eval import roster
 from handover_eval.benchmark.guard import (
     DEFAULT_EPISODE_LIMIT_S,
     MAX_EPISODE_LIMIT_S,
     agent_guard,
 )
-from handover_eval.methods import METHODS
 
-#: Built-in closed-loop-only agents (the reactive reference and the two reference agents).
-CLOSED_LOOP_ONLY: tuple[str, ...] = ("reactive", "null", "lagging")
-#: Built-in open-loop method name -> the closed-loop roster's name of the same agent.
-ROSTER_NAME = {"ours": "ours", "iaal": "iaal", "act": "act", "bc_mlp": "bc-mlp"}
-ALIASES = {"bc-mlp": "bc_mlp"}
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9 _.:+()\-]{0,63}")
 IDENT_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 MAX_CONFIG_CHARS = 10_000
@@ -59,9 +55,9 @@ class AgentSource:
 
     Attributes:
         name: the name shown in the tables and the leaderboard.
-        kind: "method" (a built-in open-loop method), "roster" (a closed-loop-only built-in) or
+        kind: "method" (a built-in of both tracks), "roster" (a closed-loop-only built-in) or
             "plugin".
-        target: the method / roster name, or for a plug-in the module name or absolute file
+        target: the built-in's roster name, or for a plug-in the module name or absolute file
             path.
         factory: a plug-in's factory name ("" for built-ins).
         config: a plug-in's factory keyword arguments as JSON text (sorted keys).
@@ -160,18 +156,16 @@ def resolve(spec: str, name: str | None = None, config: str | None = None,
     with a fresh run id and the per-episode time limit ``episode_limit_s``."""
     limit, run_id = episode_limit(episode_limit_s), uuid.uuid4().hex
     spec = spec.strip()
-    base = ALIASES.get(spec, spec)
     if ":" not in spec:
         if config not in (None, "{}"):
             raise ValueError("--agent-config is for plug-in factories, not built-in agents")
-        if base in METHODS:
-            return AgentSource(check_name(name or base), "method", base, spec=spec,
-                               episode_limit_s=limit, run_id=run_id)
-        if base in CLOSED_LOOP_ONLY:
-            return AgentSource(check_name(name or base), "roster", base, spec=spec,
+        found = roster.find(spec)
+        if found is not None and found.benchmark:
+            kind = "method" if "openloop" in found.tracks else "roster"
+            return AgentSource(check_name(name or found.name), kind, found.name, spec=spec,
                                episode_limit_s=limit, run_id=run_id)
         raise ValueError(
-            f"--agent {spec!r}: not a built-in ({list(METHODS) + list(CLOSED_LOOP_ONLY)}) and "
+            f"--agent {spec!r}: not a built-in ({list(roster.benchmark_agents())}) and "
             "not MODULE:FACTORY or path/to/file.py:FACTORY"
         )
     target, factory = spec.rsplit(":", 1)

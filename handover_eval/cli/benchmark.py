@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from handover_eval import roster
 from handover_eval.backend import JobError, session
 from handover_eval.benchmark.guard import (
     DEFAULT_EPISODE_LIMIT_S,
@@ -27,7 +28,7 @@ from handover_eval.cli.args import (
     folder_option,
     load_replay_data,
 )
-from handover_eval.methods import METHODS, MethodOptions, default_workers
+from handover_eval.methods import MethodOptions, default_workers
 from handover_eval.output_lock import OutputLock
 
 COMMANDS = ("benchmark", "leaderboard", "rescore", "far-pass")
@@ -50,10 +51,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Add the four sub-commands to evaluate.py's parser."""
     p = sub.add_parser("benchmark", help="score any agent (built-in or your own) under protocol v1",
                        description=BENCHMARK_DESCRIPTION)
+    both = [n for n in roster.benchmark_agents() if "openloop" in roster.entry(n).tracks]
+    only = [n for n in roster.benchmark_agents() if n not in both]
     p.add_argument(
         "--agent", required=True, metavar="SPEC",
-        help=f"the agent: a built-in ({' '.join(METHODS)}, or closed-loop only: reactive null "
-        "lagging), PKG.MODULE:FACTORY, or path/to/file.py:FACTORY; FACTORY(**config) must return "
+        help=f"the agent: a built-in ({' '.join(both)}, or closed-loop only: {' '.join(only)}"
+        "), PKG.MODULE:FACTORY, or path/to/file.py:FACTORY; FACTORY(**config) must return "
         "an agents.base.Agent. A plug-in's code runs (it is loaded in every worker)",
     )
     p.add_argument("--agent-config", default=None, metavar="JSON",

@@ -20,6 +20,7 @@ from pathlib import Path
 from handover_env.config import THETA_RANGES, HandoverParams
 from handover_env.data.dataset import HandoverDataset
 from handover_env.paths import output_folder
+from handover_eval import roster
 from handover_eval.backend import (
     JobError,
     session,
@@ -37,9 +38,9 @@ from handover_eval.cli.args import (
     int_in_range,
     load_replay_data,
 )
+from handover_eval.closedloop.models import rl_forms
 from handover_eval.closedloop.output import write_closed_loop, write_theta_sweep
 from handover_eval.closedloop.receivers import SETS
-from handover_eval.closedloop.roster import AGENTS, default_agents
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, ClosedLoopRun, run_closed_loop
 from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers, with_test_data
@@ -92,9 +93,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         nargs="+",
         default=None,
         metavar="NAME",
-        help=f"agents, any of {list(AGENTS)} (default: all; rl-residual / rl-scratch only with "
-        "--quick or a --rl-checkpoint of their form). giver-replay meets replays only; "
-        "static runs in StaticHandover-v0 on the same receivers",
+        help=f"agents, any of {list(roster.closedloop_agents())} (default: "
+        f"{' '.join(roster.compared_agents())}; rl-residual / rl-scratch only with --quick or a "
+        "--rl-checkpoint of their form). giver-replay meets replays only; static runs in "
+        "StaticHandover-v0 on the same receivers",
     )
     p.add_argument(
         "--sets",
@@ -357,7 +359,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
         )  # --replay-data: every episode of it, unless capped
         receivers = ClosedLoopEvalConfig(
             agents=tuple(
-                default_agents(args.quick, options.rl_checkpoints)
+                roster.default_agents(args.quick, rl_forms(options.rl_checkpoints))
                 if getattr(args, "agents", ["reactive"]) is None
                 else getattr(args, "agents", ["reactive"])
             ),

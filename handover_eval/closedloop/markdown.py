@@ -6,8 +6,8 @@ from __future__ import annotations
 import math
 
 from handover_eval.closedloop.report import EFFORT, OUTCOMES, QUANTITIES
-from handover_eval.closedloop.roster import LABELS
 from handover_eval.reporting import markdown_table
+from handover_eval.roster import label
 
 NOTE_SIMULATED = (
     "These results come from the **simulated person** (an articulated, compliant body whose "
@@ -71,7 +71,7 @@ def markdown(
     """The whole closed_loop.md."""
 
     def lab(r: dict) -> str:
-        return LABELS.get(r["agent"], r["agent"])
+        return label(r["agent"])
 
     t1 = markdown_table(
         [
@@ -194,7 +194,7 @@ def markdown(
             ["agent", "set", "n", *[c.replace("_", " ") for c in cols]],
             [
                 [
-                    LABELS.get(a, a),
+                    label(a),
                     s,
                     by[(a, s, "success")]["n_pairs"],
                     *(_diff_cell(by[(a, s, c)], digits.get(c, 2)) for c in cols),
@@ -225,7 +225,7 @@ def markdown(
         ],
         [
             [
-                LABELS.get(g["agent"], g["agent"]),
+                label(g["agent"]),
                 g["set"],
                 g["n"],
                 _f(1000 * g["max_penetration_m"], 1),

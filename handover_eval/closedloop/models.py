@@ -1,24 +1,19 @@
-"""The agents of the closed-loop evaluation, their fold models, and the per-worker model cache.
+"""The models of the closed-loop agents that learn: Table I's fold models, the RL policies, and
+the per-worker model cache.
 
-Names (``--agents``): ``reactive``, ``static`` (in ``StaticHandover-v0``), ``ours`` (the SPGP
-planner), ``iaal``, ``bc-mlp``, ``act``, ``giver-replay`` (replays only: the recorded giver's
-object path), ``null`` (holds the object at the ready pose), ``lagging`` (the reactive agent
-acting 0.5 s late), ``rl-residual`` and ``rl-scratch`` (RL policies of ``train.py rl``, loaded
-from ``--rl-checkpoint`` folders by their form, or with ``--quick`` trained for a few hundred
-steps into the cache; their model record's fold is -1, the folds they trained on are in the
-checkpoint, and they refuse any receiver they trained on: :func:`check_rl_receivers`).
+The agents that learn from data (the roster's ``learns`` entries: ours, iaal, bc-mlp, act) use
+Table I's fold models: a replay of fold f runs with the model trained on the other folds (Table
+I's fold-f training set); the scripted walkers use the fold-0 model. BC-MLP and ACT (the
+``checkpoints`` entries) are loaded from Table I's checkpoint cache
+(:func:`handover_eval.methods.fit_agent`; :func:`prepare_models` trains the missing ones first,
+ACT through :func:`handover_eval.act_folds.pretrain_act`); ours and IAAL are fitted in each
+worker (about a second each), at most once per worker and fold.
 
-The agents that learn from data (ours, iaal, bc-mlp, act) use Table I's fold models: a replay of
-fold f runs with the model trained on the other folds (Table I's fold-f training set); the
-scripted walkers use the fold-0 model. BC-MLP and ACT are loaded from Table I's checkpoint cache
-(:func:`handover_eval.methods.fit_agent`; :func:`prepare_models` trains the missing
-ones first, ACT through :func:`handover_eval.act_folds.pretrain_act`); ours and IAAL
-are fitted in each worker (about a second each), at most once per worker and fold.
-Θ: t_f goes to the agent (``agent.params``), K, B and f_r to the env.
-
-Besides the names, :func:`make_agent` accepts any :class:`agents.base.Agent` object (an external
-agent, e.g. one loaded by ``evaluate.py benchmark --agent``): it gets Θ's t_f when it has a
-``params`` attribute, as the built-in predictive agents do.
+The RL agents (``rl-residual``, ``rl-scratch``: the roster's ``rl_form`` entries, policies of
+``train.py rl``) are loaded from ``--rl-checkpoint`` folders by their form, or with ``--quick``
+trained for a few hundred steps into the cache; their model record's fold is -1, the folds they
+trained on are in the checkpoint, and they refuse any receiver they trained on
+(:func:`check_rl_receivers`).
 """
 
 from __future__ import annotations
@@ -31,72 +26,23 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.base import Agent
-from handover_env.config import HandoverParams
+from agents.base import Agent, Policy
 from handover_env.data.dataset import HandoverDataset
+from handover_eval import roster
 from handover_eval.methods import MethodOptions, build_agent, checkpoint_slot, fit_agent
 from handover_eval.methods import is_complete as checkpoint_complete
 
-AGENTS: tuple[str, ...] = (
-    "reactive",
-    "static",
-    "ours",
-    "iaal",
-    "bc-mlp",
-    "act",
-    "giver-replay",
-    "null",
-    "lagging",
-    "rl-residual",
-    "rl-scratch",
-)
-#: closed-loop RL agent -> its policy form (``--rl-checkpoint``; ``--quick`` trains a tiny one).
-RL_AGENTS: dict[str, str] = {"rl-residual": "residual", "rl-scratch": "scratch"}
-#: closed-loop agent name -> Table I method name, for the agents that learn from data.
-LEARNING: dict[str, str] = {"ours": "ours", "iaal": "iaal", "bc-mlp": "bc_mlp", "act": "act"}
-ALIASES = {"bc_mlp": "bc-mlp", "giver_replay": "giver-replay"}
-LAG_SECONDS = 0.5
-LABELS = {
-    "reactive": "Reactive",
-    "static": "Static (Meng et al.)",
-    "ours": "Ours (SPGP)",
-    "iaal": "IAAL",
-    "bc-mlp": "BC-MLP",
-    "act": "ACT",
-    "giver-replay": "Giver replay (ref.)",
-    "null": "Null (holds still)",
-    "lagging": "Lagging (reactive +0.5 s)",
-    "rl-residual": "RL residual",
-    "rl-scratch": "RL from scratch",
-}
 MODEL_CACHE_SIZE = 4  # fitted fold models kept per worker (~150 MB each for ours / IAAL)
 
 
-def check_agents(names: list[str] | tuple[str, ...]) -> list[str]:
-    """Validate agent names (accepting ``bc_mlp``); a clear ValueError naming the unknown ones."""
-    names = [ALIASES.get(n, n) for n in names]
-    unknown = [n for n in names if n not in AGENTS]
-    if unknown:
-        raise ValueError(f"unknown agent(s) {unknown}; choose from {list(AGENTS)}")
-    if not names:
-        raise ValueError(f"no agent selected; choose from {list(AGENTS)}")
-    return list(dict.fromkeys(names))
+def rl_forms(rl_checkpoints: tuple[str, ...]) -> frozenset[str]:
+    """The policy forms of the ``--rl-checkpoint`` folders."""
+    if not rl_checkpoints:
+        return frozenset()
+    from baselines.rl.files import read_record
 
+    return frozenset(read_record(f)[1].form for f in rl_checkpoints)
 
-def default_agents(quick: bool, rl_checkpoints: tuple[str, ...] = ()) -> list[str]:
-    """``--agents``' default: every agent; an RL one only with ``quick`` (trained on the spot) or
-    an ``rl_checkpoints`` folder of its form."""
-    forms = set()
-    if rl_checkpoints:
-        from baselines.rl.files import read_record
-
-        forms = {read_record(f)[1].form for f in rl_checkpoints}
-    return [a for a in AGENTS if a not in RL_AGENTS or quick or RL_AGENTS[a] in forms]
-
-
-def env_kind(agent: str) -> str:
-    """``"static"`` for the static baseline (StaticHandover-v0), else ``"dynamic"``."""
-    return "static" if agent == "static" else "dynamic"
 
 
 @dataclass(frozen=True)
@@ -119,15 +65,18 @@ def prepare_models(
     cache_dir: Path,
     progress: bool = True,
 ) -> list[ModelRecord]:
-    """Make sure the BC-MLP / ACT checkpoints of ``folds_needed`` exist (training the missing ones).
+    """Make sure the checkpoints of ``folds_needed`` exist for the agents among ``agents`` that
+    are trained into the checkpoint cache (BC-MLP, ACT), training the missing ones.
 
     ACT is trained as Table I trains it (one LeRobot export, ``options.workers`` processes);
-    BC-MLP fold by fold in this process. Returns one record per (learned agent, fold).
+    the others fold by fold (:func:`handover_eval.backend.map_folds`). Returns one record per
+    (learned agent, fold), the agent as the closed-loop files spell it.
     """
     from handover_eval.backend import map_folds
 
     records: list[ModelRecord] = []
-    if "act" in agents:
+    cached = [e for e in dict.fromkeys(roster.entry(a) for a in agents) if e.checkpoints]
+    if any(e.name == "act" for e in cached):
         from handover_eval.act_folds import pretrain_act
 
         runs = pretrain_act(
@@ -149,32 +98,30 @@ def prepare_models(
             )
             for f, run in zip(folds_needed, runs, strict=True)
         ]
-    if "bc-mlp" in agents:
+    for e in (e for e in cached if e.name != "act"):
         todo = []
         for f in folds_needed:
             train = dataset.subset(splits[f][0])
-            folder, key = checkpoint_slot(
-                "bc_mlp", build_agent("bc_mlp", options), train, cache_dir
-            )
+            folder, key = checkpoint_slot(e.name, build_agent(e.name, options), train, cache_dir)
             if checkpoint_complete(folder, key):
-                records.append(ModelRecord("bc-mlp", f, "checkpoint", 0.0, len(train)))
+                records.append(ModelRecord(e.closedloop_name, f, "checkpoint", 0.0, len(train)))
             else:
-                todo.append(_BCJob(f, splits[f][0], options, cache_dir))
+                todo.append(_FitJob(e.name, f, splits[f][0], options, cache_dir))
         done = (
             map_folds(
-                _fit_bc,
+                _fit_fold,
                 dataset,
                 todo,
                 workers=options.workers,
                 progress=progress,
-                desc="bc-mlp folds",
+                desc=f"{e.closedloop_name} folds",
                 label=lambda job: f"fold {job.fold}",
             )
             if todo
             else []
         )
         records += [
-            ModelRecord("bc-mlp", job.fold, "trained", s, len(job.train_idx))
+            ModelRecord(e.closedloop_name, job.fold, "trained", s, len(job.train_idx))
             for job, s in zip(todo, done, strict=True)
         ]
     records += prepare_rl(agents, options, cache_dir, progress)
@@ -187,7 +134,7 @@ def rl_checkpoint(agent: str, options: MethodOptions, cache_dir: Path) -> Path:
     ``--quick`` the cache's quick one; a ValueError saying how to get one otherwise."""
     from baselines.rl.files import read_record
 
-    form = RL_AGENTS[agent]
+    form = roster.entry(agent).rl_form
     for folder in options.rl_checkpoints:
         if read_record(folder)[1].form == form:
             return Path(folder)
@@ -214,11 +161,11 @@ def prepare_rl(agents: list[str], options: MethodOptions, cache_dir: Path,
     from baselines.rl.train import train_policy
 
     records = []
-    for agent in (a for a in agents if a in RL_AGENTS):
+    for agent in (a for a in agents if roster.entry(a).rl_form):
         folder = rl_checkpoint(agent, options, cache_dir)
         t0, how = time.perf_counter(), "checkpoint"
         if options.quick and folder.name.startswith("rl-quick-"):
-            want = quick_rl_config(RL_AGENTS[agent], options.seed)
+            want = quick_rl_config(roster.entry(agent).rl_form, options.seed)
             try:
                 fresh = asdict(read_record(folder)[1]) != asdict(want)
             except CheckpointError:
@@ -241,7 +188,7 @@ def check_rl_receivers(agents: tuple[str, ...], receivers: list, options: Method
     from baselines.rl.config import TRAIN_SEED_START
     from baselines.rl.files import read_record
 
-    for agent in (a for a in agents if a in RL_AGENTS):
+    for agent in (a for a in agents if roster.entry(a).rl_form):
         folder = rl_checkpoint(agent, options, cache_dir)
         if not folder.is_dir():  # a --quick one not trained yet: walkers only, none of these
             continue
@@ -256,7 +203,7 @@ def check_rl_receivers(agents: tuple[str, ...], receivers: list, options: Method
 
 
 def rl_model(agent: str, dataset: HandoverDataset, options: MethodOptions, cache_dir: Path,
-             token: str) -> tuple[Agent, ModelRecord | None]:
+             token: str) -> tuple[Policy, ModelRecord | None]:
     """The RL agent's policy, loaded once per worker (a residual on ``ours`` refits its SPGP
     base on the training-fold episodes the checkpoint names)."""
     from baselines.rl.agent import RLAgent
@@ -288,25 +235,25 @@ def rl_model(agent: str, dataset: HandoverDataset, options: MethodOptions, cache
 
 
 @dataclass(frozen=True)
-class _BCJob:
+class _FitJob:
+    method: str
     fold: int
     train_idx: np.ndarray
     options: MethodOptions
     cache_dir: Path
 
 
-def _fit_bc(dataset: HandoverDataset, job: _BCJob) -> float:
-    """Train one BC-MLP fold checkpoint into the cache (in a :func:`.backend.map_folds` worker);
+def _fit_fold(dataset: HandoverDataset, job: _FitJob) -> float:
+    """Train one fold checkpoint into the cache (in a :func:`.backend.map_folds` worker);
     seconds."""
     t0 = time.perf_counter()
-    fit_agent(
-        "bc_mlp", build_agent("bc_mlp", job.options), dataset.subset(job.train_idx), job.cache_dir
-    )
+    fit_agent(job.method, build_agent(job.method, job.options), dataset.subset(job.train_idx),
+              job.cache_dir)
     return time.perf_counter() - t0
 
 
 # ------------------------------------------------------------------------ per-worker model cache
-_MODELS: OrderedDict[tuple, Agent] = OrderedDict()
+_MODELS: OrderedDict[tuple, Policy] = OrderedDict()
 _TOKEN: list[str] = [""]
 
 
@@ -333,19 +280,15 @@ def fold_model(
     if token != _TOKEN[0]:
         clear_models()
         _TOKEN[0] = token
-    key = (agent, fold)
+    e = roster.entry(agent)
+    key = (e.name, fold)
     if key in _MODELS:
         _MODELS.move_to_end(key)
-        return _MODELS[key], None
-    method = LEARNING[agent]
+        return _MODELS[key], None  # type: ignore[return-value]
     t0 = time.perf_counter()
     train = dataset.subset(train_idx)
-    model, reused = fit_agent(method, build_agent(method, options), train, cache_dir, reuse=True)
-    how = (
-        "checkpoint"
-        if reused
-        else ("fitted in worker" if method in ("ours", "iaal") else "trained")
-    )
+    model, reused = fit_agent(e.name, build_agent(e.name, options), train, cache_dir, reuse=True)
+    how = "checkpoint" if reused else ("trained" if e.checkpoints else "fitted in worker")
     record = ModelRecord(agent, fold, how, time.perf_counter() - t0, len(train))
     _MODELS[key] = model
     while len(_MODELS) > MODEL_CACHE_SIZE:
@@ -353,39 +296,17 @@ def fold_model(
     return model, record
 
 
-def make_agent(name: str | Agent, params: HandoverParams, model: Agent | None = None) -> Agent:
-    """A ready agent for one chunk of episodes (Θ's t_f set on it; K, B, f_r are the env's).
-
-    ``name`` is a built-in name, or an external :class:`Agent` object, returned as it is with
-    ``params`` set when it has that attribute (a :class:`agents.predictive.PredictiveAgent`).
-    """
-    if isinstance(name, Agent):
-        if isinstance(getattr(name, "params", None), HandoverParams):
-            name.params = params  # type: ignore[attr-defined]
-        return name
-    if name in LEARNING or name in RL_AGENTS:
-        assert model is not None, f"{name} needs its fold model or policy"
-        model.params = params  # type: ignore[attr-defined]
-        return model
-    if name == "reactive":
-        from agents.reactive import ReactiveAgent
-
-        return ReactiveAgent(params)
-    if name == "lagging":
-        from agents.null import DelayedAgent
-        from agents.reactive import ReactiveAgent
-
-        return DelayedAgent(ReactiveAgent(params), LAG_SECONDS)
-    if name == "null":
-        from agents.null import NullAgent
-
-        return NullAgent()
-    if name == "static":
-        from agents.static import StaticAgent
-
-        return StaticAgent()
-    if name == "giver-replay":
-        from agents.giver_replay import GiverReplayAgent
-
-        return GiverReplayAgent(params=params)
-    raise ValueError(f"unknown agent {name!r}")
+def model_for(agent: str, dataset: HandoverDataset, model_fold: int | None,
+              train_idx: np.ndarray | None, options: MethodOptions, cache_dir: Path,
+              token: str) -> tuple[Policy | None, ModelRecord | None]:
+    """What :func:`handover_eval.roster.make_agent` needs for ``agent``: its fold model (an agent
+    that learns), its policy (an RL agent), or None; and the record when it was fitted or
+    loaded just now."""
+    e = roster.entry(agent)
+    if e.learns:
+        if model_fold is None or train_idx is None:
+            raise ValueError(f"{agent} learns: its job needs a model fold and training indices")
+        return fold_model(agent, model_fold, dataset, train_idx, options, cache_dir, token)
+    if e.rl_form:
+        return rl_model(agent, dataset, options, cache_dir, token)
+    return None, None

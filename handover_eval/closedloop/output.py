@@ -13,10 +13,11 @@ import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from handover_eval.closedloop.models import ModelRecord
 from handover_eval.closedloop.receivers import SETS
-from handover_eval.closedloop.roster import LABELS, ModelRecord
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, ClosedLoopRun
 from handover_eval.reporting import markdown_table, write_csv, write_png, write_text
+from handover_eval.roster import label
 
 if TYPE_CHECKING:
     from handover_eval.closedloop.theta_sweep import SweepConfig, SweepRun
@@ -50,7 +51,7 @@ def _models_text(models: list[ModelRecord]) -> str:
         rows.setdefault((m.agent, m.how), []).append(m)
     body = [
         [
-            LABELS.get(a, a),
+            label(a),
             how,
             len(ms),
             ", ".join(str(f) for f in sorted({m.fold for m in ms})),
@@ -149,7 +150,7 @@ def write_closed_loop(
             ],
             [
                 [
-                    LABELS.get(r["agent"], r["agent"]),
+                    label(r["agent"]),
                     r["set"],
                     r["n"],
                     md.success_cell(r),
@@ -200,7 +201,7 @@ def write_theta_sweep(
         + ", the same at every value"
     )
     header = _header(
-        f"Θ sweep: {LABELS.get(sweep.agent, sweep.agent)}", dataset, cfg, quick, n_rec
+        f"Θ sweep: {label(sweep.agent)}", dataset, cfg, quick, n_rec
     ).replace("Θ = K", "Base Θ (the others while one is swept) = K")
     footer = (
         f"\n## Models and timing\n\n{_models_text(models)}\n{len(rows)} episodes in "

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from handover_eval import roster
 from handover_eval.closedloop.report import groups_of
-from handover_eval.closedloop.roster import LABELS
 
 SET_COLOURS = {
     "walker-id": "tab:blue",
@@ -91,7 +91,7 @@ def closed_loop_figure(rows: Sequence[dict], agg: Sequence[dict], title: str) ->
     for ax in axes:
         ax.set_xticks(x)
         ax.set_xticklabels(
-            [LABELS.get(a, a).split(" (")[0] for a in agents], rotation=30, ha="right", fontsize=8
+            [roster.label(a).split(" (")[0] for a in agents], rotation=30, ha="right", fontsize=8
         )
         ax.grid(alpha=0.3, axis="y")
         ax.set_xlim(-0.6, len(agents) - 0.4)

@@ -22,8 +22,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from handover_eval import roster
 from handover_eval.closedloop.receivers import SETS
-from handover_eval.closedloop.roster import AGENTS
 from handover_eval.closedloop.stats import (
     N_BOOTSTRAP,
     median_iqr,
@@ -108,8 +108,9 @@ def groups_of(row: dict) -> tuple[str, ...]:
 
 
 def _order(agent: str, group: str = "") -> tuple[int, int]:
-    """Table order: the agents as listed in AGENTS, then the groups as in GROUPS."""
-    a = AGENTS.index(agent) if agent in AGENTS else len(AGENTS)
+    """Table order: the agents in roster order (:func:`handover_eval.roster.rank`), then the
+    groups as in GROUPS."""
+    a = roster.rank(agent)
     return a, GROUPS.index(group) if group in GROUPS else len(GROUPS)
 
 
@@ -123,7 +124,7 @@ def _group(rows: Sequence[dict]) -> dict[tuple[str, str], list[dict]]:
 
 
 def aggregate(rows: Sequence[dict]) -> list[dict]:
-    """One row per (agent, receiver group), agents in AGENTS order (module docstring)."""
+    """One row per (agent, receiver group), agents in roster order (module docstring)."""
     out = []
     for (agent, rset), mine in _group(rows).items():
         n = len(mine)

@@ -27,7 +27,6 @@ spawned, nothing is served).
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 import uuid
@@ -37,18 +36,13 @@ from typing import Any
 import numpy as np
 
 from handover_env.data.dataset import HandoverDataset
+from handover_eval import roster
 from handover_eval.benchmark.outcomes import events, first_failure
-from handover_eval.closedloop.receivers import FIT_ALL, ReceiverSpec, replay_source
-from handover_eval.closedloop.roster import (
-    LEARNING,
-    RL_AGENTS,
-    env_kind,
-    fold_model,
-    make_agent,
-    rl_model,
-)
+from handover_eval.closedloop.models import model_for
+from handover_eval.closedloop.receivers import FIT_ALL, ReceiverSpec
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, plan_jobs
-from handover_eval.closedloop.worker import ENV_IDS, EpisodeJob, episode_row, instabilities
+from handover_eval.closedloop.worker import EpisodeJob
+from handover_eval.episodes import make_env, run_receiver
 from handover_eval.methods import MethodOptions
 from handover_eval.reporting import atomic_write_bytes
 
@@ -76,7 +70,7 @@ def first_job(config: ClosedLoopEvalConfig, receivers: list[ReceiverSpec],
     """The job of the run's first agent and the first receiver it meets (one receiver), planned
     as the run plans it. ``fit_all``: the run had ``--replay-data`` (models of all of --data)."""
     agent = config.agents[0]
-    specs = [s for s in receivers if agent != "giver-replay" or s.set == "replay"]
+    specs = [s for s in receivers if not roster.entry(agent).replays_only or s.set == "replay"]
     if not specs:
         raise ValueError(f"--rerun: {agent} meets none of the receivers")
     if fit_all:
@@ -164,46 +158,27 @@ class EpisodeLogger:
 
 def log_job(dataset: HandoverDataset, job: EpisodeJob, path: Path) -> dict:
     """Run ``job``'s first receiver with the logger, write the .rrd to ``path``; returns the
-    episode's row (:func:`.worker.episode_row`) with its ``first_failure``."""
-    import gymnasium as gym
+    episode's row (:func:`handover_eval.episodes.episode_row`) with its ``first_failure``.
+
+    The episode is :func:`handover_eval.episodes.run_receiver`'s, in a fresh env of the job's
+    (not this process's cached one: the logger holds it, and it is closed after the episode)."""
     import rerun as rr
 
-    import handover_env  # noqa: F401 - registers the envs
-    from handover_env.rollout import run_episode
-
-    model = None
-    if job.agent in LEARNING:
-        model, _ = fold_model(job.agent, job.model_fold, dataset, job.train_idx, job.options,
-                              job.cache_dir, job.token)
-    elif job.agent in RL_AGENTS:
-        model, _ = rl_model(job.agent, dataset, job.options, job.cache_dir, job.token)
-    agent = make_agent(job.agent, job.params, model)
+    model, _ = model_for(job.agent, dataset, job.model_fold, job.train_idx, job.options,
+                         job.cache_dir, job.token)
+    agent = roster.make_agent(job.agent, job.params, job.options, model)
     spec = job.receivers[0]
-    options: dict[str, Any] = {"receiver": spec.set}
-    if spec.set == "replay":
-        source = replay_source(spec, dataset)
-        options = {"receiver": "replay", "episode": source, "hand_mode": job.hand_mode}
-        if job.agent == "giver-replay":
-            agent.set_episode(getattr(source, "episode", source))  # type: ignore[attr-defined]
     p = job.params
-    env = gym.make(ENV_IDS[env_kind(job.agent)], stiffness=p.stiffness, damping=p.damping,
-                   forecast_time=p.forecast_time, release_force=p.release_force,
-                   **(json.loads(job.env_kwargs) if job.env_kwargs else {}))
+    env = make_env(job.env, p, job.env_kwargs)
     title = f"{job.agent} meets {spec.set} {spec.key} (seed {spec.seed})"
     rec = rr.RecordingStream(APPLICATION, recording_id=title)
     stream = rec.binary_stream()
     try:
         rec.log("description", rr.TextDocument(title), static=True)
         logger = EpisodeLogger(rec, env, p.release_force)
-        steps = [0]
-
-        def on_step(step: int, info: dict) -> None:
-            steps[0] = step + 1
-            logger(step, info)
-
-        info = run_episode(env, agent, seed=spec.seed, options=options, on_step=on_step)
-        row = episode_row(job, spec, info, steps[0], math.nan)
-        row["sim_unstable"] = instabilities(env.unwrapped.data)
+        row = run_receiver(job, agent, spec, dataset, roster.entry(job.agent), on_step=logger,
+                           env=env)
+        row["wall_s"] = math.nan
         row["first_failure"] = first_failure(row["outcome"], events(row))
         outcome = row["outcome"] + (f" (first failed check: {row['first_failure']})"
                                     if row["first_failure"] else "")

@@ -4,14 +4,15 @@ The run, top to bottom (:func:`run_closed_loop`):
 
 1. **Receivers** (:mod:`.receivers`): N seeded scripted ID and OOD walkers, and the
    replayed episodes of the chosen folds of Table I's split (default: the held-out half).
-2. **Fold models** (:mod:`.roster`): BC-MLP / ACT checkpoints of the needed folds are
+2. **Fold models** (:mod:`.models`): BC-MLP / ACT checkpoints of the needed folds are
    loaded from Table I's cache, or trained first (the training time is reported apart).
 3. **Episodes**: chunks of a few receivers for one agent are run in ``workers`` spawned
    processes (:func:`handover_eval.backend.map_folds`, the dataset sent once per
    worker; :mod:`.worker`). Each worker makes its own envs (one per env kind and Θ,
-   never pickled) and fits or loads each fold model once. Every episode is seeded and every
+   never pickled: :func:`handover_eval.episodes.env_for`) and fits or loads each fold model
+   once. Every episode is seeded and every
    agent reset, so the rows do not depend on the number of workers or on which worker ran what.
-4. **Rows** (:func:`.worker.episode_row`): the final ``info`` flattened, ``outcome``
+4. **Rows** (:func:`handover_eval.episodes.episode_row`): the final ``info`` flattened, ``outcome``
    "timeout" for a TimeLimit truncation, for replays the recorded transfer and Δt, Δx, and the
    number of MuJoCo instabilities (auto-resets) in the episode.
 
@@ -40,7 +41,9 @@ import numpy as np
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
 from handover_env.sensors.profiles import PROFILES
+from handover_eval import roster
 from handover_eval.backend import map_folds
+from handover_eval.closedloop.models import ModelRecord, check_rl_receivers, prepare_models
 from handover_eval.closedloop.receivers import (
     FIT_ALL,
     SETS,
@@ -52,20 +55,7 @@ from handover_eval.closedloop.receivers import (
     replays,
     walkers,
 )
-from handover_eval.closedloop.roster import (
-    AGENTS,
-    LEARNING,
-    ModelRecord,
-    check_agents,
-    check_rl_receivers,
-    prepare_models,
-)
-from handover_eval.closedloop.worker import (  # noqa: F401 - episode_row re-exported
-    EpisodeJob,
-    clear_worker_state,
-    episode_row,
-    run_job,
-)
+from handover_eval.closedloop.worker import EpisodeJob, clear_worker_state, run_job
 from handover_eval.methods import MethodOptions, with_test_data
 
 
@@ -74,7 +64,7 @@ class ClosedLoopEvalConfig:
     """What ``evaluate.py closed-loop`` runs.
 
     Args:
-        agents: agent names (:data:`handover_eval.closedloop.roster.AGENTS`).
+        agents: agent names (default :func:`handover_eval.roster.compared_agents`).
         sets: receiver sets among "id", "ood", "replay".
         walkers: scripted walkers per set (ID, OOD).
         replay_folds: folds whose episodes are replayed (None: the held-out half).
@@ -88,7 +78,7 @@ class ClosedLoopEvalConfig:
         sensing: the env's sensor profile ("paper", "ideal", "randomized"; docs/sensing.md).
     """
 
-    agents: tuple[str, ...] = AGENTS
+    agents: tuple[str, ...] = field(default_factory=roster.compared_agents)
     sets: tuple[str, ...] = SETS
     walkers: int = 50
     replay_folds: tuple[int, ...] | None = None
@@ -103,7 +93,7 @@ class ClosedLoopEvalConfig:
     sensing: str = "paper"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "agents", tuple(check_agents(list(self.agents))))
+        object.__setattr__(self, "agents", tuple(roster.check_agents(list(self.agents))))
         bad = [s for s in self.sets if s not in SETS]
         if bad or not self.sets:
             raise ValueError(f"unknown receiver set(s) {bad}; choose from {list(SETS)}")
@@ -129,8 +119,9 @@ def plan_jobs(
 ) -> list[EpisodeJob]:
     """Chunks of receivers per agent; learning agents get the fold model each receiver needs.
 
-    Giver replay meets replays only. Jobs are ordered by model fold (so a worker's fold models
-    are fitted once) and, within that, by agent. ``splits`` maps a model fold to its (train,
+    An agent of the roster's ``replays_only`` (giver replay) meets replays only. Jobs are
+    ordered by model fold (so a worker's fold models are fitted once) and, within that, by
+    agent in roster order. ``splits`` maps a model fold to its (train,
     test) indices; a replay without a fold (``--replay-data``) and every walker then meet
     :data:`FIT_ALL`, the model of all of ``--data``.
     """
@@ -138,10 +129,11 @@ def plan_jobs(
     jobs = []
     for agent in config.agents:
         groups: dict[tuple[str, int | None], list[ReceiverSpec]] = {}
+        entry = roster.entry(agent)
         for spec in receivers:
-            if agent == "giver-replay" and spec.set != "replay":
+            if entry.replays_only and spec.set != "replay":
                 continue
-            if agent not in LEARNING:
+            if not entry.learns:
                 fold = None
             elif fit_all:
                 fold = FIT_ALL
@@ -164,9 +156,8 @@ def plan_jobs(
                         env_kwargs=json.dumps({"sensing": config.sensing}),
                     )
                 )
-    order = {a: k for k, a in enumerate(AGENTS)}
     return sorted(
-        jobs, key=lambda j: (-1 if j.model_fold is None else j.model_fold, order[j.agent])
+        jobs, key=lambda j: (-1 if j.model_fold is None else j.model_fold, roster.rank(j.agent))
     )
 
 

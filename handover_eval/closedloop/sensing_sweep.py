@@ -36,8 +36,9 @@ import numpy as np
 
 from handover_env.data.dataset import HandoverDataset
 from handover_env.sensors import make_profile
+from handover_eval import roster
+from handover_eval.closedloop.models import ModelRecord, prepare_models
 from handover_eval.closedloop.report import paired_metrics
-from handover_eval.closedloop.roster import ModelRecord, check_agents, prepare_models
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, build_receivers, plan_jobs, run_jobs
 from handover_eval.closedloop.stats import N_BOOTSTRAP, wilson_interval
 from handover_eval.methods import MethodOptions
@@ -89,7 +90,7 @@ class SensingSweepConfig:
     receivers: ClosedLoopEvalConfig = dataclasses.field(default_factory=ClosedLoopEvalConfig)
 
     def __post_init__(self) -> None:
-        agents = check_agents(list(dict.fromkeys([REFERENCE, *self.agents])))
+        agents = roster.check_agents(list(dict.fromkeys([REFERENCE, *self.agents])))
         object.__setattr__(self, "agents", tuple(agents))
         bad = [f for f in self.factors if f not in FACTORS]
         if bad or not self.factors:

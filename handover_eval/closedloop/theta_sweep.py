@@ -28,8 +28,9 @@ import numpy as np
 
 from handover_env.config import THETA_RANGES, HandoverParams
 from handover_env.data.dataset import HandoverDataset
+from handover_eval import roster
+from handover_eval.closedloop.models import ModelRecord, prepare_models
 from handover_eval.closedloop.report import EFFORT, GROUPS, groups_of, paired_metrics
-from handover_eval.closedloop.roster import ModelRecord, check_agents, prepare_models
 from handover_eval.closedloop.run import (
     ClosedLoopEvalConfig,
     build_receivers,
@@ -101,10 +102,10 @@ class SweepConfig:
     receivers: ClosedLoopEvalConfig = dataclasses.field(default_factory=ClosedLoopEvalConfig)
 
     def __post_init__(self) -> None:
-        (agent,) = check_agents([self.agent])
+        (agent,) = roster.check_agents([self.agent])
         object.__setattr__(self, "agent", agent)
-        if agent == "giver-replay" and not self.replays_per_fold:
-            raise ValueError("giver-replay needs replays: --replays-per-fold N")
+        if roster.entry(agent).replays_only and not self.replays_per_fold:
+            raise ValueError(f"{agent} needs replays: --replays-per-fold N")
         bad = [p for p in self.params if p not in PARAMS]
         if bad or not self.params:
             raise ValueError(f"unknown Θ parameter(s) {bad}; choose from {list(PARAMS)}")

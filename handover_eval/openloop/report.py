@@ -9,8 +9,9 @@ from collections.abc import Sequence
 from typing import Any
 
 from handover_env.data.dataset import HandoverDataset
+from handover_eval import roster
 from handover_eval.openloop.protocol import OpenLoopProtocol
-from handover_eval.reporting import METHOD_LABELS, markdown_table, mean_std
+from handover_eval.reporting import markdown_table, mean_std
 
 
 def table1_markdown(
@@ -40,7 +41,7 @@ def table1_markdown(
     ]
     body = [
         [
-            METHOD_LABELS[r["method"]],
+            roster.label(r["method"]),
             mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
             mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
             mean_std(r["id_rms_axis_mm"], r["id_std_axis_mm"]),
@@ -116,7 +117,7 @@ def sample_efficiency_figure(rows: list[dict], methods: Sequence[str]) -> Any:
             y = [r[key] for r in mine]
             e = [r[std_key] for r in mine]
             line = ax.errorbar(
-                x, y, yerr=e, marker=markers.get(name, "o"), capsize=3, label=METHOD_LABELS[name]
+                x, y, yerr=e, marker=markers.get(name, "o"), capsize=3, label=roster.label(name)
             )
             for xi, yi, ei in zip(
                 x, y, e, strict=True
@@ -181,7 +182,7 @@ def table1_summary(rows: list[dict]) -> str:
               "ID paper", "OOD paper"]
     return markdown_table(header, [
         [
-            METHOD_LABELS[r["method"]],
+            roster.label(r["method"]),
             mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
             mean_std(r["ood_rms_3d_mm"], r["ood_std_3d_mm"]),
             mean_std(r["id_now_axis_mm"], r["id_now_axis_std_mm"]),
@@ -199,7 +200,7 @@ def sample_efficiency_summary(rows: list[dict]) -> str:
               "all current frame (mm)"]
     return markdown_table(header, [
         [
-            METHOD_LABELS[r["method"]],
+            roster.label(r["method"]),
             f"{r['ratio']:g}",
             mean_std(r["all_rms_3d_mm"], r["all_std_3d_mm"]),
             mean_std(r["id_rms_3d_mm"], r["id_std_3d_mm"]),
@@ -232,7 +233,7 @@ def degradation_line(rows: list[dict], ratios: Sequence[float]) -> str | None:
     lo, hi = min(ratios), max(ratios)
     return (
         f"RMS at ratio {lo:g} vs {hi:g} (all episodes, 1 s horizon 3D / current frame): "
-        + ", ".join(f"{METHOD_LABELS[m]} {horizon[m]:+.1f}% / {now[m]:+.1f}%" for m in horizon)
+        + ", ".join(f"{roster.label(m)} {horizon[m]:+.1f}% / {now[m]:+.1f}%" for m in horizon)
     )
 
 
@@ -242,7 +243,7 @@ def tradeoff_summary(rows: list[dict]) -> str:
               "x faster than IAAL", "RMS vs IAAL"]
     return markdown_table(header, [
         [
-            METHOD_LABELS[r["method"]],
+            roster.label(r["method"]),
             "" if r["inducing_rate"] is None else f"{r['inducing_rate']:g}",
             f"{r['frame_ms_median']:.3f}",
             f"{r['frame_ms_p99']:.3f}",

@@ -53,7 +53,7 @@ def prefetch(
     if len(jobs) < 2:
         return 0
     runner.planner(jobs[0].theta)  # fit once here, so every task gets the fitted planner
-    portable = copy.copy(runner)  # no env (EpisodeRunner.__getstate__), and no episode cache
+    portable = copy.copy(runner)  # no env (the runner holds none), and no episode cache
     portable.cache = {}
     results = map_jobs(_walk, portable, jobs, progress=False, desc="CoSpar walks",
                        label=lambda j: f"participant {j.participant.pid} seed {j.seed}")

@@ -5,11 +5,12 @@ K in [80, 140], B in [10, 20], t_f in [0, 1] s, f_r in [5, 20] N. Here every ite
 
 1. CoSpar draws ``n_samples`` utility functions from its Laplace posterior (paper Eqs. 2-3) and
    proposes their argmax actions (Thompson sampling, :mod:`agents.cospar`);
-2. each proposed Theta is run as real episodes in the env: the planner (``ours``: the SPGP
-   planner fitted once on the synthetic default, which uses t_f; K, B and f_r are env kwargs) hands
-   the bottle to scripted walkers with the participant's body and path, one episode per walk, the
-   same ``walks`` walker seeds for every Theta (common random numbers; :class:`EpisodeRunner`
-   caches episodes by participant, walk and Theta);
+2. each proposed Theta is run as real episodes in the env (:func:`handover_eval.episodes.play`
+   in this process's env of that Theta, :func:`handover_eval.episodes.env_for`): the planner
+   (``ours``: the SPGP planner fitted once on the synthetic default, which uses t_f; K, B and f_r
+   are the env's) hands the bottle to scripted walkers with the participant's body and path, one
+   episode per walk, the same ``walks`` walker seeds for every Theta (common random numbers;
+   :class:`EpisodeRunner` caches episodes by participant, walk and Theta);
 3. the participant (:mod:`agents.participants`) compares every pair among the new actions and the
    ``buffer_size`` actions they tried last, by their mean satisfaction over the walks, with the
    probit noise of Eq. 2; each answer is a preference added to the data (episodes the env ended
@@ -25,6 +26,7 @@ an iteration holds ``participants x n_samples`` new actions.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -35,9 +37,13 @@ import numpy as np
 from agents.cospar import THETA_NAMES, CoSpar, CoSparConfig
 from agents.participants import COST_NAMES, Participant
 from handover_env.config import HandoverParams
+from handover_eval import roster
+from handover_eval.episodes import clear_envs, env_for, play
+from handover_eval.methods import MethodOptions
 
 #: The paper's learned Theta-hat (Sec. V-B-1), printed beside ours; never given to participants.
 PAPER_THETA = (114.3, 17.1, 0.14, 7.1)
+#: The roster's agents CoSpar tunes Θ for.
 AGENTS = ("ours", "reactive")
 RECEIVERS = ("id", "ood", "replay")
 #: ``info`` keys kept per episode (numbers or the outcome string).
@@ -79,11 +85,12 @@ def _keep(info: Mapping) -> dict[str, Any]:
 
 
 class EpisodeRunner:
-    """Runs one agent with a given Theta on a participant's walks, in the dynamic or static env.
+    """Runs one agent with a given Theta on a participant's walks, in the dynamic or static env
+    (this process's env of that Theta, :func:`handover_eval.episodes.env_for`).
 
     Args:
         agent: ``"ours"`` (SPGP planner fitted on ``dataset``, or on the synthetic default) or
-            ``"reactive"``.
+            ``"reactive"`` (built by :mod:`handover_eval.roster`).
         receiver: ``"id"``/``"ood"`` scripted walkers with the participant's body, or ``"replay"``
             (synthetic demonstrations closest to the participant's speed, at their height).
         dataset: training data of ``ours`` and the replay pool (default: ``load_any(None)``).
@@ -105,8 +112,6 @@ class EpisodeRunner:
         self._dataset = dataset
         self._agent: Any = None
         self._static_agent: Any = None
-        self._env: Any = None
-        self._env_key: tuple | None = None
         self._speeds: np.ndarray | None = None
         self.cache: dict[tuple, dict[str, Any]] = {}
         self.episodes_run = 0
@@ -123,37 +128,17 @@ class EpisodeRunner:
     def planner(self, theta: HandoverParams) -> Any:
         """The planning agent (``ours`` or ``reactive``) fitted once, with ``theta`` set."""
         if self._agent is None:
-            if self.agent_name == "ours":
-                from agents.nonparametric import NonparametricAgent
-
-                self._agent = NonparametricAgent().fit(self.dataset())
-            else:
-                from agents.reactive import ReactiveAgent
-
-                self._agent = ReactiveAgent()
+            agent = roster.build(self.agent_name, MethodOptions(workers=1))
+            if roster.entry(self.agent_name).learns:
+                agent = agent.fit(self.dataset())  # type: ignore[attr-defined]
+            self._agent = agent
         self._agent.params = theta
         return self._agent
 
-    def _make_env(self, theta: HandoverParams, static: bool) -> Any:
-        key = (theta.as_array(), static)
-        if self._env_key != key:
-            import gymnasium as gym
-
-            import handover_env  # noqa: F401  (registers the envs)
-
-            if self._env is not None:
-                self._env.close()
-            name = "handover_env/StaticHandover-v0" if static else "handover_env/DynamicHandover-v0"
-            self._env = gym.make(
-                name,
-                stiffness=theta.stiffness,
-                damping=theta.damping,
-                forecast_time=theta.forecast_time,
-                release_force=theta.release_force,
-                sensing=self.sensing,
-            )
-            self._env_key = key
-        return self._env
+    def env(self, theta: HandoverParams, static: bool = False) -> Any:
+        """This process's env (static or dynamic) of ``theta`` on the runner's sensing."""
+        return env_for("static" if static else "dynamic", theta,
+                       json.dumps({"sensing": self.sensing}))
 
     def _options(self, participant: Participant, seed: int) -> dict:
         if self.receiver != "replay":
@@ -191,39 +176,30 @@ class EpisodeRunner:
         """One episode per walk seed (cached); the static env uses the static agent."""
         import time
 
-        from handover_env.rollout import run_episode
-
         out = []
         for seed in seeds:
             key = self.cache_key(participant, theta, seed, static)
             if key not in self.cache:
                 t0 = time.perf_counter()
-                env = self._make_env(theta, static)
+                env = self.env(theta, static)
                 if static:
                     if self._static_agent is None:
-                        from agents.static import StaticAgent
-
-                        self._static_agent = StaticAgent()
+                        self._static_agent = roster.build("static", MethodOptions(workers=1))
                     agent = self._static_agent
                 else:
                     agent = self.planner(theta)
-                info = run_episode(
-                    env, agent, seed=int(seed), options=self._options(participant, int(seed))
-                )
-                self.cache[key] = _keep(info)
+                played = play(env, agent, int(seed), self._options(participant, int(seed)))
+                self.cache[key] = _keep(played.info)
                 self.episodes_run += 1
                 self.seconds += time.perf_counter() - t0
             out.append(self.cache[key])
         return out
 
-    def __getstate__(self) -> dict[str, Any]:
-        """Pickled (to a sweep's workers) with its fitted planner and episode cache, not its env."""
-        return {**self.__dict__, "_env": None, "_env_key": None}
-
     def close(self) -> None:
-        if self._env is not None:
-            self._env.close()
-            self._env, self._env_key = None, None
+        """Close this process's envs (:func:`handover_eval.episodes.clear_envs`; the runner holds
+        none itself, so it pickles, to a sweep's workers, with its fitted planner and episode
+        cache only)."""
+        clear_envs()
 
 
 def lived(infos: Sequence[Mapping]) -> list[Mapping]:
