@@ -29,7 +29,9 @@ from handover_eval.benchmark.plugin import NAME_RE
 from handover_eval.benchmark.protocol import (
     CLOSEDLOOP_SETS,
     KNOWN_VERSIONS,
+    OPENLOOP_FOLDS,
     OPENLOOP_METRICS,
+    REPLAY_FOLDS,
     TRACKS,
 )
 from handover_eval.benchmark.result_values import value_problem
@@ -42,8 +44,8 @@ EPISODE_FILES = {"openloop": "openloop_episodes.csv", "closedloop": "closedloop_
 #: files ~0.5 MB and ~1,200 rows of 2 agents).
 MAX_JSON_BYTES = 256_000
 MAX_CSV_BYTES = 200_000_000
-MAX_ROWS = 100_000
-MAX_AGENTS = 1_000
+MAX_ROWS = 50_000
+MAX_AGENTS = 100
 MAX_FIELD_CHARS = 200
 OUTCOME_NAMES = (
     "success", "premature_release", "dropped", "unsafe_force", "missed", "unstable", "timeout"
@@ -75,18 +77,20 @@ def _parse_int(text: str) -> int:
     return int(text)
 
 
-def _int_from(low: int) -> Callable[[str], int]:
+def _int_from(low: int, below: int | None = None) -> Callable[[str], int]:
     def parse(text: str) -> int:
         value = _parse_int(text)
         if value < low:
             raise ValueError(f"{value} is below {low}")
+        if below is not None and value >= below:
+            raise ValueError(f"{value} is not below {below}")
         return value
 
     return parse
 
 
-def _opt_int_from(low: int) -> Callable[[str], int | str]:
-    parse_int = _int_from(low)
+def _opt_int_from(low: int, below: int | None = None) -> Callable[[str], int | str]:
+    parse_int = _int_from(low, below)
 
     def parse(text: str) -> int | str:
         return "" if text == "" else parse_int(text)
@@ -128,15 +132,15 @@ _NAME = _parse_str(NAME_RE)
 _KEY = _parse_str(KEY_RE)
 #: column -> parser, in the order the CSV holds them. Times (s from the episode's start or the
 #: receiver's departure), forces, lengths and errors are nan or >= 0; seeds, steps and counts
-#: >= 0; a model fold >= -1 (-1: fitted on all of ``--data``); only ``pass_y`` and the replay
-#: deltas ``delta_t``, ``delta_x`` may be negative.
+#: >= 0; folds those of the protocol's splits (0 .. k-1; a model fold -1: fitted on all of
+#: ``--data``); only ``pass_y`` and the replay deltas ``delta_t``, ``delta_x`` may be negative.
 CLOSEDLOOP_COLUMNS: dict[str, Callable[[str], Any]] = {
     "agent": _NAME,
     "set": _one_of(CLOSEDLOOP_SETS),
     "receiver": _KEY,
     "seed": _int_from(0),
-    "fold": _opt_int_from(0),
-    "model_fold": _opt_int_from(-1),
+    "fold": _opt_int_from(0, REPLAY_FOLDS),
+    "model_fold": _opt_int_from(-1, REPLAY_FOLDS),
     "is_ood": _parse_bool,
     "pass_y": _parse_float,
     "outcome": _one_of(OUTCOME_NAMES),
@@ -155,7 +159,7 @@ CLOSEDLOOP_COLUMNS: dict[str, Callable[[str], Any]] = {
 }
 OPENLOOP_COLUMNS: dict[str, Callable[[str], Any]] = {
     "agent": _NAME,
-    "fold": _int_from(0),
+    "fold": _int_from(0, OPENLOOP_FOLDS),
     "source_id": _KEY,
     "is_ood": _parse_bool,
     "n_queries": _int_from(0),
