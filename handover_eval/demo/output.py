@@ -37,8 +37,8 @@ STILL = "demo_side_by_side.png"
 
 
 def write_video(frames: Iterable[np.ndarray], path: Path, fps: int = VIDEO_FPS) -> Path:
-    """Encode ``frames`` (equal-sized RGB uint8 arrays, sides multiples of 8 px) as an H.264 mp4
-    at ``path``."""
+    """Encode ``frames`` (equal-sized RGB uint8 arrays with even sides, as H.264's 4:2:0 needs;
+    imageio would otherwise scale them) as an H.264 mp4 at ``path``."""
     try:
         import imageio.v2 as imageio
     except ModuleNotFoundError as exc:
@@ -46,7 +46,7 @@ def write_video(frames: Iterable[np.ndarray], path: Path, fps: int = VIDEO_FPS) 
     with tempfile.TemporaryDirectory() as tmp:
         local = Path(tmp) / "video.mp4"
         with imageio.get_writer(local, fps=fps, codec="libx264", quality=7,
-                                macro_block_size=8) as w:
+                                macro_block_size=2) as w:
             for frame in frames:
                 w.append_data(frame)
         return atomic_write_bytes(path, local.read_bytes())

@@ -11,7 +11,7 @@ walker, ``reset(seed=s, options={"receiver": "id"})``) meets
 * the static baseline (:class:`agents.static.StaticAgent`) in ``handover_env/StaticHandover-v0``,
 
 both at the env's default Θ-hat. Each episode is scored as the benchmark scores one (the closed
-loop's row, :func:`handover_eval.closedloop.worker.episode_row`, and the outcome and first
+loop's row, :func:`handover_eval.episodes.episode_row`, and the outcome and first
 failure of :mod:`handover_eval.benchmark.outcomes`). The episodes of :data:`VIDEO_SEEDS` are also
 filmed: every :data:`FRAME_STRIDE`-th env step and the final state, through
 :class:`handover_eval.demo.view.FramedView`, with the facts each caption shows
@@ -30,7 +30,6 @@ import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -43,12 +42,11 @@ from agents.static import StaticAgent
 from handover_env.config import HandoverParams
 from handover_env.envs.observation import ObsLayout
 from handover_env.person.demos import load_any
-from handover_env.rollout import run_episode
 from handover_eval.benchmark.outcomes import events, first_failure
 from handover_eval.closedloop.receivers import ReceiverSpec
-from handover_eval.closedloop.worker import EpisodeJob, episode_row, instabilities
 from handover_eval.demo.view import FramedView, ViewSize
-from handover_eval.methods import MethodOptions
+from handover_eval.episodes import Played, episode_row
+from handover_eval.episodes import play as play_episode
 
 #: The six walkers of the summary, fixed before any of their episodes was run (issue 37).
 DEMO_SEEDS: tuple[int, ...] = (37_000, 37_001, 37_002, 37_003, 37_004, 37_005)
@@ -139,15 +137,28 @@ class _LastObservation(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-def benchmark_row(side: str, seed: int, info: dict[str, Any], steps: int, sim_unstable: int,
-                  wall: float) -> dict[str, Any]:
-    """The benchmark's scoring of one episode: the closed loop's row of its final ``info``, then
-    the outcome, success and first failure of :mod:`handover_eval.benchmark.outcomes`."""
+@dataclass(frozen=True)
+class DemoSetting:
+    """What the closed loop's row says of a demo episode besides the walker and the outcome (a
+    :class:`handover_eval.episodes.RowSource`): the side's key as the agent, Θ-hat, no model
+    fold."""
+
+    agent: str
+    env: str
+    params: HandoverParams = field(default_factory=HandoverParams)
+    env_kwargs: str = ""
+    hand_mode: str = "reach"
+    model_fold: int | None = None
+    extra: tuple[tuple[str, Any], ...] = ()
+
+
+def benchmark_row(side: str, seed: int, played: Played) -> dict[str, Any]:
+    """The benchmark's scoring of one episode: the closed loop's row of its final ``info``
+    (:func:`handover_eval.episodes.episode_row`), then the outcome, success and first failure of
+    :mod:`handover_eval.benchmark.outcomes`."""
     spec = ReceiverSpec(set=RECEIVER, key=f"{RECEIVER}-{seed}", seed=seed)
-    job = EpisodeJob(token="demo", agent=side, receivers=(spec,), params=HandoverParams(),
-                     hand_mode="reach", options=MethodOptions(), cache_dir=Path("."))
-    full = episode_row(job, spec, info, steps, wall)
-    full["sim_unstable"] = sim_unstable
+    full = episode_row(DemoSetting(side, side), spec, played.info, played.steps, played.wall_s)
+    full["sim_unstable"] = played.sim_unstable
     ff = first_failure(str(full["outcome"]), events(full))
     return {
         "side": side,
@@ -160,7 +171,7 @@ def benchmark_row(side: str, seed: int, info: dict[str, Any], steps: int, sim_un
         "release_force": full["release_force"],
         "peak_wrist_force": full["peak_wrist_force"],
         "body_contact_force": full["body_contact_force"],
-        "steps": steps,
+        "steps": played.steps,
     }
 
 
@@ -179,26 +190,22 @@ def play(env: gym.Env, agent: Agent, side: str, seed: int,
     given."""
     assert isinstance(env, _LastObservation)
     layout = ObsLayout()
-    steps = [0]
     frames: list[np.ndarray] = []
     moments: list[Moment] = []
     filmed = [-1]
 
     def on_step(step: int, info: dict) -> None:
-        steps[0] = step + 1
         if film is not None and step % FRAME_STRIDE == 0:
             frames.append(film())
             moments.append(_moment(info, env.last_obs, layout))
             filmed[0] = step
 
-    t0 = time.perf_counter()
-    info = run_episode(env, agent, seed=seed, options={"receiver": RECEIVER}, on_step=on_step)
-    if film is not None and filmed[0] != steps[0] - 1:  # the final state, once
+    played = play_episode(env, agent, seed, {"receiver": RECEIVER}, on_step)
+    if film is not None and filmed[0] != played.steps - 1:  # the final state, once
         frames.append(film())
-        moments.append(_moment(info, env.last_obs, layout))
-    wall = time.perf_counter() - t0
-    row = benchmark_row(side, seed, info, steps[0], instabilities(env.unwrapped.data), wall)
-    return DemoEpisode(side, seed, info, row, frames, moments, wall)
+        moments.append(_moment(played.info, env.last_obs, layout))
+    row = benchmark_row(side, seed, played)
+    return DemoEpisode(side, seed, played.info, row, frames, moments, played.wall_s)
 
 
 def make_env(side: Side) -> _LastObservation:
@@ -240,7 +247,6 @@ def handover_times(episodes: Sequence[DemoEpisode], key: str = "handover_time") 
             if e.row["success"] and math.isfinite(float(e.row[key]))]
 
 
-
 @dataclass(frozen=True)
 class DemoJob:
     """Walkers of one side run in one process: all of ``seeds``, those in ``film_seeds`` filmed."""
@@ -259,12 +265,12 @@ def plan(seeds: Sequence[int], video_seeds: Sequence[int], film: bool,
     whole static side."""
     seeds = tuple(int(s) for s in seeds)
     film_seeds = tuple(int(s) for s in video_seeds) if film else ()
-    static_filmed = tuple(s for s in seeds if s in film_seeds) or seeds
-    static_rest = tuple(s for s in seeds if s not in static_filmed)
+    helper_seeds = tuple(s for s in seeds if s in film_seeds) or seeds
+    static_rest = tuple(s for s in seeds if s not in helper_seeds)
     here = [DemoJob("dynamic", seeds, film_seeds, size)]
     if static_rest:
         here.append(DemoJob("static", static_rest, (), size))
-    return here, [DemoJob("static", static_filmed, film_seeds, size)]
+    return here, [DemoJob("static", helper_seeds, film_seeds, size)]
 
 
 def run_job(job: DemoJob, agent: Agent | None = None,
@@ -279,7 +285,6 @@ def run_job(job: DemoJob, agent: Agent | None = None,
     return run_side(side, agent, job.seeds, factory, job.film_seeds, on_episode)
 
 
-
 @dataclass
 class DemoRun:
     """The demo's episodes by side key (in :data:`SIDES` order, each in seed order), and the
@@ -292,12 +297,15 @@ class DemoRun:
 
 def run(seeds: Sequence[int] = DEMO_SEEDS, video_seeds: Sequence[int] = VIDEO_SEEDS,
         film: bool = True, size: ViewSize | None = None, workers: int = 2,
-        on_episode: Callable[[DemoEpisode], None] | None = None) -> DemoRun:
+        on_episode: Callable[[DemoEpisode], None] | None = None,
+        planner: Agent | None = None) -> DemoRun:
     """Run every walker of ``seeds`` on both sides; film the walkers of ``video_seeds`` when
     ``film``. With ``workers`` = 2 a spawned helper process runs its share of :func:`plan` while
     this one runs the rest; 1 runs everything here. Either way each episode is seeded and its
     agent reset, so the episodes are the same. Each process holds one GL context at a time (a
-    side's view is closed before the next side starts)."""
+    side's view is closed before the next side starts). ``planner`` is the dynamic side's agent
+    (default: :func:`fit_planner`'s; it never goes to the helper, which runs only the static
+    side)."""
     if workers not in (1, 2):
         raise ValueError(f"workers must be 1 or 2, got {workers}")
     unknown = [s for s in video_seeds if s not in seeds]
@@ -314,7 +322,7 @@ def run(seeds: Sequence[int] = DEMO_SEEDS, video_seeds: Sequence[int] = VIDEO_SE
         future = pool.submit(_run_jobs, helper)
     try:
         t0 = time.perf_counter()
-        planner = fit_planner()
+        planner = planner if planner is not None else fit_planner()
         fit_s = time.perf_counter() - t0
         done: list[DemoEpisode] = []
         for job in here:

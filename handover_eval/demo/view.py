@@ -41,16 +41,16 @@ class CameraPose:
 
 @dataclass(frozen=True)
 class ViewSize:
-    """Pixels of one side's rendered scene."""
+    """Pixels of one side's rendered scene (even: the mp4's frames need even sides)."""
 
     width: int = 560
     height: int = 420
 
     def __post_init__(self) -> None:
         for name, v in (("width", self.width), ("height", self.height)):
-            if isinstance(v, bool) or int(v) != v or not 16 <= v <= 2048:
-                raise ValueError(f"view {name} must be a whole number of pixels in [16, 2048], "
-                                 f"got {v!r}")
+            if isinstance(v, bool) or int(v) != v or not 16 <= v <= 2048 or v % 2:
+                raise ValueError(f"view {name} must be an even whole number of pixels in "
+                                 f"[16, 2048], got {v!r}")
 
 
 class FramedView:
