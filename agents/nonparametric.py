@@ -53,7 +53,7 @@ the ID test episodes):
   1e-8 on synthetic 30 Hz walks (tests/test_gp.py) and to 2e-8 median / 1.3e-6 worst on real
   recordings (pauses make K_mm numerically singular; see agents/gp.py).
 * precision float32: per-frame cost ~halved, flows within 1e-4 of float64, RMS unchanged (see
-  the 10-fold figures in the README).
+  the 10-fold figures in docs/results.md).
 
 Far from every demo all flows revert to their prior (mu = 0, sigma2 = 1), every d tends to
 kappa + 1 and the blend becomes an (arbitrary but deterministic) K-demo average at each demo's
@@ -86,7 +86,7 @@ class NonparametricConfig:
         inducing_ratio: fraction of each demo's samples used as FITC inducing points, in (0, 1]
             (paper: 0.4). Ignored when ``exact``.
         exact: use the exact GP per demo (IAAL) instead of FITC.
-        lengthscale: kernel lengthscale l, m (chosen on the open-loop protocol, see README).
+        lengthscale: kernel lengthscale l, m (chosen on the open-loop protocol; docs/results.md).
         kappa: weight of the cosine distance against the variance term in Eq. d.
         top_k: K, the number of most similar demos blended (Eq. xi_pred).
         horizon: H, predicted frames (30 = 1 s at 30 Hz, the paper's chunk).

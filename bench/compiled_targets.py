@@ -11,7 +11,7 @@ multiply-add), run beside the numpy code on every env step of reactive-agent epi
 whether every output agreed bit for bit, both times per call and their ratio, and numba's
 compile time (paid per process unless numba caches to disk).
 
-numba is not a dependency of handover_env (it is not agreed; see the README's "Speed" section):
+numba is not a dependency of handover_env (it is not agreed; see bench/README.md):
 without it the benchmark says so and exits 0. ``pip install numba`` into the venv to run it.
 
 Usage: ``python bench/compiled_targets.py [--quick]``

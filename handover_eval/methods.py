@@ -56,7 +56,7 @@ class MethodOptions:
             make-test-sized machine's budget (2 cores, one torch thread per fold). On a
             787-episode training set the validation L1 after 3000 steps is within ~1% of the
             value after 5000; the held-out current-frame RMS still gains from more steps
-            (README, Sample efficiency).
+            (docs/results.md, Sample efficiency).
         bc_epochs: BC-MLP maximum epochs (None = the BC-MLP agent's default).
         horizon: predicted frames (the protocol's horizon).
         giver_state: also give BC-MLP and ACT the giver's position at the query frame

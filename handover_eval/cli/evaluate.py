@@ -15,7 +15,7 @@
 
 PATH is a folder of the public dataset's pickles (``whole_motions/``), a canonical ``.npz``, or
 omitted for the embedded synthetic default. Every method is scored by the same open-loop protocol
-(``handover_eval/openloop/protocol.py``, summarised in the README). Results go to ``--out``
+(``handover_eval/openloop/protocol.py``, summarised in docs/results.md). Results go to ``--out``
 (default ``results/<command>/``): Markdown and CSV tables, per-fold and per-episode CSVs, PNG plots.
 A running command locks its ``--out`` (``handover_eval.output_lock``): a second run is refused.
 Trained BC-MLP / ACT checkpoints are kept under ``<out>/checkpoints`` and reused when the method

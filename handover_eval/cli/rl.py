@@ -39,7 +39,7 @@ from handover_eval.cli.args import (
 from handover_eval.output_lock import OutputLock
 
 #: The default budget: 58 min of the 2-core machine at the PPO rate measured with 2 envs, 287
-#: env steps/s (229 with 1 env; README, "RL agent").
+#: env steps/s (229 with 1 env; docs/rl.md).
 DEFAULT_STEPS = 1_000_000
 DEFAULT_EVAL_EVERY = 50_000
 ENVS = int_in_range(1, 64)

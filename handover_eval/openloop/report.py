@@ -79,7 +79,7 @@ def table1_markdown(
         "the per-axis "
         "RMS of the first predicted row only (the giver position the planner commands now), the "
         "reading that "
-        "matches the paper's numbers (README, Evaluation protocol). The paper's "
+        "matches the paper's numbers (docs/results.md, Open-loop evaluation protocol). The paper's "
         "numbers are on its full public set (900 ID + 100 OOD). Inputs: every method sees the "
         "receiver base "
         "track up to the query frame"
