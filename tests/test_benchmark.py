@@ -9,6 +9,7 @@ import csv
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -165,7 +166,7 @@ def test_result_fields_are_checked(plugin_runs, tmp_path, edit, message) -> None
     edit(data)
     path = tmp_path / "r.json"
     path.write_text(json.dumps(data))
-    with pytest.raises(BenchmarkFileError) as exc:
+    with pytest.raises(BenchmarkFileError, match=re.escape(message)) as exc:
         read_result(path)
     assert message in str(exc.value) and str(path) in str(exc.value)
 
@@ -332,7 +333,7 @@ def test_agent_specs(tmp_path) -> None:
 
 
 def test_help_says_a_plugin_runs_its_code(capsys) -> None:
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^0$"):
         evaluate.main(["benchmark", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "Loading a plug-in agent runs its code" in text

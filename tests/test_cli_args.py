@@ -36,7 +36,7 @@ def test_int_in_range_parses_bounds_and_names_them() -> None:
     with pytest.raises(ValueError, match=r"^--walks must be an integer in \[1, 1000\], got 0$"):
         walks.check("--walks", [3, 0])
     walks.check("--walks", None)  # unset
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"empty range \[5, 1\]"):
         int_in_range(5, 1)
 
 
@@ -79,7 +79,7 @@ def test_every_integer_option_is_bounded() -> None:
 def test_train_counts_beyond_their_maximum_are_argparse_errors(argv, tmp_path, monkeypatch,
                                                                capsys) -> None:
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^2$") as exc:
         train_cli.main(argv)
     assert exc.value.code == 2
     last = capsys.readouterr().err.strip().splitlines()[-1]
@@ -100,7 +100,7 @@ def test_train_counts_beyond_their_maximum_are_argparse_errors(argv, tmp_path, m
 )
 def test_user_study_counts_are_argparse_errors(argv, tmp_path, monkeypatch, capsys) -> None:
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^2$") as exc:
         evaluate_cli.main(argv)
     assert exc.value.code == 2
     last = capsys.readouterr().err.strip().splitlines()[-1]

@@ -164,13 +164,13 @@ def test_workspace_covers_the_dataset_handover_box(model, corner):
 
 
 def test_config_validation():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="ticks must be >= 1"):
         ControllerConfig(ticks=0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="ControllerConfig values must be finite"):
         ControllerConfig(rot_omega=float("nan"))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"timestep must be in \(0, 0\.005\] s"):
         SceneConfig(timestep=0.1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"object_mass must be in \[0\.05, 2\] kg"):
         SceneConfig(object_mass=10.0)
 
 

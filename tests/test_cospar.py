@@ -75,9 +75,9 @@ def test_grid_spans_paper_ranges() -> None:
 
 
 def test_config_validation() -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="points_per_dim needs 4 entries >= 2"):
         CoSparConfig(points_per_dim=(1, 3, 3, 3))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="need n_samples >= 1"):
         CoSparConfig(n_samples=1, buffer_size=0)
 
 

@@ -36,7 +36,7 @@ def _public_folder(folder: Path, n_id: int = 3, n_ood: int = 1) -> Path:
 
 @pytest.mark.parametrize("command", COMMANDS)
 def test_every_subcommand_has_help(command: str, capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^0$") as exc:
         build_parser().parse_args([command, "--help"])
     assert exc.value.code == 0
     assert "usage:" in capsys.readouterr().out
@@ -85,7 +85,7 @@ def test_errors_are_reported_not_raised(tmp_path: Path, capsys: pytest.CaptureFi
     (tmp_path / "empty").mkdir()
     assert main(["convert", str(tmp_path / "empty"), str(tmp_path / "x.npz")]) == 2
     assert "no motion_normal_<i>.pkl" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit, match="^2$"):
         main(["synth", "--ood-fraction", "2", str(tmp_path / "x.npz")])
 
 

@@ -108,7 +108,7 @@ def test_noise_model_validation_and_effect() -> None:
 
 @pytest.mark.parametrize("kwargs", [{"n": 0}, {"ood_fraction": 1.5}, {"seed": -1}])
 def test_generate_validation(kwargs: dict) -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=f"^{next(iter(kwargs))} must be"):
         generate_synthetic(**{"n": 5, **kwargs})
 
 

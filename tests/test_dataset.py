@@ -36,7 +36,7 @@ def test_episode_validation() -> None:
     with pytest.raises(DatasetError, match="disagree in length"):
         _episode(giver_xyz=np.zeros((9, 3)))
     ep = _episode()
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="read-only"):
         ep.receiver_xy[0, 0] = 1.0  # arrays are read-only
 
 
@@ -69,7 +69,7 @@ def test_npz_round_trip(tmp_path: Path, small: HandoverDataset) -> None:
 
 
 def test_load_errors(tmp_path: Path, small: HandoverDataset) -> None:
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match="no dataset file at"):
         HandoverDataset.load(tmp_path / "missing.npz")
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")
@@ -89,7 +89,7 @@ def test_load_errors(tmp_path: Path, small: HandoverDataset) -> None:
     (tmp_path / "x.txt").write_text("x")
     with pytest.raises(DatasetError, match=r"expected a \.npz"):
         load_any(tmp_path / "x.txt")
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match=r"no dataset at .*\(expected a \.npz file"):
         load_any(tmp_path / "nothing_here")
 
 
@@ -107,7 +107,7 @@ def test_stratified_kfold(small: HandoverDataset) -> None:
     assert any(not np.array_equal(a[1], b[1]) for a, b in zip(folds, other))
     with pytest.raises(ValueError, match="only 10 OOD"):
         small.stratified_kfold(11)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="k must be an integer >= 2"):
         small.stratified_kfold(1)
 
 
@@ -118,7 +118,7 @@ def test_subsample(small: HandoverDataset) -> None:
     assert ids <= {ep.source_id for ep in small}
     assert {ep.source_id for ep in small.subsample(0.5, seed=0)} == ids
     assert len(small.subsample(0.01)) == 2  # at least one of each kind
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"ratio must be in \(0, 1\]"):
         small.subsample(0.0)
 
 
@@ -126,7 +126,7 @@ def test_subset_and_properties(small: HandoverDataset) -> None:
     sub = small.subset([3, 0])
     assert [ep.source_id for ep in sub] == [small[3].source_id, small[0].source_id]
     assert small.n_frames == int(small.lengths.sum()) and small.dt == pytest.approx(1 / 30)
-    with pytest.raises(IndexError):
+    with pytest.raises(IndexError, match="index out of range for a dataset of 40 episodes"):
         small.subset([len(small)])
     with pytest.raises(DatasetError, match="empty"):
         HandoverDataset([]).save("/tmp/never_written.npz")

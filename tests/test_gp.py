@@ -142,21 +142,21 @@ def test_inducing_indices_uniform_in_time():
     assert inducing_indices(3, 0.01).tolist() == [0]
     np.testing.assert_array_equal(inducing_indices(7, 1.0), np.arange(7))
     for bad in (0.0, -0.1, 1.5, float("nan")):
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match=r"inducing ratio must be in \(0, 1\]"):
             inducing_indices(10, bad)
 
 
 def test_bad_inputs_raise():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="lengthscale must be positive and finite"):
         GPHyperparameters(lengthscale=0.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="noise_var must be positive and finite"):
         GPHyperparameters(lengthscale=0.1, noise_var=float("nan"))
     hyp = GPHyperparameters(lengthscale=0.1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"expected X \(N, 2\) and Y \(N, D\)"):
         exact_gp(np.zeros((3, 3)), np.zeros((3, 2)), hyp)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="X and Y must be non-empty and finite"):
         exact_gp(np.full((3, 2), np.nan), np.zeros((3, 2)), hyp)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="FlowBank needs at least one demo"):
         FlowBank([], hyp)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="1 input and 0 output sequences"):
         build_bank([np.zeros((3, 2))], [], hyp, 0.4)

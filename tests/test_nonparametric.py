@@ -158,15 +158,18 @@ def test_far_query_is_finite_and_sensible(toy):
 
 
 def test_bad_input_raises(agent):
-    for bad in (np.zeros((0, 2)), np.zeros((5, 3)), np.array([[0.0, np.nan]]), np.zeros(4)):
-        with pytest.raises(ValueError):
+    for bad, match in ((np.zeros((0, 2)), "at least 1 frame"),
+                       (np.zeros((5, 3)), r"shape \(T, 2\)"),
+                       (np.array([[0.0, np.nan]]), "NaN or inf"),
+                       (np.zeros(4), r"shape \(T, 2\)")):
+        with pytest.raises(ValueError, match=match):
             agent.predict(bad)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"query times must lie in \[0, 4\]"):
         agent.predict_sequence(np.zeros((5, 2)), np.array([7]))
     agent.stream_reset()
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="no receiver frame streamed yet"):
         agent.stream_predict()
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="NaN or inf"):
         agent.stream_update(np.array([np.inf, 0.0]))
     agent.stream_update([0.5, -0.8])
     sums, last = agent.stream_distances().copy(), agent._state.last.copy()
@@ -178,13 +181,13 @@ def test_bad_input_raises(agent):
     # a refused frame changes nothing
     assert np.array_equal(agent.stream_distances(), sums)
     assert np.array_equal(agent._state.last, last) and agent._state.count == 1
-    with pytest.raises(RuntimeError):
+    with pytest.raises(RuntimeError, match=r"call fit\(dataset\) first"):
         NonparametricAgent().predict(np.zeros((3, 2)))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="fit needs a non-empty HandoverDataset"):
         NonparametricAgent().fit(HandoverDataset([]))
     for kwargs in ({"inducing_ratio": 0.0}, {"inducing_ratio": 1.2}, {"kappa": -1.0}, {"top_k": 0},
                    {"lengthscale": 0.0}, {"precision": "float16"}, {"horizon": 2.5}):
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match=f"^{next(iter(kwargs))} must be"):
             NonparametricConfig(**kwargs)
 
 

@@ -157,12 +157,14 @@ def test_bad_predictions_and_settings_raise():
         def predict(self, receiver_history):
             return np.full((self.horizon, 3), np.nan)
 
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="agent returned NaN/inf predictions"):
         episode_rms(_Bad(), ep)
     short = _Constant()
     short.horizon = 5
-    with pytest.raises(ValueError):
+    with pytest.raises(
+        ValueError, match=r"predictions of shape \(14, 5, 3\), need \(14, >= 30, 3\)"
+    ):
         episode_rms(short, ep)
     for kwargs in ({"horizon": 0}, {"first_query": -1}, {"stride": 0}, {"stride": 1.5}):
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match=f"^{next(iter(kwargs))} must be an integer"):
             OpenLoopProtocol(**kwargs)

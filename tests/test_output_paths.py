@@ -3,6 +3,7 @@ Issue 20 item 2: one check (``handover_env.paths.output_folder``) of every outpu
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -142,7 +143,7 @@ def test_output_folder_expands_home_and_names_its_option(tmp_path, monkeypatch) 
         ("a\0b", "--cache 'a\\x00b': a path cannot hold a NUL byte"),
         ("~/dangling", f"--cache {tmp_path / 'dangling'}: a symbolic link to nothing"),
     ]:
-        with pytest.raises(UnsafePathError) as exc:
+        with pytest.raises(UnsafePathError, match="^" + re.escape(message)) as exc:
             output_folder(bad, "--cache")
         assert str(exc.value).startswith(message)
     assert not (tmp_path / "nowhere").exists()

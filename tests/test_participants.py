@@ -183,9 +183,9 @@ def test_population_is_seeded_and_matches_its_stated_distributions() -> None:
     assert 0.75 < np.median(speeds) < 0.9
     heights = np.array([q.body.height for q in people])
     assert np.corrcoef(heights, speeds)[0, 1] > 0  # taller people walk faster (dynamic similarity)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="participant seed must be a whole number >= 0"):
         sample_participant(-1)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="need at least one participant"):
         sample_population(0)
 
 

@@ -151,7 +151,7 @@ def test_train_preference_cli_writes_theta_history_and_plot(tmp_path: Path, caps
 def test_train_preference_rejects_bad_input(argv: list[str], capsys) -> None:
     from handover_eval.cli import train
 
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^2$") as exc:
         train.main(["preference", *argv])
     assert exc.value.code == 2
     assert "error" in capsys.readouterr().err

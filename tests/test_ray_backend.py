@@ -176,7 +176,9 @@ def test_ray_retries_a_raised_and_a_crashed_task_once(tmp_path: Path, ray_instan
 def test_a_job_failing_twice_is_named_and_the_others_kept(
     tmp_path: Path, backend: str, ray_instance
 ) -> None:
-    with session(Backend(backend), workers=2, log=None), pytest.raises(JobError) as err:
+    with session(Backend(backend), workers=2, log=None), pytest.raises(
+        JobError, match=r"folds: 1 of 4 job\(s\) failed"
+    ) as err:
         map_jobs(_always_fails_on_2, tmp_path, list(range(4)), workers=2, progress=False,
                  desc="folds", label=lambda j: f"fold {j}")
     assert err.value.failed == {"fold 2": "ValueError: job 2 cannot be done"}

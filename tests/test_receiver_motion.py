@@ -100,7 +100,7 @@ def test_base_trajectory_is_deterministic_and_rate_aware() -> None:
     assert np.array_equal(a.xy, b.xy) and np.array_equal(a.heading, b.heading)
     fast = trajectory.base_trajectory(p, rate_hz=60.0)
     assert abs(fast.t[-1] - a.t[-1]) < 0.05
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="rate_hz must be positive and finite"):
         trajectory.base_trajectory(p, rate_hz=0.0)
 
 

@@ -87,7 +87,7 @@ def test_training_seeds_lie_above_every_evaluation_seed():
     # distinct across envs, episodes and run seeds (for one env count)
     grid = [episode_seed(r, 4, i, e) for r in range(3) for i in range(4) for e in range(100)]
     assert len(set(grid)) == len(grid)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="the learning-curve set has at most 1000 receivers"):
         curve_seed(CURVE_SEEDS)
 
 

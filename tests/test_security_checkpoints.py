@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 from collections.abc import Callable
 from pathlib import Path
@@ -297,7 +298,7 @@ def test_tampered_bc_mlp_checkpoint_is_a_checkpoint_error_naming_it(bc_dir, tmp_
     folder = _copy(bc_dir, tmp_path / "ckpt")
     file, tamper = BC_TAMPER[name]
     tamper(folder / file)
-    with pytest.raises(CheckpointError) as info:
+    with pytest.raises(CheckpointError, match=re.escape(str(folder))) as info:
         BCMLPAgent.load(folder)
     assert str(folder) in str(info.value) and "\n" not in str(info.value)
 
@@ -307,7 +308,7 @@ def test_tampered_act_checkpoint_is_a_checkpoint_error_naming_it(act_dir, tmp_pa
     folder = _copy(act_dir, tmp_path / "ckpt")
     file, tamper = ACT_TAMPER[name]
     tamper(folder / file)
-    with pytest.raises(CheckpointError) as info:
+    with pytest.raises(CheckpointError, match=re.escape(str(folder))) as info:
         ACTAgent.load(folder)
     assert str(folder) in str(info.value) and "\n" not in str(info.value)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import sys
 from collections.abc import Callable
@@ -132,7 +133,7 @@ def test_loading_a_planted_checkpoint_writes_nothing(request, tmp_path, outside,
     plant(folder, outside)
     untouched = Untouched(outside, folder)
     cls = BCMLPAgent if kind == "bc" else ACTAgent
-    with pytest.raises(CheckpointError) as info:
+    with pytest.raises(CheckpointError, match=re.escape(str(folder / ".staging"))) as info:
         cls.load(folder)
     message = str(info.value)
     assert f"{folder / '.staging'}: an interrupted checkpoint write" in message

@@ -186,7 +186,7 @@ def test_bad_task_and_reward_arguments_are_clear_errors():
         HandoverReward(force_scale=0.0)
     with pytest.raises(ValueError, match="finite"):
         HandoverReward(success=float("nan"))
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="unexpected keyword argument 'sucess'"):
         gym.make(DYNAMIC, reward={"sucess": 1.0})
     with pytest.raises(ValueError, match="stabilisation_delay"):
         StaticHandover(stabilisation_delay=-1.0)

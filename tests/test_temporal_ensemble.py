@@ -34,11 +34,11 @@ def test_old_chunks_expire_and_interpolation():
     np.testing.assert_allclose(ens.at(5.25), [10.25])
     np.testing.assert_allclose(ens.at(9.0), [12.0])  # past the newest chunk: hold its last row
     np.testing.assert_allclose(ens.at(1.5), [1.5])
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="start frames must not decrease: 4 after 5"):
         ens.add(np.zeros((3, 1)), 4)  # start frames must not decrease
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"chunk must have shape \(3, 1\), got \(2, 1\)"):
         ens.add(np.zeros((2, 1)), 6)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="chunk contains NaN or inf"):
         ens.add(np.full((3, 1), np.nan), 6)
     ens.reset()
     assert ens.empty and ens.at(0.0) is None
@@ -104,12 +104,14 @@ def test_predictive_agent_streams_forecasts_and_resets():
 
 
 def test_closed_loop_config_validation():
-    for kwargs in ({"min_frames": 0}, {"ensemble_m": float("nan")}, {"ready_pos": (0.0, 0.0)},
-                   {"max_yaw_turn": -1.0}):
-        with pytest.raises(ValueError):
+    for kwargs, match in (({"min_frames": 0}, "min_frames must be an integer >= 1"),
+                          ({"ensemble_m": float("nan")}, "ClosedLoopConfig values must be finite"),
+                          ({"ready_pos": (0.0, 0.0)}, r"ready_pos must be \(x, y, z\)"),
+                          ({"max_yaw_turn": -1.0}, "max_yaw_turn must be >= 0")):
+        with pytest.raises(ValueError, match=match):
             ClosedLoopConfig(**kwargs)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="horizon must be an integer >= 1"):
         TemporalEnsembler(horizon=0)
     agent = _ConstantVelocity()
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"observation must have shape \(90,\)"):
         agent.act(np.zeros(3))

@@ -196,7 +196,7 @@ def test_a_half_written_file_is_a_one_line_error(data_path, tmp_path, capsys, da
 def test_zero_or_negative_options_are_errors_not_defaults(
     data_path, tmp_path, capsys, option, value
 ):
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^2$") as exc:
         train.main(bc(data_path, tmp_path / "run", f"{option}={value}"))
     assert exc.value.code == 2
     assert f"argument {option}: must be" in capsys.readouterr().err

@@ -279,7 +279,7 @@ def _write_folder(folder: Path, n_id: int = 3, n_ood: int = 2) -> Path:
 
 
 def test_transfer_stats_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^0$") as exc:
         build_parser().parse_args(["transfer-stats", "--help"])
     assert exc.value.code == 0 and "--calibration-folds" in capsys.readouterr().out
     folder = _write_folder(tmp_path / "whole_motions")

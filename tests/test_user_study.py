@@ -92,7 +92,7 @@ def test_user_study_quick_end_to_end(tmp_path: Path) -> None:
 def test_user_study_rejects_bad_input(capsys) -> None:
     from handover_eval.cli import evaluate
 
-    with pytest.raises(SystemExit) as exc:
+    with pytest.raises(SystemExit, match="^2$") as exc:
         evaluate.main(["user-study", "--participants", "1"])
     assert exc.value.code == 2
     assert (
