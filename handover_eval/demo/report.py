@@ -98,12 +98,12 @@ def summary_markdown(run: DemoRun) -> str:
         "stabilisation delay subtracted (paper Sec. V-C); medians over the successes. Outcomes "
         "and first failures use the benchmark's names.",
         "",
-        markdown_table(head, body),
+        markdown_table(head, body).rstrip("\n"),
         "",
         "The paper's figures are its user study's (8 people, 5 trials each, the real UR5e); "
         "these are simulated walkers.",
         "",
-        markdown_table(["seed", *(_LABELS[s.key] for s in SIDES)], per),
+        markdown_table(["seed", *(_LABELS[s.key] for s in SIDES)], per).rstrip("\n"),
         "",
     ])
 
