@@ -10,7 +10,9 @@ walker, ``reset(seed=s, options={"receiver": "id"})``) meets
   embedded synthetic default) in ``handover_env/DynamicHandover-v0``, and
 * the static baseline (:class:`agents.static.StaticAgent`) in ``handover_env/StaticHandover-v0``,
 
-both at the env's default Θ-hat. Each episode is scored as the benchmark scores one (the closed
+both at the env's default Θ-hat. The seed draws the same person in both envs (height, speed,
+start and the shape of the walk); the static task replaces only the end of the path and its
+passing line with its stop area. Each episode is scored as the benchmark scores one (the closed
 loop's row, :func:`handover_eval.episodes.episode_row`, and the outcome and first
 failure of :mod:`handover_eval.benchmark.outcomes`). The episodes of :data:`VIDEO_SEEDS` are also
 filmed: every :data:`FRAME_STRIDE`-th env step and the final state, through
