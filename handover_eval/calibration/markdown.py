@@ -208,8 +208,8 @@ def write_markdown(
         + (f", first {summary['limit']} of each kind only" if summary.get("limit") else "")
         + f", {summary['skipped_files']} skipped). Statistics over recordings only; no recording's "
         "own values are stored. Code: `handover_eval/calibration/detect.py` (rules), "
-        "`calibration/measures.py` and `calibration/decisions.py` (quantities), `handover_env/data/filtering.py` (the "
-        "track filter).",
+        "`calibration/measures.py` and `calibration/decisions.py` (quantities), "
+        "`handover_env/data/filtering.py` (the track filter).",
         "",
         "## Split",
         "",
