@@ -293,12 +293,12 @@ def run_dir(tmp_path_factory) -> Path:
     """A train.py rl --quick run's folder after its first checkpoint (step 0), written by the
     trainer's own save() without a training step."""
     from baselines.rl.policy import build_model
-    from baselines.rl.train import TrainingData, _vec_env, reward_record, save
+    from baselines.rl.train import TrainingData, reward_record, save, training_vec_env
 
     config = _quick_config()
     assert config.steps == QUICK["steps"]
     out = tmp_path_factory.mktemp("rl") / "run"
-    vec = _vec_env(config, make_base(config), TrainingData())
+    vec = training_vec_env(config, make_base(config), TrainingData())
     env = make_handover_env(config)
     try:
         model = build_model(config, vec)
@@ -316,10 +316,10 @@ def run_dir(tmp_path_factory) -> Path:
 
 def test_the_untampered_state_restores(run_dir):
     from baselines.rl.policy import build_model
-    from baselines.rl.train import TrainingData, _vec_env, restore
+    from baselines.rl.train import TrainingData, restore, training_vec_env
 
     config = _quick_config()
-    vec = _vec_env(config, make_base(config), TrainingData())
+    vec = training_vec_env(config, make_base(config), TrainingData())
     try:
         state = restore(run_dir, build_model(config, vec), config)
     finally:

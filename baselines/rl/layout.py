@@ -23,8 +23,10 @@ O is the policy's observation size (:class:`~handover_env.envs.observation.ObsLa
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from baselines.rl.config import RLConfig
+if TYPE_CHECKING:  # RLConfig checks its size with this module: no import at run time
+    from baselines.rl.config import RLConfig
 
 #: The action's size: the Cartesian target (x, y, z) and the yaw.
 ACTION_SIZE = 4

@@ -153,7 +153,8 @@ def evaluate_curve(agent: RLAgent, env: Any, receivers: list[CurveReceiver],
             "return": float(np.mean(returns))}
 
 
-def _vec_env(config: RLConfig, base: Any, data: TrainingData) -> Any:
+def training_vec_env(config: RLConfig, base: Any, data: TrainingData) -> Any:
+    """The run's ``config.n_envs`` training envs (SubprocVecEnv when more than one)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     fns = [functools.partial(training_env, config, i, base, data.replays)
@@ -345,7 +346,7 @@ def train_policy(
     out = Path(out)
     torch.set_num_threads(1)
     base = make_base(config, None, data.base_fit)
-    vec = _vec_env(config, base, data)
+    vec = training_vec_env(config, base, data)
     eval_env = make_handover_env(config)
     try:
         model = build_model(config, vec)
