@@ -102,7 +102,7 @@ def test_runner_runs_the_chosen_sensing_profile_and_refuses_others(tmp_path: Pat
     for sensing in ("ideal", "paper"):
         runner = EpisodeRunner("reactive", "id", sensing=sensing)
         infos[sensing] = runner.run(p, theta, seeds)[0]
-        assert runner._env.unwrapped.sensing == sensing
+        assert runner.env(theta).unwrapped.sensing == sensing
         if sensing == "ideal":
             save_episode_cache(runner, tmp_path / "episodes.jsonl")
         runner.close()
