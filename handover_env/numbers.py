@@ -35,7 +35,14 @@ def checked_number(
     """
     if not is_real_number(value):
         raise ValueError(f"{label} must be a number, got {value!r:.80}")
-    x = float(value)  # type: ignore[arg-type]
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except OverflowError:  # an int too large for a float (e.g. 10**400)
+        raise ValueError(
+            f"{label} must be in [{lo:.6g}, {hi:.6g}]{' ' + unit if unit else ''}"
+            f"{f' ({why})' if why else ''}, got an integer of about "
+            f"{int(int(value).bit_length() * math.log10(2)) + 1} digits"  # type: ignore[call-overload]
+        ) from None
     if not (math.isfinite(x) and lo <= x <= hi):
         raise ValueError(
             f"{label} must be {'' if math.isfinite(x) else 'finite and '}in [{lo:.6g}, {hi:.6g}]"

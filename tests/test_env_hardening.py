@@ -421,3 +421,18 @@ def test_person_settings_in_range_make_a_working_env():
     obs, _ = env.reset(seed=0)
     assert env.observation_space.contains(env.step(ACTION)[0]) and env.observation_space.contains(
         obs)
+
+
+@pytest.mark.parametrize(
+    "value", [10**400, -(10**400), 10**5000], ids=["1e400", "-1e400", "1e5000"]
+)
+def test_a_number_too_large_for_a_float_is_named(value):
+    """An integer beyond float range is one ValueError naming the setting, not an OverflowError."""
+    from handover_env.numbers import checked_number
+
+    with pytest.raises(ValueError, match=r"walker pass_y must be in \[-2, 2\] m, got an integer"):
+        checked_number("walker pass_y", value, -2.0, 2.0, "m")
+    env = gym.make("handover_env/DynamicHandover-v0")
+    with pytest.raises(ValueError, match=r"walker speed .*got an integer of about \d+ digits"):
+        env.reset(seed=0, options={"walker": {"speed": value}})
+    env.close()
