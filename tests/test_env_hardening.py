@@ -436,3 +436,16 @@ def test_a_number_too_large_for_a_float_is_named(value):
     with pytest.raises(ValueError, match=r"walker speed .*got an integer of about \d+ digits"):
         env.reset(seed=0, options={"walker": {"speed": value}})
     env.close()
+
+
+@pytest.mark.parametrize(
+    "name", ["motion_normal_0.pkl.bak", "motion_normal_0.pkl\n", "x_motion_normal_0.pkl"]
+)
+def test_a_recording_name_must_match_in_full(tmp_path, name):
+    """``load_recording`` takes the public file name in full (a suffix or a newline is no match)."""
+    from crafted import good_record
+
+    path = tmp_path / name
+    path.write_bytes(pickle.dumps(good_record(), protocol=4))
+    with pytest.raises(DatasetError, match="not a public-dataset file name"):
+        load_recording(path)

@@ -126,7 +126,7 @@ def load_recording(path: str | os.PathLike) -> Recording:
         UnsafePickleError, DatasetError: as :func:`handover_env.data.public.load_public_file`.
     """
     path = Path(path)
-    match = FILE_NAME_RE.match(path.name)
+    match = FILE_NAME_RE.fullmatch(path.name)
     if match is None:
         raise DatasetError(
             f"{path}: not a public-dataset file name (motion_normal_<i>.pkl or "
