@@ -66,7 +66,7 @@ def _flag(row: Mapping[str, Any], key: str) -> bool:
 
 
 def events(row: Mapping[str, Any]) -> dict[str, bool]:
-    """Every event flag of one closed-loop episode row (:func:`handover_eval.closedloop.worker.
+    """Every event flag of one closed-loop episode row (:func:`handover_eval.episodes.
     episode_row`'s columns)."""
     outcome = row.get("outcome")
     return {

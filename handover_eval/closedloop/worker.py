@@ -4,9 +4,7 @@ A job (:class:`EpisodeJob`) is a chunk of receivers for one agent, Θ and model 
 gets the job's model once (:func:`handover_eval.closedloop.models.model_for`: fitted or loaded
 once per worker and fold), makes the agent (:func:`handover_eval.roster.make_agent`) and runs
 each receiver through :func:`handover_eval.episodes.run_receiver`, the one closed-loop episode
-runner (this process's Θ-keyed envs, the episode, its row). ``episode_row`` and
-``instabilities`` are :mod:`handover_eval.episodes`'s, named here too for the code that imports
-them from this module.
+runner (this process's Θ-keyed envs, the episode, its row).
 """
 
 from __future__ import annotations
@@ -22,10 +20,8 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval import roster
 from handover_eval.closedloop.models import ModelRecord, clear_models, model_for
 from handover_eval.closedloop.receivers import ReceiverSpec
-from handover_eval.episodes import clear_envs, episode_row, instabilities, run_receiver
+from handover_eval.episodes import clear_envs, run_receiver
 from handover_eval.methods import MethodOptions
-
-__all__ = ["EpisodeJob", "clear_worker_state", "episode_row", "instabilities", "run_job"]
 
 
 @dataclass(frozen=True)
