@@ -7,7 +7,7 @@
   shaping.
 * :mod:`baselines.rl.policy`: the SB3 algorithm and policy built from a config.
 * :mod:`baselines.rl.files`: the safe checkpoint (safetensors + JSON, never SB3's pickled zip).
-* :mod:`baselines.rl.agent`: :class:`RLAgent`, the policy as an :class:`agents.base.Agent`.
+* :mod:`baselines.rl.agent`: :class:`RLAgent`, the policy as an :class:`agents.base.Policy`.
 * :mod:`baselines.rl.train`: the training loop, learning curve, checkpoints and resume.
 """
 

@@ -1,4 +1,4 @@
-"""The RL policy as an :class:`~agents.base.Agent`: what ``evaluate.py closed-loop --agents
+"""The RL policy as a :class:`~agents.base.Policy`: what ``evaluate.py closed-loop --agents
 rl-residual rl-scratch`` runs.
 
 :class:`RLAgent` holds a policy rebuilt from a checkpoint
@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from agents.base import Agent
+from agents.base import Agent, Policy
 from baselines.checkpoint_io import CheckpointError
 from baselines.rl.config import TRAIN_SEED_START, RLConfig
 from baselines.rl.envs import PolicyIO
@@ -44,7 +44,7 @@ def make_base(config: RLConfig, params: HandoverParams | None = None, fit_data: 
     return base
 
 
-class RLAgent(Agent):
+class RLAgent(Policy):
     """A trained SB3 policy acting in the handover env (module docstring).
 
     Args:
@@ -108,11 +108,6 @@ class RLAgent(Agent):
         if kind != "replay" and seed >= TRAIN_SEED_START:
             raise ValueError(f"walker seed {seed} is in the RL training range (>= "
                              f"{TRAIN_SEED_START}); evaluation seeds lie below it")
-
-    def predict(self, receiver_history: np.ndarray) -> np.ndarray:
-        raise NotImplementedError(
-            "an RL policy acts in the env (act, closed loop); it makes no open-loop prediction "
-            "of the giver trajectory from the receiver history")
 
     def reset(self) -> None:
         if self.base is not None:
