@@ -18,10 +18,32 @@ def is_real_number(value: object) -> bool:
     )
 
 
+def fits_float(value: object) -> bool:
+    """False for a number ``float()`` cannot hold (an int beyond ~1.8e308); True otherwise."""
+    try:
+        float(value)  # type: ignore[arg-type]
+    except OverflowError:
+        return False
+    except (TypeError, ValueError):
+        return True
+    return True
+
+
+def shown(value: object) -> str:
+    """``value`` for an error message: its repr cut at 80 characters, or an integer too large for
+    a float by its number of digits (its repr may not even be allowed: ``sys.int_info``)."""
+    if is_real_number(value) and not fits_float(value):
+        digits = int(abs(int(value)).bit_length() * math.log10(2)) + 1  # type: ignore[call-overload]
+        return f"an integer of about {digits} digits"
+    return f"{value!r:.80}"
+
+
 def checked_number(
     label: str, value: object, lo: float, hi: float, unit: str = "", why: str = ""
 ) -> float:
     """``value`` as a float if it is a real, finite number in ``[lo, hi]``.
+
+    An integer too large for a float counts as not finite.
 
     Args:
         label: how the message names the setting, e.g. ``"walker pass_y"``.
@@ -35,17 +57,10 @@ def checked_number(
     """
     if not is_real_number(value):
         raise ValueError(f"{label} must be a number, got {value!r:.80}")
-    try:
-        x = float(value)  # type: ignore[arg-type]
-    except OverflowError:  # an int too large for a float (e.g. 10**400)
-        raise ValueError(
-            f"{label} must be in [{lo:.6g}, {hi:.6g}]{' ' + unit if unit else ''}"
-            f"{f' ({why})' if why else ''}, got an integer of about "
-            f"{int(int(value).bit_length() * math.log10(2)) + 1} digits"  # type: ignore[call-overload]
-        ) from None
+    x = float(value) if fits_float(value) else math.inf  # type: ignore[arg-type]
     if not (math.isfinite(x) and lo <= x <= hi):
         raise ValueError(
             f"{label} must be {'' if math.isfinite(x) else 'finite and '}in [{lo:.6g}, {hi:.6g}]"
-            f"{' ' + unit if unit else ''}{f' ({why})' if why else ''}, got {value!r:.80}"
+            f"{' ' + unit if unit else ''}{f' ({why})' if why else ''}, got {shown(value)}"
         )
     return x

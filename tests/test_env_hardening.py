@@ -430,7 +430,12 @@ def test_a_number_too_large_for_a_float_is_named(value):
     """An integer beyond float range is one ValueError naming the setting, not an OverflowError."""
     from handover_env.numbers import checked_number
 
-    with pytest.raises(ValueError, match=r"walker pass_y must be in \[-2, 2\] m, got an integer"):
+    with pytest.raises(
+        ValueError, match=(
+            r"walker pass_y must be finite and in \[-2, 2\] m, "
+            r"got an integer of about \d+ digits"
+        ),
+    ):
         checked_number("walker pass_y", value, -2.0, 2.0, "m")
     env = gym.make("handover_env/DynamicHandover-v0")
     with pytest.raises(ValueError, match=r"walker speed .*got an integer of about \d+ digits"):

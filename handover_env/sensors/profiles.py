@@ -31,7 +31,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from handover_env.numbers import checked_number, is_real_number
+from handover_env.numbers import checked_number, fits_float, is_real_number, shown
 
 G = 9.81
 
@@ -110,37 +110,10 @@ CONTROLLER_FIELDS: dict[str, Field] = {
 }
 
 
-
-
-def _shown(value: object) -> str:
-    """``value`` for an error message: its repr cut at 80 characters, or an integer too large for
-    a float by its number of digits (its repr may not even be allowed: ``sys.int_info``)."""
-    if is_real_number(value) and not _fits_float(value):
-        digits = int(abs(int(value)).bit_length() * math.log10(2)) + 1  # type: ignore[call-overload]
-        return f"an integer of about {digits} digits"
-    return f"{value!r:.80}"
-
-
-def _fits_float(value: object) -> bool:
-    """False for a number ``float()`` cannot hold (an int beyond ~1.8e308); True otherwise."""
-    try:
-        float(value)  # type: ignore[arg-type]
-    except OverflowError:
-        return False
-    except (TypeError, ValueError):
-        return True
-    return True
-
-
 def check_value(group: str, table: Mapping[str, Field], name: str, value: object) -> float:
     """``value`` as a float if it is a valid ``group.name``; else ValueError naming the field (an
     integer too large for a float included)."""
     lo, hi, _, unit, source = table[name]
-    if not _fits_float(value):
-        raise ValueError(
-            f"{group} {name} must be finite and in [{lo:.6g}, {hi:.6g}]"
-            f"{' ' + unit if unit else ''} ({source}), got {_shown(value)}"
-        )
     return checked_number(f"{group} {name}", value, lo, hi, unit, source)
 
 
@@ -200,7 +173,7 @@ class WristFTParams:
     def __post_init__(self) -> None:
         _validate(self, "wrist", WRIST_FIELDS)
         if not isinstance(self.zeroing, (bool, np.bool_)):
-            raise ValueError(f"wrist zeroing must be True or False, got {_shown(self.zeroing)}")
+            raise ValueError(f"wrist zeroing must be True or False, got {shown(self.zeroing)}")
         object.__setattr__(self, "zeroing", bool(self.zeroing))
 
 
@@ -335,18 +308,18 @@ def sensing_settings(sensing: object, sensors: object = None, obs_noise: object 
     checked = check_overrides(sensors) if sensors is not None else {}
     legacy: dict[str, dict[str, object]] = {}
     if obs_noise is not None:
-        if (not is_real_number(obs_noise) or not _fits_float(obs_noise)
+        if (not is_real_number(obs_noise) or not fits_float(obs_noise)
                 or not math.isfinite(float(obs_noise)) or obs_noise < 0):
             raise ValueError(
-                f"obs_noise must be a finite number >= 0 (m), got {_shown(obs_noise)}")
+                f"obs_noise must be a finite number >= 0 (m), got {shown(obs_noise)}")
         _set_by("obs_noise", legacy, "camera", pelvis_sigma=float(obs_noise),
                 hand_sigma=float(obs_noise), pelvis_rho=0.0, hand_rho=0.0)
     if obs_latency is not None:
-        if (not is_real_number(obs_latency) or not _fits_float(obs_latency)
+        if (not is_real_number(obs_latency) or not fits_float(obs_latency)
                 or not math.isfinite(float(obs_latency))
                 or int(obs_latency) != obs_latency or obs_latency < 0):
             raise ValueError(
-                f"obs_latency must be a whole number of frames >= 0, got {_shown(obs_latency)}")
+                f"obs_latency must be a whole number of frames >= 0, got {shown(obs_latency)}")
         _set_by("obs_latency", legacy, "camera", latency=int(obs_latency) / frame_rate)
     if force_filter_tau is not None:
         _set_by("force_filter_tau", legacy, "wrist", filter_tau=force_filter_tau)
