@@ -53,7 +53,7 @@ class CoSparConfig:
     The defaults (lengthscale 0.4 of each range, noise 0.3, two Thompson samples plus a buffer of
     two) were chosen on simulated users: over 4 noiseless quadratic users on a 4x3x4x4 grid and 20
     iterations, the mean utility regret was 0.006 against 0.035-0.15 for lengthscale 0.25 and
-    0.001-0.15 for 0.6 (sensitive to the buffer); see ``tests/test_cospar.py``.
+    0.001-0.15 for 0.6 (sensitive to the buffer); see ``tests/agents/test_cospar.py``.
     """
 
     points_per_dim: tuple[int, int, int, int] = (7, 6, 6, 7)

@@ -25,7 +25,7 @@ computed in feature space: K_mm is inverted on its numerically non-singular eige
 ``K_mm^+ = P P^T`` (eigenvalues below ``rcond * max`` dropped instead of adding jitter, which
 costs ~sqrt(jitter) in accuracy), ``Phi = K_nm P``, ``A = I + Phi^T Lambda^-1 Phi`` (eigenvalues
 >= 1). When Z = X (inducing ratio 1.0) Q_nn = K_nn, Lambda = sn2 I and both formulas agree with
-the exact GP (tests/test_gp.py: 1e-8 on synthetic 30 Hz walks with l <= 0.15 m). On 59 real
+the exact GP (tests/agents/test_gp.py: 1e-8 on synthetic 30 Hz walks with l <= 0.15 m). On 59 real
 recordings at l = 0.15 m the largest difference in mean or variance is 2e-8 (median), 3e-7
 (90th percentile), 1.3e-6 (worst): where the receiver pauses or samples are dense, K_mm is
 numerically singular and float64 cannot represent K_mm^-1 any better.

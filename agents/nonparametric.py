@@ -50,7 +50,7 @@ the ID test episodes):
   worst); kappa = 1 (both terms of Eq. d on their natural [0, 2] and [0, 1] scales).
 * lengthscale in {0.1, 0.2, 0.4} m at K = 20, kappa = 1: 111.4, 110.9, 111.2 mm (flat); 0.15 m is
   used: short enough that K_mm stays representable, so FITC at ratio 1.0 equals the exact GP to
-  1e-8 on synthetic 30 Hz walks (tests/test_gp.py) and to 2e-8 median / 1.3e-6 worst on real
+  1e-8 on synthetic 30 Hz walks (tests/agents/test_gp.py) and to 2e-8 median / 1.3e-6 worst on real
   recordings (pauses make K_mm numerically singular; see agents/gp.py).
 * precision float32: per-frame cost ~halved, flows within 1e-4 of float64, RMS unchanged (see
   the 10-fold figures in docs/results.md).

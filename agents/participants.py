@@ -9,7 +9,7 @@ statistic of published work or of the recordings (cited), or an assumption (said
 **Independence from the paper's Theta-hat.** Nothing here mentions Theta. A participant judges
 what *happened* in an episode (the env's final ``info``); which Theta produced it is unknown to
 them. The population is defined in outcome units (seconds, newtons, metres, m/s^3), never in
-parameter units, and this module imports nothing from the env (``tests/test_participants.py``
+parameter units, and this module imports nothing from the env (``tests/agents/test_participants.py``
 checks the imports and that no Theta-hat literal appears).
 
 **Body** (:class:`Body`): sex, height, walking speed and the line along which the person passes

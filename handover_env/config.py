@@ -18,7 +18,7 @@ THETA_RANGES: dict[str, tuple[float, float]] = {
 
 
 #: Θ's fields the robot reads, in the env: K and B in the impedance controller (Eq. 1), f_r in
-#: the release (tests/test_theta_split.py: the env reads these and no other).
+#: the release (tests/eval/test_theta_split.py: the env reads these and no other).
 ROBOT_FIELDS: tuple[str, ...] = ("stiffness", "damping", "release_force")
 #: Θ's field the agent reads: t_f, how far ahead its target x_d(t + t_f) is (no agent reads a
 #: robot field).

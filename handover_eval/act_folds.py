@@ -9,7 +9,7 @@ Every fold's model trains from one shared export, in parallel:
 2. Each training set is a list of episode indices of that export:
    ``ACTAgent.fit_lerobot(export, episodes=...)`` splits train/validation and computes the
    normalisation statistics from those episodes only, and trains exactly the model that exporting
-   just those episodes would give (``tests/test_act_folds.py``).
+   just those episodes would give (``tests/baselines/test_act_folds.py``).
 3. :func:`pretrain_act` trains the missing fold models in ``workers`` spawned processes, or as
    Ray tasks (:mod:`.backend`), with one torch thread each and writes them to the same checkpoint
    folders, with the same completion

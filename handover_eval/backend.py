@@ -221,8 +221,9 @@ def map_folds(
 
     Table I's folds, the sample-efficiency cells, the trade-off fits and the closed-loop episode
     chunks are independent and seeded, so running them on ``workers`` processes (or as Ray tasks)
-    returns exactly what the serial loop returns, in job order (``tests/test_evaluate.py`` checks
-    the tables are identical with 1 and 2 workers, ``tests/test_ray_backend.py`` with Ray).
+    returns exactly what the serial loop returns, in job order (``tests/eval/test_evaluate.py``
+    checks the tables are identical with 1 and 2 workers, ``tests/eval/test_ray_backend.py`` with
+    Ray).
     ``fn(dataset, job)`` must be a module-level function; a job that raises is retried once, then
     :class:`JobError` names it after the other jobs finished.
     """

@@ -40,7 +40,7 @@ builds the policy and processors from our own validated config.
 Reproducibility: training runs under :func:`reproducible` (seeded Python, numpy and torch RNGs,
 one torch thread, ``torch.use_deterministic_algorithms``), with data order and dropout masks drawn
 from the seed and the step, so a seed gives bit-identical weights in any process
-(``tests/test_act_determinism.py``), whatever torch thread count the caller set.
+(``tests/baselines/test_act_determinism.py``), whatever torch thread count the caller set.
 """
 
 from __future__ import annotations

@@ -74,8 +74,8 @@ def lerobot_samples(ds, episode_indices: np.ndarray) -> dict[str, torch.Tensor]:
 
     Reads the parquet columns once and applies ``ds.delta_indices`` exactly as
     ``LeRobotDataset.__getitem__`` does (indices clamped to the episode, ``action_is_pad`` outside
-    it); ``tests/test_act.py`` checks the result equals ``ds[i]`` item by item. The columns are
-    read as one numpy batch (``datasets``' lazy column objects convert row by row).
+    it); ``tests/baselines/test_act.py`` checks the result equals ``ds[i]`` item by item. The
+    columns are read as one numpy batch (``datasets``' lazy column objects convert row by row).
     """
     cols = ds.hf_dataset.with_format("numpy")[:]  # one batch read, not an iteration over rows
     env = np.asarray(cols[OBS_ENV_STATE], dtype=np.float32)
@@ -107,8 +107,8 @@ def normalise_samples(
 
     The pipeline (rename, batch dim, device, ``NormalizerProcessorStep``) is elementwise over rows,
     so normalising all rows up front and indexing a batch afterwards gives bitwise the same tensors
-    as indexing first and normalising the batch (``tests/test_act.py`` checks it). ``chunk`` rows at
-    a time bound the pipeline's temporaries.
+    as indexing first and normalising the batch (``tests/baselines/test_act.py`` checks it).
+    ``chunk`` rows at a time bound the pipeline's temporaries.
     """
     n = int(next(iter(samples.values())).shape[0])
     parts = [

@@ -20,8 +20,8 @@ stiffness of 1 N/mm (:data:`ARM_POSTURE_STIFFNESS`; measured human arm endpoint 
 relaxed posture is a few hundred N/m to a few N/mm), so an arm struck by the robot gives way at
 the shoulder and elbow as a person's does. MuJoCo welds take a stiffness in acceleration units;
 :data:`WELD_GAIN` converts, calibrated once so that a static 40 N force at a segment's centre of
-mass deflects it by force / K (measured in ``tests/test_body_model.py``). Damping gives a damping
-ratio of about 1.
+mass deflects it by force / K (measured in ``tests/person/test_body_model.py``). Damping gives a
+damping ratio of about 1.
 
 Stiffness of the tissue. The ISO constants also set the **contacts**: a robot or object geom
 pressing on a region compresses it like that region's tissue (:func:`contact_timeconst`,
@@ -188,10 +188,10 @@ _GEOMS: tuple[tuple[str, str, tuple[int, tuple], tuple[int, tuple], float], ...]
 )
 GEOM_NAMES = tuple(g[1] for g in _GEOMS)
 #: Calibration of the weld stiffness: measured quasi-static stiffness / target is 1 with this
-#: gain per segment (see the module docstring; ``tests/test_body_model.py`` re-measures it). The
-#: upper arms are the exception: pushed at the centre of mass they are held by the shoulder and the
-#: forearm chain, about 1.1 kN/m however weak their own weld, so their gain is left out of
-#: :func:`calibrate_weld_gains` (measured 1.09 and 1.15 kN/m for the right and left arm).
+#: gain per segment (see the module docstring; ``tests/person/test_body_model.py`` re-measures
+#: it). The upper arms are the exception: pushed at the centre of mass they are held by the
+#: shoulder and the forearm chain, about 1.1 kN/m however weak their own weld, so their gain is
+#: left out of :func:`calibrate_weld_gains` (measured 1.09 and 1.15 kN/m for the right and left arm).
 WELD_GAIN = {
     "pelvis": 0.0952,
     "torso": 0.1288,

@@ -22,7 +22,7 @@ base toward -y (where the receiver walks past) and slightly +x (where the receiv
 ``base_yaw = -pi/2`` turns the UR5e so that its home configuration faces that side. With the
 gripper pointing toward the receiver's path (yaw about -pi/2), the arm reaches the whole box
 except the column right against the pedestal (x ~ 0, y > -0.6), where the wrist would sit on the
-base axis (the UR shoulder singularity); ``tests/test_controller.py`` checks the corners.
+base axis (the UR shoulder singularity); ``tests/env/test_controller.py`` checks the corners.
 """
 
 from __future__ import annotations

@@ -6,8 +6,8 @@ Reading runs no code: the CSVs go through :mod:`csv` and the JSON through :func:
 exact type and range against the schemas below (every pattern matched in full, so no trailing
 newline slips through). An episode file holds at most :data:`MAX_ROWS` rows of at most
 :data:`MAX_AGENTS` agents: bounds that keep ``rescore`` of the largest file admitted under 2 GB
-of memory and a minute (``tests/test_security_results.py``). The values of a result.json are
-then checked against each other (:mod:`.result_values`). Any problem is a
+of memory and a minute (``tests/security/test_security_results.py``). The values of a
+result.json are then checked against each other (:mod:`.result_values`). Any problem is a
 :class:`BenchmarkFileError` whose message is one line naming the file and the field (and, in an
 episode file, the line).
 """

@@ -409,7 +409,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             else Path("results") / ("table1-quick" if quick else "table1") / "checkpoints"
         )
         if getattr(args, "rerun", None) is not None:
-            from handover_eval.closedloop.rerun_log import check_rerun_path
+            from handover_eval.rerun_log import check_rerun_path
 
             args.rerun = check_rerun_path(args.rerun)
         backend = backend_from_args(args)
@@ -481,7 +481,7 @@ def _run(args, load_dataset, receivers, sweep, options, backend, out: Path, cach
 def _rerun(path: Path, config: ClosedLoopEvalConfig, run: ClosedLoopRun,
            dataset: HandoverDataset, options: MethodOptions, cache: Path, fit_all: bool) -> None:
     """``--rerun``: the first agent's episode with its first receiver, logged to ``path``."""
-    from handover_eval.closedloop.rerun_log import first_job, log_job
+    from handover_eval.rerun_log import first_job, log_job
 
     job = first_job(config, run.receivers, dataset, options, cache, fit_all)
     row = log_job(dataset, job, path)

@@ -8,7 +8,7 @@ Everything here is plain numpy and deterministic for a given seed:
   the resamples drawn as a (B, n) index matrix in blocks of rows of at most
   :data:`BOOTSTRAP_BLOCK` indices, so memory stays bounded for any n; numpy's generator draws
   the same integers in the same order whatever the blocks, so the CI is that of one (B, n) draw,
-  bit for bit (``tests/test_security_results.py``).
+  bit for bit (``tests/security/test_security_results.py``).
 * :func:`pair_up`: aligns two agents' per-episode values on the same receivers (by key, never
   by row order) and drops receivers where either value is undefined.
 * :func:`paired_difference`: the median (or mean) of the paired differences agent - reference,
