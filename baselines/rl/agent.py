@@ -5,7 +5,8 @@ rl-residual rl-scratch`` runs.
 (:func:`baselines.rl.files.read_checkpoint`, nothing unpickled) or the live policy of a training
 run, the fixed observation / action mapping (:class:`baselines.rl.envs.PolicyIO`) and, for the
 residual form, its base agent. ``act(obs)`` is the same computation as one step of the training
-wrapper, with the policy's deterministic action (its mean). The agent acts in the env only: it
+wrapper (the action filter and the memory of the last actions included), with the policy's
+deterministic action (its mean). The agent acts in the env only: it
 has no open-loop prediction.
 """
 
@@ -21,21 +22,34 @@ from agents.base import Agent, Policy
 from baselines.checkpoint_io import CheckpointError
 from baselines.rl.config import TRAIN_SEED_START, RLConfig
 from baselines.rl.envs import PolicyIO
+from baselines.rl.layout import PRIVILEGED_SIZE
 from handover_env.config import HandoverParams
 
 
 def make_base(config: RLConfig, params: HandoverParams | None = None, fit_data: Any = None):
-    """The residual's base agent: the reactive agent (Θ's t_f), or the SPGP planner (``ours``)
-    fitted on ``fit_data`` (the training folds' episodes); None for scratch."""
+    """The residual's base agent: the reactive agent (Θ's t_f), the constant-velocity agent
+    (``cv``: the reactive agent's extrapolation in the predictive wrapper, Θ's t_f), or the SPGP
+    planner (``ours``) fitted on ``fit_data`` (the training folds' episodes); None for
+    scratch."""
     if config.form != "residual":
         return None
-    if config.base == "reactive":
+    return build_agent(config.base, params, fit_data)
+
+
+def build_agent(name: str, params: HandoverParams | None = None, fit_data: Any = None):
+    """The agent ``name`` (``"reactive"``, ``"cv"`` or ``"ours"``) as a residual's base or a
+    warm start's teacher (:func:`make_base`)."""
+    if name == "reactive":
         from agents.reactive import ReactiveAgent
 
         return ReactiveAgent(params or HandoverParams())
+    if name == "cv":
+        from agents.constant_velocity import ConstantVelocityAgent
+
+        return ConstantVelocityAgent(params=params or HandoverParams())
     if fit_data is None or len(fit_data) == 0:
-        raise ValueError("a residual policy on 'ours' needs the training folds' episodes to fit "
-                         "the SPGP planner (--data with replays of the training folds)")
+        raise ValueError("'ours' (a residual's base or a warm start's teacher) needs the training "
+                         "folds' episodes to fit the SPGP planner (--data)")
     from agents.nonparametric import NonparametricAgent, NonparametricConfig
 
     base = NonparametricAgent(NonparametricConfig()).fit(fit_data)
@@ -62,6 +76,7 @@ class RLAgent(Policy):
             raise ValueError("a residual RL agent needs its base agent (and a scratch one none)")
         self.policy, self.io, self.base = policy, io, base
         self.config = io.config
+        self.memory = io.memory()
         self.trained_replays = frozenset(trained_replays)
         self.record = record or {}
 
@@ -110,6 +125,7 @@ class RLAgent(Policy):
                              f"{TRAIN_SEED_START}); evaluation seeds lie below it")
 
     def reset(self) -> None:
+        self.memory.reset()
         if self.base is not None:
             self.base.reset()
 
@@ -117,7 +133,9 @@ class RLAgent(Policy):
         base_target = None
         if self.base is not None:
             base_target = np.asarray(self.base.act(obs), dtype=np.float64)
-        x = self.io.observation(obs, base_target)
+        x: Any = self.io.observation(obs, base_target, self.memory.observation())
+        if self.config.privileged_critic:  # the critic's part: never read by the actor
+            x = {"actor": x, "privileged": np.zeros(PRIVILEGED_SIZE, np.float32)}
         with torch.no_grad():
             action, _ = self.policy.predict(x, deterministic=True)
-        return self.io.target(action, base_target)
+        return self.io.target(self.memory.apply(action), base_target)

@@ -1,13 +1,13 @@
 """What an RL training run of the handover policy is: :class:`RLConfig`, and the receivers it may
 meet (seed ranges disjoint from the closed-loop evaluation's, by construction).
 
-**Seeds.** The closed-loop evaluation (``handover_eval/closedloop/receivers.py``) resets its
+**Seeds.** The closed-loop evaluation (``handover_eval/receivers.py``) resets its
 scripted walkers with seeds ``0 .. N-1`` (ID) and ``10000 .. 10000+N-1`` (OOD), N at most 10 000
 (``evaluate.py``'s ``--walkers`` bound), so every evaluation seed is below
 :data:`EVAL_SEED_LIMIT`. Every training episode is reset with its own explicit seed from
 :func:`episode_seed`, and the fixed learning-curve set from :func:`curve_seed`; both are at least
 :data:`TRAIN_SEED_START` > :data:`EVAL_SEED_LIMIT`. No walker an evaluation scores on is ever
-trained on (``tests/test_rl.py`` checks both bounds against the evaluation's constants).
+trained on (``tests/baselines/test_rl.py`` checks both bounds against the evaluation's constants).
 
 **Replays.** Training replays come only from the folds :func:`training_folds` of Table I's
 stratified split: the complement of the evaluation's held-out half (folds ``k//2 .. k-1``). The
@@ -31,13 +31,17 @@ RUN_STRIDE = 1_000_000_000
 
 ALGOS = ("ppo", "sac")
 FORMS = ("residual", "scratch")
-BASES = ("reactive", "ours")
+BASES = ("reactive", "ours", "cv")
+#: Teachers of the behaviour-cloning warm start of a scratch policy ("" = none).
+WARM_STARTS = ("", "reactive", "ours", "cv")
+#: Added exploration noise of SAC ("" = SAC's own Gaussian sampling only).
+ACTION_NOISES = ("", "pink")
 RECEIVER_KINDS = ("id", "ood", "replay")
 
 
 def training_folds(folds: int) -> tuple[int, ...]:
     """The folds of a ``folds``-fold split RL may train on: ``0 .. k//2 - 1``, the complement of
-    the closed-loop evaluation's held-out half (``closedloop.receivers.held_out_folds``)."""
+    the closed-loop evaluation's held-out half (``receivers.held_out_folds``)."""
     if folds < 2:
         raise ValueError(f"folds must be >= 2, got {folds}")
     return tuple(range(folds // 2))
@@ -61,10 +65,21 @@ def curve_seed(k: int) -> int:
     return TRAIN_SEED_START + k
 
 
+def warm_start_seed(run_seed: int, k: int) -> int:
+    """The reset seed of the ``k``-th teacher episode of a warm start: counted down from the top
+    of the run's block of :data:`RUN_STRIDE` episode seeds, which training episodes fill from the
+    bottom (a run has at most ``2 * MAX_STEPS + MAX_ENVS`` episodes, far below the
+    ``RUN_STRIDE - MAX_WARM_START_EPISODES`` where the teacher's begin)."""
+    if not 0 <= k < MAX_WARM_START_EPISODES or run_seed < 0:
+        raise ValueError(f"a warm start has at most {MAX_WARM_START_EPISODES} episodes")
+    return TRAIN_SEED_START + CURVE_SEEDS + run_seed * RUN_STRIDE + RUN_STRIDE - 1 - k
+
+
 #: Upper bounds of an :class:`RLConfig`, far above any real run (the defaults: 200 000 steps,
 #: 2 envs, a 64 x 64 network of 20 809 parameters, 30 frames of history) but low enough that a
 #: crafted ``config.json`` cannot make a load allocate more than about 40 MB or take more than a
-#: few seconds (tests/test_security_rl.py). Steps, envs and widths are train.py's own flag bounds.
+#: few seconds (tests/security/test_security_rl.py). Steps, envs and widths are train.py's own
+#: flag bounds.
 MAX_STEPS = 10_000_000
 MAX_ENVS = 64
 MAX_WIDTH = 4096
@@ -74,19 +89,27 @@ MAX_POLICY_PARAMS = 2**23
 #: 30 s of 30 Hz camera frames (the paper's observation holds 1 s, 30 frames).
 MAX_HISTORY = 900
 MAX_SEED = 2**32 - 1
+#: The most past actions in the observation (1 s at 30 Hz).
+MAX_LAST_ACTIONS = 30
+#: The most teacher episodes of a warm start (their seeds: :func:`warm_start_seed`).
+MAX_WARM_START_EPISODES = 10_000
 #: (low, high) of each integer field.
 INT_LIMITS = {
     "steps": (1, MAX_STEPS), "n_envs": (1, MAX_ENVS), "seed": (0, MAX_SEED),
     "n_steps": (1, 100_000), "batch_size": (1, 100_000), "n_epochs": (1, 1000),
     "folds": (2, 100), "split_seed": (0, MAX_SEED), "curve_episodes": (1, CURVE_SEEDS),
     "eval_every": (1, MAX_STEPS), "history": (2, MAX_HISTORY),
+    "sde_sample_freq": (-1, 100_000), "last_actions": (0, MAX_LAST_ACTIONS),
+    "warm_start_episodes": (0, MAX_WARM_START_EPISODES), "warm_start_epochs": (1, 1000),
 }
 #: (low, high, low excluded) of each float field: m, rad, and plain numbers.
 FLOAT_LIMITS = {
     "residual_xyz": (0.0, 2.0, True), "residual_yaw": (0.0, math.pi, True),
     "learning_rate": (0.0, 1.0, True), "gamma": (0.0, 1.0, True),
     "log_std_init": (-20.0, 2.0, False), "ent_coef": (-10.0, 10.0, False),
-    "shaping": (0.0, 1000.0, False),
+    "shaping": (0.0, 1000.0, False), "action_tau": (0.0, 10.0, False),
+    "noise_sigma": (0.0, 1.0, False), "action_change": (0.0, 1000.0, False),
+    "contact_penalty": (0.0, 1000.0, False),
     "p_id": (0.0, 1.0, False), "p_ood": (0.0, 1.0, False), "p_replay": (0.0, 1.0, False),
 }
 
@@ -139,6 +162,27 @@ class RLConfig:
             policy meets the robot's imperfections, not one fixed world), ``"paper"``, ``"ideal"``,
             or ``""`` for the env's own default.
         history: camera frames of receiver history in the observation (the env's ``history``).
+        use_sde, sde_sample_freq: SB3's generalised state-dependent exploration (gSDE, Raffin et
+            al. 2022) for PPO or SAC: the exploration noise is a function of the policy's
+            features, its matrix redrawn every ``sde_sample_freq`` steps (-1: once a rollout).
+        action_noise, noise_sigma: SAC only: ``"pink"`` adds 1/f ("pink") noise of standard
+            deviation ``noise_sigma`` (action units) to SAC's sampled action
+            (:mod:`baselines.rl.noise`); ``""`` none.
+        action_tau: s, time constant of the first-order filter through which the action reaches
+            the robot (:mod:`baselines.rl.action_filter`); 0 = no filter.
+        last_actions: the policy also sees its ``last_actions`` last actions (as they reached
+            the robot, after the filter); 0 = none.
+        privileged_critic: asymmetric actor-critic: the critic also sees the true person state
+            and the true wrist force (:mod:`baselines.rl.privileged`), the actor only the sensed
+            observation.
+        warm_start, warm_start_episodes, warm_start_epochs: scratch only: behaviour cloning of
+            the actor on a teacher agent's actions (``"reactive"``, ``"ours"`` or ``"cv"``) over
+            ``warm_start_episodes`` training-receiver episodes, ``warm_start_epochs`` passes,
+            before RL (:mod:`baselines.rl.warm_start`); ``""`` none.
+        action_change: weight of the penalty on the change of the action between steps
+            (:mod:`baselines.rl.penalties`); 0 = none.
+        contact_penalty: weight of the penalty on body contact force beyond the receiving hand,
+            per second at each region's ISO/TS 15066 limit (:mod:`baselines.rl.penalties`).
     """
 
     algo: str = "ppo"
@@ -167,6 +211,18 @@ class RLConfig:
     eval_every: int = 20_000
     sensing: str = "randomized"
     history: int = 30
+    use_sde: bool = False
+    sde_sample_freq: int = -1
+    action_noise: str = ""
+    noise_sigma: float = 0.1
+    action_tau: float = 0.0
+    last_actions: int = 0
+    privileged_critic: bool = False
+    warm_start: str = ""
+    warm_start_episodes: int = 0
+    warm_start_epochs: int = 20
+    action_change: float = 0.0
+    contact_penalty: float = 0.0
 
     def __post_init__(self) -> None:
         if self.algo not in ALGOS:
@@ -177,6 +233,7 @@ class RLConfig:
             raise ValueError(f"base must be one of {list(BASES)}, got {self.base!r}")
         if self.form == "scratch" and self.base != "":
             object.__setattr__(self, "base", "")
+        self._check_levers()
         if self.sensing not in SENSING:
             raise ValueError(f"sensing must be one of {list(SENSING)}, got {self.sensing!r}")
         for name, (low, high, open_low) in FLOAT_LIMITS.items():
@@ -204,6 +261,24 @@ class RLConfig:
         if n > MAX_POLICY_PARAMS:
             raise ValueError(f"net_arch {_short(self.net_arch)} with history {self.history} makes "
                              f"a policy of {n:,} parameters, more than {MAX_POLICY_PARAMS:,}")
+
+    def _check_levers(self) -> None:
+        """The exploration, observation and warm-start fields fit together."""
+        if self.action_noise not in ACTION_NOISES:
+            raise ValueError(f"action_noise must be one of {list(ACTION_NOISES)}, got "
+                             f"{self.action_noise!r}")
+        if self.action_noise and self.algo != "sac":
+            raise ValueError("action_noise (pink) is for SAC; PPO explores with its policy's "
+                             "own noise (use_sde for time-correlated noise)")
+        if self.sde_sample_freq != -1 and not self.use_sde:
+            raise ValueError("sde_sample_freq is gSDE's: set use_sde too")
+        if self.warm_start not in WARM_STARTS:
+            raise ValueError(f"warm_start must be one of {list(WARM_STARTS)}, got "
+                             f"{self.warm_start!r}")
+        if self.warm_start and self.form != "scratch":
+            raise ValueError("warm_start is for the scratch form (a residual starts at its base)")
+        if bool(self.warm_start) != (self.warm_start_episodes > 0):
+            raise ValueError("warm_start and warm_start_episodes > 0 go together")
 
     def probabilities(self, with_replays: bool) -> dict[str, float]:
         """Each receiver kind's probability (normalised; ``replay`` dropped without replays)."""

@@ -3,13 +3,18 @@
 **Observation** (:class:`PolicyIO`). The env's flat observation (``ObsLayout``), each part
 shifted and scaled by fixed constants of the task (:func:`normalisation`: positions about the
 robot's ready pose in units of 0.5-2 m, forces in 20 N, torques in 5 N m, time in 15 s) and
-clipped to ±10; the residual policy also sees its base agent's target (about the ready pose).
-The constants are stored in the checkpoint and checked on loading; no running statistics, so a
+clipped to ±10; the residual policy also sees its base agent's target (about the ready pose),
+and with ``last_actions`` = k its k last actions (:mod:`baselines.rl.action_filter`). With
+``privileged_critic`` the training env's observation is a Dict of that (``"actor"``) and the
+true state the critic alone sees (``"privileged"``, :mod:`baselines.rl.privileged`). The
+constants are stored in the checkpoint and checked on loading; no running statistics, so a
 seed gives the same policy whatever the number of evaluations.
 
 **Action.** The policy acts in [-1, 1]^4. Residual: the target is the base agent's target plus
 ``(a_x, a_y, a_z) * residual_xyz`` and ``a_yaw * residual_yaw`` (default ±0.15 m, ±0.3 rad);
-scratch: the action maps affinely onto the env's action box. Both are clipped to that box.
+scratch: the action maps affinely onto the env's action box. Both are clipped to that box. With
+``action_tau`` > 0 the action first passes a first-order filter of that time constant
+(:mod:`baselines.rl.action_filter`), in training and deployed alike.
 
 **Training env** (:class:`HandoverTrainingEnv`). Every reset draws the receiver from the
 training receivers only: its kind (ID walker, OOD walker, a replay of the training folds) from a
@@ -22,7 +27,9 @@ Russell 1999: it leaves the optimal policy unchanged) with ``phi(s) = -shaping *
 the gripper holds the bottle (0 otherwise and at the end). A handover happens only where the
 bottle meets the hand, so ``phi`` says how far the task is from its precondition; it names no
 agent's target (the residual is the place for that). ``info["reward_shaping"]`` holds ``F``
-beside the env's ``reward_time``, ``reward_force`` and ``reward_outcome``.
+beside the env's ``reward_time``, ``reward_force`` and ``reward_outcome``, and
+``info["reward_action_change"]`` and ``info["reward_contact"]`` the penalties of
+:mod:`baselines.rl.penalties` (0 with their weights at 0); the reward is the sum of all six.
 """
 
 from __future__ import annotations
@@ -34,7 +41,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from baselines.rl.action_filter import ActionMemory
 from baselines.rl.config import RLConfig, episode_seed
+from baselines.rl.penalties import action_change_cost, contact_cost, segment_forces
+from baselines.rl.privileged import PRIVILEGED_SIZE, privileged_observation
 from handover_env.envs.observation import ObsLayout
 
 ENV_ID = "handover_env/DynamicHandover-v0"
@@ -61,8 +71,11 @@ PART_SCALES: dict[str, tuple[tuple[float, ...], float]] = {
 TARGET_SCALE = (0.5, 0.5, 0.5, math.pi / 2)
 
 
-def normalisation(history: int, form: str) -> tuple[np.ndarray, np.ndarray]:
-    """The fixed ``(offset, scale)`` float32 vectors of the policy's observation."""
+def normalisation(history: int, form: str, last_actions: int = 0
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The fixed ``(offset, scale)`` float32 vectors of the policy's observation: the env's
+    parts, the base target (residual) and the ``last_actions`` last actions (already in [-1, 1]:
+    offset 0, scale 1)."""
     layout = ObsLayout(history)
     offset, scale = [], []
     for name, shape, _ in layout.fields:
@@ -74,6 +87,8 @@ def normalisation(history: int, form: str) -> tuple[np.ndarray, np.ndarray]:
     if form == "residual":
         offset.append(np.asarray(READY))
         scale.append(np.asarray(TARGET_SCALE))
+    offset.append(np.zeros(4 * last_actions))
+    scale.append(np.ones(4 * last_actions))
     return (np.concatenate(offset).astype(np.float32), np.concatenate(scale).astype(np.float32))
 
 
@@ -95,7 +110,7 @@ class PolicyIO:
 
     @classmethod
     def for_env(cls, config: RLConfig, action_space: gym.spaces.Box) -> PolicyIO:
-        offset, scale = normalisation(config.history, config.form)
+        offset, scale = normalisation(config.history, config.form, config.last_actions)
         return cls(config, action_space.low.astype(np.float64),
                    action_space.high.astype(np.float64), offset, scale)
 
@@ -108,16 +123,45 @@ class PolicyIO:
     def action_space(self) -> gym.spaces.Box:
         return gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
 
-    def observation(self, obs: np.ndarray, base_target: np.ndarray | None) -> np.ndarray:
-        """The normalised policy observation of an env observation (and the base target)."""
+    def observation(self, obs: np.ndarray, base_target: np.ndarray | None,
+                    past: np.ndarray | None = None) -> np.ndarray:
+        """The normalised policy observation of an env observation, the base target (residual)
+        and the last actions (:meth:`baselines.rl.action_filter.ActionMemory.observation`)."""
         x = np.asarray(obs, dtype=np.float64)
         if self.config.form == "residual":
             x = np.concatenate([x, np.asarray(base_target, dtype=np.float64)])
+        if self.config.last_actions:
+            x = np.concatenate([x, np.asarray(past, dtype=np.float64).reshape(-1)])
         if x.shape != self.offset.shape:
             raise ValueError(f"observation has {x.shape[0]} values, the policy expects "
                              f"{self.offset.shape[0]}")
         z = (x - self.offset) / self.scale
         return np.clip(np.nan_to_num(z, nan=0.0), -OBS_CLIP, OBS_CLIP).astype(np.float32)
+
+    def start_action(self) -> np.ndarray:
+        """The action of an episode's start (:mod:`baselines.rl.action_filter`): no correction
+        (residual), or the one whose target is the ready pose (scratch)."""
+        if self.config.form == "residual":
+            return np.zeros(4)
+        a = 2.0 * (np.asarray(READY) - self.low) / (self.high - self.low) - 1.0
+        return np.clip(a, -1.0, 1.0)
+
+    def action_of(self, target: np.ndarray, base_target: np.ndarray | None) -> np.ndarray:
+        """The action in [-1, 1]^4 whose target is nearest ``target`` (the inverse of
+        :meth:`target`, clipped): a teacher's target as the policy's action."""
+        t = np.asarray(target, dtype=np.float64).reshape(4)
+        if self.config.form == "residual":
+            c = self.config
+            a = (t - np.asarray(base_target, dtype=np.float64)) / np.array(
+                [c.residual_xyz] * 3 + [c.residual_yaw])
+        else:
+            a = 2.0 * (t - self.low) / (self.high - self.low) - 1.0
+        return np.clip(a, -1.0, 1.0)
+
+    def memory(self) -> ActionMemory:
+        """A fresh :class:`~baselines.rl.action_filter.ActionMemory` of this config."""
+        return ActionMemory(self.config.action_tau, self.config.last_actions,
+                            self.start_action())
 
     def target(self, action: np.ndarray, base_target: np.ndarray | None) -> np.ndarray:
         """The env's Cartesian target (x, y, z, yaw) for the policy's action in [-1, 1]^4."""
@@ -181,8 +225,9 @@ class HandoverTrainingEnv(gym.Wrapper):
         self.config, self.env_index, self.base = config, env_index, base
         self.replays = list(replays)
         self.io = PolicyIO.for_env(config, env.action_space)
-        self.observation_space = self.io.observation_space
+        self.observation_space = training_observation_space(config, self.io)
         self.action_space = self.io.action_space
+        self.memory = self.io.memory()
         self.shaping = HandoverShaping(config.history, config.shaping, config.gamma)
         probs = config.probabilities(bool(self.replays))
         self._kinds, self._p = list(probs), np.array(list(probs.values()))
@@ -214,18 +259,42 @@ class HandoverTrainingEnv(gym.Wrapper):
             self.base.reset()
             self._target = np.asarray(self.base.act(obs), dtype=np.float64)
         self._phi = self.shaping.potential(obs)
+        self.memory.reset()
         info = {**info, "train_receiver": kind, "train_seed": s}
-        return self.io.observation(obs, self._target), info
+        return self._observation(obs), info
+
+    def _observation(self, obs: np.ndarray) -> Any:
+        """The policy's observation (and, for an asymmetric critic, the privileged state)."""
+        x = self.io.observation(obs, self._target, self.memory.observation())
+        if not self.config.privileged_critic:
+            return x
+        return {"actor": x, "privileged": privileged_observation(self.env)}
 
     def step(self, action):
-        target = self.io.target(action, self._target)
+        c = self.config
+        before = self.memory.u.copy()
+        u = self.memory.apply(action)
+        target = self.io.target(u, self._target)
         obs, reward, terminated, truncated, info = self.env.step(target)
         shaping, self._phi = self.shaping.term(self._phi, obs, terminated)
-        info = {**info, "reward_shaping": shaping}
+        change = action_change_cost(c.action_change, u, before) if c.action_change else 0.0
+        contact = contact_cost(c.contact_penalty, segment_forces(self.env)) \
+            if c.contact_penalty else 0.0
+        info = {**info, "reward_shaping": shaping, "reward_action_change": change,
+                "reward_contact": contact}
         if self.base is not None and not (terminated or truncated):
             self._target = np.asarray(self.base.act(obs), dtype=np.float64)
-        return (self.io.observation(obs, self._target), float(reward) + shaping, terminated,
+        return (self._observation(obs), float(reward) + shaping + change + contact, terminated,
                 truncated, info)
+
+
+def training_observation_space(config: RLConfig, io: PolicyIO) -> gym.spaces.Space:
+    """The training env's observation space: the policy's Box, or with ``privileged_critic`` a
+    Dict of it (``"actor"``) and the privileged state (``"privileged"``)."""
+    if not config.privileged_critic:
+        return io.observation_space
+    return gym.spaces.Dict({"actor": io.observation_space, "privileged": gym.spaces.Box(
+        -OBS_CLIP, OBS_CLIP, (PRIVILEGED_SIZE,), np.float32)})
 
 
 def training_env(config: RLConfig, env_index: int, base: Any, replays: list | tuple) -> gym.Env:

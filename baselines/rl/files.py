@@ -44,20 +44,23 @@ from baselines.checkpoint_io import (
 )
 from baselines.config_json import config_from_dict
 from baselines.rl.config import RLConfig
-from baselines.rl.envs import PART_SCALES, PolicyIO, normalisation
+from baselines.rl.envs import PART_SCALES, PolicyIO, normalisation, training_observation_space
 from baselines.rl.layout import DTYPE, Layout, checkpoint_layout
 from baselines.rl.policy import build_policy
 from handover_env.regular_file import read_regular_file
 
 KIND = "rl"
-FORMAT = 1
+#: 2: the exploration, observation, warm-start and penalty fields of RLConfig (issue 36).
+FORMAT = 2
 CONFIG = "config.json"
 WEIGHTS = "model.safetensors"
 TRAINING_STATE = "training_state"
 #: The sections of config.json besides type, format and config, and their JSON types.
 SECTIONS = {"reward": dict, "io": dict, "receivers": dict, "training": dict, "versions": dict}
 REWARD_KEYS = ("time_cost", "force_threshold", "force_scale", "success", "failure", "shaping",
-               "gamma")
+               "gamma", "action_change", "contact_penalty")
+#: The reward record's weights that are the config's own fields.
+CONFIG_REWARD_KEYS = ("shaping", "gamma", "action_change", "contact_penalty")
 #: A run's wall time may not exceed this (s; ten years); real runs take an hour.
 MAX_WALL_S = 3.2e8
 #: Bytes of a safetensors header allowed per tensor (our headers hold about 100 per key).
@@ -103,7 +106,15 @@ def record_of(config: RLConfig, io: PolicyIO, reward: dict, receivers: dict,
              for name, (off, scale) in PART_SCALES.items()}
     if config.form == "residual":
         n = ObsLayout(config.history).size
-        parts["base_target"] = {"offset": io.offset[n:].tolist(), "scale": io.scale[n:].tolist()}
+        parts["base_target"] = {"offset": io.offset[n:n + 4].tolist(),
+                                "scale": io.scale[n:n + 4].tolist()}
+    if config.last_actions:
+        parts["last_actions"] = {"offset": [0.0], "scale": 1.0}
+    if config.privileged_critic:
+        from baselines.rl.privileged import PRIVILEGED_PARTS
+
+        parts["privileged"] = {name: {"offset": list(off), "scale": sc}
+                               for name, (off, sc, _) in PRIVILEGED_PARTS.items()}
     return {
         "type": KIND,
         "format": FORMAT,
@@ -152,8 +163,9 @@ def read_record(folder: str | Path) -> tuple[dict, RLConfig]:
             isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
             for v in reward.values()):
         raise CheckpointError(f"{path}: reward must hold the finite numbers {list(REWARD_KEYS)}")
-    if reward["shaping"] != config.shaping or reward["gamma"] != config.gamma:
-        raise CheckpointError(f"{path}: reward shaping/gamma disagree with its config")
+    if any(reward[k] != getattr(config, k) for k in CONFIG_REWARD_KEYS):
+        raise CheckpointError(f"{path}: reward {'/'.join(CONFIG_REWARD_KEYS)} disagree with its "
+                              "config")
     for key in ("replay_ids", "base_fit_ids"):
         ids = saved["receivers"].get(key, [])
         if not isinstance(ids, list) or not all(isinstance(i, str) for i in ids):
@@ -282,13 +294,14 @@ def read_checkpoint(folder: str | Path) -> RLCheckpoint:
     folder = Path(folder)
     saved, config = read_record(folder)
     tensors = read_weights(folder / WEIGHTS, checkpoint_layout(config))
-    offset, scale = normalisation(config.history, config.form)
+    offset, scale = normalisation(config.history, config.form, config.last_actions)
     if not (np.array_equal(tensors["io.offset"].numpy(), offset)
             and np.array_equal(tensors["io.scale"].numpy(), scale)):
         raise CheckpointError(f"{folder / WEIGHTS}: io.offset/io.scale differ from this code's "
                               "observation normalisation (a different version or an edited file)")
     io = PolicyIO.for_env(config, env_action_space())
-    policy = build_policy(config, io.observation_space, io.action_space, initialise=False)
+    policy = build_policy(config, training_observation_space(config, io), io.action_space,
+                          initialise=False)
     state = {k[len("policy."):]: v for k, v in tensors.items() if k.startswith("policy.")}
     try:
         policy.load_state_dict(state, strict=True)

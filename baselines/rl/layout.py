@@ -16,8 +16,14 @@ The layout is Stable-Baselines3's ``MlpPolicy`` state dict for the networks of
   ``net_arch`` on the observation and action, then a ``Linear`` to one value.
 
 O is the policy's observation size (:class:`~handover_env.envs.observation.ObsLayout` of
-``history`` frames, plus the base agent's 4-d target for a residual), A = 4 (x, y, z, yaw).
-``tests/test_security_rl.py`` checks this layout against SB3's built policies, key for key.
+``history`` frames, plus the base agent's 4-d target for a residual and 4 values per remembered
+action, ``last_actions``), A = 4 (x, y, z, yaw). With gSDE (``use_sde``) PPO's ``log_std`` is
+(last width x A) and SAC's actor has ``actor.log_std`` (last width x A) and ``actor.mu.0`` (SB3
+clips the mean with a Hardtanh after it) instead of its two Linear heads. With
+``privileged_critic`` the value network (PPO) or both Q-networks and their targets (SAC) take
+the observation plus the :data:`PRIVILEGED_SIZE` values of the privileged state
+(:mod:`baselines.rl.privileged`); the actor's input is unchanged.
+``tests/security/test_security_rl.py`` checks this layout against SB3's built policies, key for key.
 """
 
 from __future__ import annotations
@@ -28,6 +34,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # RLConfig checks its size with this module: no import at run time
     from baselines.rl.config import RLConfig
 
+#: Values of the privileged state an asymmetric critic sees (baselines.rl.privileged).
+PRIVILEGED_SIZE = 18
 #: The action's size: the Cartesian target (x, y, z) and the yaw.
 ACTION_SIZE = 4
 #: The residual's extra observation: the base agent's target (x, y, z, yaw).
@@ -36,11 +44,13 @@ DTYPE = "F32"
 Layout = dict[str, tuple[int, ...]]
 
 
-def observation_size(history: int, form: str) -> int:
-    """O: the flat observation of ``history`` camera frames (+ the base target for a residual)."""
+def observation_size(history: int, form: str, last_actions: int = 0) -> int:
+    """O: the flat observation of ``history`` camera frames (+ the base target for a residual,
+    + 4 values per remembered action)."""
     from handover_env.envs.observation import ObsLayout
 
-    return ObsLayout(history).size + (BASE_TARGET_SIZE if form == "residual" else 0)
+    return (ObsLayout(history).size + (BASE_TARGET_SIZE if form == "residual" else 0)
+            + ACTION_SIZE * last_actions)
 
 
 def _mlp(prefix: str, n_in: int, widths: tuple[int, ...], n_out: int | None = None) -> Layout:
@@ -55,25 +65,34 @@ def _mlp(prefix: str, n_in: int, widths: tuple[int, ...], n_out: int | None = No
 
 def policy_layout(config: RLConfig) -> Layout:
     """{state-dict key: shape} of the SB3 policy of ``config`` (every tensor float32)."""
-    obs, act, arch = observation_size(config.history, config.form), ACTION_SIZE, config.net_arch
+    obs = observation_size(config.history, config.form, config.last_actions)
+    critic_obs = obs + (PRIVILEGED_SIZE if config.privileged_critic else 0)
+    act, arch = ACTION_SIZE, config.net_arch
     last = arch[-1]
+    # gSDE: a log std per (latent feature, action); else one per action (PPO) or a Linear (SAC)
+    sde_std = (last, act)
     if config.algo == "ppo":
-        return {"log_std": (act,), **_mlp("mlp_extractor.policy_net", obs, arch),
-                **_mlp("mlp_extractor.value_net", obs, arch),
+        return {"log_std": sde_std if config.use_sde else (act,),
+                **_mlp("mlp_extractor.policy_net", obs, arch),
+                **_mlp("mlp_extractor.value_net", critic_obs, arch),
                 "action_net.weight": (act, last), "action_net.bias": (act,),
                 "value_net.weight": (1, last), "value_net.bias": (1,)}
-    out = {**_mlp("actor.latent_pi", obs, arch),
-           "actor.mu.weight": (act, last), "actor.mu.bias": (act,),
-           "actor.log_std.weight": (act, last), "actor.log_std.bias": (act,)}
+    out = _mlp("actor.latent_pi", obs, arch)
+    if config.use_sde:  # SB3 clips the mean (Hardtanh after the Linear: mu.0)
+        out.update({"actor.log_std": sde_std, "actor.mu.0.weight": (act, last),
+                    "actor.mu.0.bias": (act,)})
+    else:
+        out.update({"actor.mu.weight": (act, last), "actor.mu.bias": (act,),
+                    "actor.log_std.weight": (act, last), "actor.log_std.bias": (act,)})
     for critic in ("critic", "critic_target"):
         for q in ("qf0", "qf1"):
-            out.update(_mlp(f"{critic}.{q}", obs + act, arch, 1))
+            out.update(_mlp(f"{critic}.{q}", critic_obs + act, arch, 1))
     return out
 
 
 def checkpoint_layout(config: RLConfig) -> Layout:
     """{key: shape} of ``model.safetensors``: ``policy.<key>`` and ``io.offset``, ``io.scale``."""
-    n = observation_size(config.history, config.form)
+    n = observation_size(config.history, config.form, config.last_actions)
     out = {f"policy.{k}": v for k, v in policy_layout(config).items()}
     out["io.offset"] = out["io.scale"] = (n,)
     return out

@@ -56,6 +56,7 @@ from baselines.rl.config import (
     TRAIN_SEED_START,
     RLConfig,
     curve_seed,
+    warm_start_seed,
 )
 from baselines.rl.envs import PolicyIO, make_handover_env, training_env
 from baselines.rl.files import (
@@ -69,6 +70,7 @@ from baselines.rl.files import (
     record_of,
     write_checkpoint,
 )
+from baselines.rl.layout import observation_size
 from baselines.rl.policy import build_model
 
 RESUMABLE = frozenset({"steps", "eval_every"})
@@ -173,11 +175,12 @@ def _optimizers(model: Any) -> dict[str, torch.optim.Optimizer]:
 
 
 def reward_record(config: RLConfig, env: Any) -> dict:
-    """The final reward weights: the env task's HandoverReward fields, the shaping weight and
-    gamma."""
+    """The final reward weights: the env task's HandoverReward fields, the shaping weight,
+    gamma and the penalties' weights (:mod:`baselines.rl.penalties`)."""
     reward = asdict(env.unwrapped.task.reward)
     return {**{k: float(v) for k, v in reward.items()}, "shaping": config.shaping,
-            "gamma": config.gamma}
+            "gamma": config.gamma, "action_change": config.action_change,
+            "contact_penalty": config.contact_penalty}
 
 
 def receivers_record(config: RLConfig, data: TrainingData, state: dict) -> dict:
@@ -187,11 +190,13 @@ def receivers_record(config: RLConfig, data: TrainingData, state: dict) -> dict:
         "eval_seed_limit": EVAL_SEED_LIMIT,
         "curve_seeds": [TRAIN_SEED_START, TRAIN_SEED_START + config.curve_episodes],
         "episode_seeds": [TRAIN_SEED_START + CURVE_SEEDS + config.seed * RUN_STRIDE, last],
+        "warm_start_seeds": [warm_start_seed(config.seed, config.warm_start_episodes - 1),
+                             warm_start_seed(config.seed, 0)] if config.warm_start else [],
         "dataset": data.dataset,
         "folds": [int(f) for f in data.folds],
         "replay_ids": sorted(data.replay_ids),
         "base_fit_ids": sorted(ep.source_id for ep in data.base_fit)
-        if data.base_fit is not None and config.base == "ours" else [],
+        if data.base_fit is not None and "ours" in (config.base, config.warm_start) else [],
     }
 
 
@@ -291,7 +296,7 @@ def restore(out: Path, model: Any, config: RLConfig) -> dict:
     state = check_state(read_json(state_file, "RL training state", root=out), state_file, saved,
                         record["training"])
     layout = {k: shape for k, (shape, _) in expected_of(model.policy.state_dict()).items()}
-    n = model.observation_space.shape[0]
+    n = observation_size(config.history, config.form, config.last_actions)
     layout = {**{f"policy.{k}": v for k, v in layout.items()}, "io.offset": (n,), "io.scale": (n,)}
     tensors = read_weights(out / WEIGHTS, layout)
     model.policy.load_state_dict({k[7:]: v for k, v in tensors.items() if k.startswith("policy.")})
@@ -358,6 +363,15 @@ def train_policy(
             model.num_timesteps = state["steps"]
             for i, n in enumerate(state["episodes"]):
                 vec.env_method("restart", n, indices=[i])
+        if config.warm_start and not resume:
+            from baselines.rl.agent import build_agent
+            from baselines.rl.warm_start import warm_start
+
+            teacher = build_agent(config.warm_start, None, data.base_fit)
+            errors = warm_start(model, config, teacher, data.replays)
+            if log is not None:
+                log(f"[rl] warm start on {config.warm_start}: {config.warm_start_episodes} "
+                    f"episodes, action MSE {errors[0]:.4f} -> {errors[-1]:.4f}")
         receivers = curve_receivers(config, len(data.replays))
         agent = RLAgent(model.policy, io, make_base(config, None, data.base_fit))
         t0 = time.perf_counter() - state["wall_time_s"]

@@ -6,6 +6,8 @@
     python train.py rl --out runs/rl3 --seeds 0 1 2         # seeds in parallel (--backend ray)
     python train.py rl --out runs/rl --resume --steps 1500000 # extend a finished run
     python train.py rl --out /tmp/rl --quick                # a few hundred steps, for tests
+    python train.py rl --out runs/rl-cv --base cv --use-sde --action-tau 0.1 --last-actions 1 \
+        --privileged-critic --action-change 1 --contact-penalty 1   # the levers of docs/rl.md
 
 The policy trains against the simulated person: scripted ID/OOD walkers with seeds from the
 training range (every one above every closed-loop evaluation seed) and replays of the training
@@ -56,9 +58,9 @@ def add_rl_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--form", choices=("residual", "scratch"), default="residual",
                    help="residual: a bounded correction of the base agent's Cartesian target "
                    "(default); scratch: the policy's action is the target")
-    p.add_argument("--base", choices=("reactive", "ours"), default="reactive",
+    p.add_argument("--base", choices=("reactive", "ours", "cv", "none"), default="reactive",
                    help="the residual's base agent (default reactive; ours = the SPGP planner "
-                   "fitted on the training folds)")
+                   "fitted on the training folds; cv = constant velocity); none = --form scratch")
     p.add_argument("--residual-xyz", type=positive_float, default=0.15,
                    help="m, bound of the residual's x/y/z correction (default 0.15)")
     p.add_argument("--residual-yaw", type=positive_float, default=0.3,
@@ -98,6 +100,34 @@ def add_rl_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"the env's sensing profile for training, one of {list(SENSING)} "
                    "(default randomized: sensor, controller and latency parameters drawn per "
                    "episode from their documented ranges; '' = the env's default, paper)")
+    g = p.add_argument_group("levers (issue 36; docs/rl.md)")
+    g.add_argument("--use-sde", action="store_true",
+                   help="SB3's gSDE: time-correlated, state-dependent exploration (PPO, SAC)")
+    g.add_argument("--sde-sample-freq", type=int_in_range(-1, 100_000), default=-1,
+                   help="gSDE: steps between new noise matrices (-1: once a rollout, default)")
+    g.add_argument("--action-noise", choices=("none", "pink"), default="none",
+                   help="SAC: pink (1/f) noise added to the sampled action (default none)")
+    g.add_argument("--noise-sigma", type=float, default=0.1,
+                   help="standard deviation of --action-noise, action units (default 0.1)")
+    g.add_argument("--action-tau", type=float, default=0.0,
+                   help="s, time constant of the first-order filter the action reaches the robot "
+                   "through (default 0: none)")
+    g.add_argument("--last-actions", type=int_in_range(0, 30), default=0,
+                   help="the policy also sees its last N actions (after the filter; default 0)")
+    g.add_argument("--privileged-critic", action="store_true",
+                   help="asymmetric actor-critic: the critic also sees the true person state and "
+                   "wrist force; the actor only the sensed observation")
+    g.add_argument("--warm-start", choices=("none", "reactive", "ours", "cv"), default="none",
+                   help="scratch only: behaviour-clone the actor on this agent's actions first")
+    g.add_argument("--warm-start-episodes", type=int_in_range(1, 10_000), default=None,
+                   help="teacher episodes of --warm-start (default 50; 2 with --quick)")
+    g.add_argument("--warm-start-epochs", type=int_in_range(1, 1000), default=20,
+                   help="passes of the warm start's fit (default 20)")
+    g.add_argument("--action-change", type=float, default=0.0,
+                   help="weight of the penalty on the action's change per step (default 0)")
+    g.add_argument("--contact-penalty", type=float, default=0.0,
+                   help="weight of the penalty on body contact beyond the receiving hand, per "
+                   "second at the region's ISO/TS 15066 limit (default 0)")
     p.add_argument("--eval-every", type=STEPS, default=None,
                    help=f"env steps between learning-curve points and checkpoints (default "
                    f"{DEFAULT_EVAL_EVERY:,})")
@@ -120,8 +150,18 @@ def config_from_args(args: argparse.Namespace):
     p_replay = args.p_replay if args.p_replay is not None else (0.0 if args.quick else 0.2)
     if not (0 <= p_replay <= 1 and 0 <= args.p_ood <= 1 and p_replay + args.p_ood <= 1):
         raise ValueError("--p-replay and --p-ood must be in [0, 1] with a sum <= 1")
-    kw: dict = dict(algo=args.algo, form=args.form, base=args.base if args.form == "residual"
-                    else "", residual_xyz=args.residual_xyz, residual_yaw=args.residual_yaw,
+    form = "scratch" if args.base == "none" else args.form
+    warm = "" if args.warm_start == "none" else args.warm_start
+    episodes = 0 if not warm else args.warm_start_episodes or (2 if args.quick else 50)
+    kw: dict = dict(algo=args.algo, form=form, base=args.base if form == "residual"
+                    else "", use_sde=args.use_sde, sde_sample_freq=args.sde_sample_freq,
+                    action_noise="" if args.action_noise == "none" else args.action_noise,
+                    noise_sigma=args.noise_sigma, action_tau=args.action_tau,
+                    last_actions=args.last_actions, privileged_critic=args.privileged_critic,
+                    warm_start=warm, warm_start_episodes=episodes,
+                    warm_start_epochs=args.warm_start_epochs, action_change=args.action_change,
+                    contact_penalty=args.contact_penalty, residual_xyz=args.residual_xyz,
+                    residual_yaw=args.residual_yaw,
                     n_envs=2, learning_rate=args.lr, shaping=args.shaping,
                     sensing=args.sensing, folds=args.folds or (3 if args.quick else 10),
                     split_seed=args.split_seed,
@@ -172,7 +212,8 @@ def run_rl_command(args: argparse.Namespace, load_data: Callable) -> None:
     workers = args.workers or default_workers()
     with OutputLock(out):
         check_out(out, seeds, args.resume, args.overwrite)
-        needs_data = config.p_replay > 0 or (config.form == "residual" and config.base == "ours")
+        needs_data = config.p_replay > 0 or (config.form == "residual" and config.base == "ours"
+                                             ) or config.warm_start == "ours"
         dataset = load_data(args.data, args.quick, 0) if needs_data else None
         data = training_data(dataset, config)
         print(f"[rl] {config.algo} {config.form}"

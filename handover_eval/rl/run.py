@@ -4,7 +4,7 @@
 (:mod:`baselines.rl.config`: every one >= ``TRAIN_SEED_START``, above every closed-loop
 evaluation seed) and replays of the dataset episodes of the training folds of Table I's
 stratified split (:func:`baselines.rl.config.training_folds`: folds ``0 .. k//2 - 1``, the
-complement of :func:`handover_eval.closedloop.receivers.held_out_folds`, checked here). The
+complement of :func:`handover_eval.receivers.held_out_folds`, checked here). The
 replays are the dataset's :class:`~handover_env.data.dataset.Episode` objects (the body walks
 the recorded pelvis track). The SPGP base (``--base ours``) is fitted on the same episodes.
 
@@ -23,7 +23,7 @@ import numpy as np
 from baselines.rl.config import RLConfig, training_folds
 from baselines.rl.train import TrainingData, train_policy
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.closedloop.receivers import fold_of, held_out_folds
+from handover_eval.receivers import fold_of, held_out_folds
 
 #: ``--quick``: a few hundred steps of a tiny network on walkers only (tests, make test).
 
@@ -32,12 +32,13 @@ def training_data(dataset: HandoverDataset | None, config: RLConfig) -> Training
     """The replays (and the SPGP base's fit) of the training folds of ``dataset`` (module
     docstring); no replays when ``dataset`` is None or ``config.p_replay`` is 0 (a base ``ours``
     still needs the dataset)."""
-    needs_base = config.form == "residual" and config.base == "ours"
+    needs_base = (config.form == "residual" and config.base == "ours") or (
+        config.warm_start == "ours")
     if dataset is None or (config.p_replay == 0 and not needs_base):
         return TrainingData()
     folds = training_folds(config.folds)
     overlap = set(folds) & set(held_out_folds(config.folds))
-    if overlap:  # never: the two are complements by construction (tests/test_rl.py)
+    if overlap:  # never: the two are complements by construction (tests/baselines/test_rl.py)
         raise RuntimeError(f"training folds {sorted(overlap)} are held out for evaluation")
     ids = fold_of(dataset, config.folds, config.split_seed)
     idx = np.flatnonzero(np.isin(ids, folds))

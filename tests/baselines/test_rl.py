@@ -55,7 +55,7 @@ from handover_env.envs.observation import ObsLayout  # noqa: E402
 from handover_env.person.synthetic import generate_synthetic  # noqa: E402
 from handover_eval.cli import train  # noqa: E402
 from handover_eval.cli.closedloop import COUNTS  # noqa: E402
-from handover_eval.closedloop.receivers import FIRST_SEED, fold_of, held_out_folds  # noqa: E402
+from handover_eval.receivers import FIRST_SEED, fold_of, held_out_folds  # noqa: E402
 from handover_eval.rl.run import training_data  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -190,7 +190,8 @@ def test_quick_training_writes_a_checkpoint_curve_and_reward_weights(quick_dir):
     record = json.loads((quick_dir / "config.json").read_text())
     assert record["type"] == "rl" and record["config"]["algo"] == "ppo"
     assert record["reward"] == {"time_cost": 1.0, "force_threshold": 2.0, "force_scale": 10.0,
-                                "success": 10.0, "failure": 10.0, "shaping": 1.0, "gamma": 0.99}
+                                "success": 10.0, "failure": 10.0, "shaping": 1.0, "gamma": 0.99,
+                                "action_change": 0.0, "contact_penalty": 0.0}
     assert record["receivers"]["episode_seeds"][0] >= TRAIN_SEED_START
     assert record["receivers"]["eval_seed_limit"] == EVAL_SEED_LIMIT
     assert (quick_dir / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
