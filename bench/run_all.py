@@ -6,8 +6,7 @@ planner) and prints ratios: absolute times on a shared machine are noise, ratios
 
 ``rl_throughput`` (agent steps per second per core, one and two vector envs) and
 ``agent_episode_cost`` (CPU seconds per closed-loop episode of every agent) report throughput
-rather than a ratio. ``compiled_targets`` (numba beside numpy on one per-step kernel) runs only
-where numba is installed (it is not a dependency) and says so otherwise. ``make_test_time`` (the
+rather than a ratio. ``make_test_time`` (the
 wall time of ``make install`` and of ``make test`` on a fresh clone) installs a whole
 environment, so it runs only when asked: ``--make-test-clone PATH`` (with ``--dry-run`` it prints
 its commands instead).
@@ -36,7 +35,6 @@ ORDER = (
     "rl_throughput",
     "agent_episode_cost",
     "spurious_force",
-    "compiled_targets",
 )
 
 
