@@ -52,7 +52,6 @@ themselves are the pure functions of :mod:`handover_env.person.receiver_rules`.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -60,13 +59,14 @@ import mujoco
 import numpy as np
 
 from handover_env.person import motion as rm
+from handover_env.person import path_ahead as pa
 from handover_env.person.body_model import BodyIds, apply_dims
 from handover_env.person.effort import Effort
 from handover_env.person.grip import ArmGrip
 from handover_env.person.min_jerk import min_jerk_step
 from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
 from handover_env.person.pose import STRAIGHT_ARM, TRUNK_MAX_TURN, MotionPose, interp
-from handover_env.person.receiver_rules import Meeting, PathAhead, left_behind, meet
+from handover_env.person.receiver_rules import Meeting, meeting_of
 from handover_env.person.rotations import length
 from handover_env.person.settings import (
     HEIGHT_OPTION_RANGE,
@@ -127,6 +127,7 @@ class Receiver:
             model, int(ids.body.bodies[SEG["hand_r"]]), ids.body.grip_site, ids.object_body
         )
         self._v6 = np.zeros(6)
+        self._judge_io = np.zeros(pa.IO_SIZE)
         self.motion: PersonMotion | None = None
         self.kind, self.source_id, self.hand_mode = "id", "", "reach"
         self.present_after_walk = False
@@ -199,7 +200,12 @@ class Receiver:
         self._max_reach = (STRAIGHT_ARM * self.pose.arm_reach
                            + float(np.linalg.norm(self.pose.shoulder_local))
                            * math.sin(TRUNK_MAX_TURN))
-        self._shoulder_track, self._forward_track = self.pose.shoulder_track()
+        self._track, self._path = pa.track_rows(*self.pose.shoulder_track())
+        io = self._judge_io
+        io[pa.MIN_SPEED], io[pa.BEHIND], io[pa.WITHIN] = (
+            self.config.min_speed_factor, self.config.give_up_behind, PASS_DISTANCE)
+        io[pa.REACH], io[pa.LEAD], io[pa.COMFORT] = (
+            self._max_reach, self.config.reach_lead_time, self._comfort)
         self._reset_state()
 
     def _reset_state(self) -> None:
@@ -225,7 +231,8 @@ class Receiver:
         self._gripper: np.ndarray | None = None
         self._clear = False
         self._gripper_axis: np.ndarray | None = None
-        self._judged: dict[str, Any] | None = None
+        self._left = False
+        self._meet: Meeting | None = None
 
     # ------------------------------------------------------------------ queries
     @property
@@ -291,8 +298,8 @@ class Receiver:
         )
         self._object_axis = object_rot[:, 2].copy()
         grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
-        self._ahead = self._path_ahead()
-        self._judged = {}  # this step's judgements of the object (see _once)
+        if object_free and not self.present_after_walk and self.state in ("walking", "reaching"):
+            self._judge(grasp_point, object_vel)
         # ---- how fast to walk on
         slow = False
         if object_free and self.state in ("walking", "reaching"):
@@ -305,67 +312,46 @@ class Receiver:
         # ---- what the hand does
         if object_free:
             self._decide(t1, grasp_point, object_vel)
-        self._judged = None
         key = self._pose_at(self.tau, (grasp_point, object_vel, dt))
         self.targets.push(key)
         self._t = t1
         self._dt = dt
 
-    def _path_ahead(self) -> PathAhead:
-        """The person's remaining nominal path from the playback position on, timed at the
-        current speed factor (the shoulder now first, then every later frame)."""
-        f0 = int(math.floor(self.tau)) + 1
-        shoulder = np.vstack([interp(self._shoulder_track, self.tau), self._shoulder_track[f0:]])
-        forward = np.vstack([interp(self._forward_track, self.tau), self._forward_track[f0:]])
-        frames = np.concatenate([[self.tau], np.arange(f0, self.motion.frames, dtype=np.float64)])
-        rate = RATE * max(self.rho, self.config.min_speed_factor)
-        return PathAhead((frames - self.tau) / rate, shoulder, forward)
-
-    def _once(self, key: str, judge: Callable[[], Any]) -> Any:
-        """``judge()``, computed once per env step: within :meth:`plan_step` the object, its
-        velocity, the path ahead, the state and the reach plan are the same whenever the slow-down
-        rule and the decision ask, so the second asking gets the first answer."""
-        judged = self._judged
-        if judged is None:  # outside plan_step: nothing to share
-            return judge()
-        if key not in judged:
-            judged[key] = judge()
-        return judged[key]
-
-    def _meeting(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> Meeting:
-        """When and how far from the shoulder the person will meet the object on their own path
+    def _judge(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> None:
+        """This step's two judgements of the object on the person's remaining nominal path, from
+        the playback position on, timed at the current speed factor
+        (:func:`~handover_env.person.path_ahead.judge_kernel`): whether it is left behind for good
+        (:func:`~handover_env.person.receiver_rules.left_behind`: ``give_up_behind`` behind the
+        shoulder within ``PASS_DISTANCE``, and the rest of the walk never brings it ahead again),
+        and when and how far from the shoulder they will meet it
         (:func:`~handover_env.person.receiver_rules.meet`, the object extrapolated over the reach
-        lead time; a reaching person keeps the closest approach of their reach onset)."""
-        closest = take = None
+        lead time; a reaching person keeps the closest approach and the take distance of their
+        reach onset)."""
+        io = self._judge_io
+        io[pa.TAU], io[pa.RHO] = self.tau, self.rho
+        io[pa.OBJ:pa.OBJ + 3], io[pa.OBJ_VEL:pa.OBJ_VEL + 3] = grasp_point, object_vel
+        io[pa.CLOSEST] = io[pa.TAKE] = -1.0
         if self.state == "reaching" and self.reach_plan is not None:
-            closest, take = self.reach_plan.closest, self.reach_plan.take
-        return self._once("meeting", lambda: meet(
-            grasp_point, object_vel, self._ahead, self._max_reach, self.config.reach_lead_time,
-            self._comfort, closest, take))
-
-    def _left_behind(self, grasp_point: np.ndarray) -> bool:
-        """The person has walked past the object for good
-        (:func:`~handover_env.person.receiver_rules.left_behind`): it is ``give_up_behind``
-        behind the shoulder within ``PASS_DISTANCE``, and the rest of their walk never brings it
-        ahead of them again."""
-        return self._once("left_behind", lambda: left_behind(
-            grasp_point, self._ahead, self.config.give_up_behind, PASS_DISTANCE))
+            io[pa.CLOSEST], io[pa.TAKE] = self.reach_plan.closest, self.reach_plan.take
+        pa.judge_kernel(self._track, self._path, io)
+        self._left = io[pa.LEFT] > 0.0
+        self._meet = meeting_of(io[pa.MEETING:])
 
     def _should_slow(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> bool:
         """Slow down: the person is about to meet the object (within the reach lead time) farther
         than is comfortable, or to pass it out of reach."""
-        if self.present_after_walk or self._left_behind(grasp_point):
+        if self.present_after_walk or self._left:
             return False
-        m = self._meeting(grasp_point, object_vel)
+        m = self._meet
         return m.time <= self.config.reach_lead_time and m.distance > self._comfort
 
     def _decide(self, t: float, grasp_point: np.ndarray, object_vel: np.ndarray) -> None:
         cfg = self.config
         if self.state == "walking" and not self.present_after_walk and self.hand_mode == "reach":
-            if self._left_behind(grasp_point):
+            if self._left:
                 self._pass(t)
                 return
-            m = self._meeting(grasp_point, object_vel)
+            m = self._meet
             if m.reachable and m.time <= cfg.reach_lead_time:
                 self._begin_reach(t, min(max(m.time, cfg.close_time), cfg.reach_duration))
                 self.reach_plan = m
@@ -393,14 +379,14 @@ class Receiver:
         ):
             self._begin_reach(t, cfg.close_time)
         elif self.state == "reaching" and self.hand_mode == "reach" and not self.present_after_walk:
-            if self._left_behind(grasp_point):
+            if self._left:
                 self._pass(t)
                 return
             # Re-plan the hand's arrival for the meeting: earlier as soon as it comes earlier,
             # later only when it is put off by more than REPLAN_SLACK (the person pauses or turns
             # away, or the object is taken back), not for the last centimetres of an object that
             # moves on with the walk.
-            m = self._meeting(grasp_point, object_vel)
+            m = self._meet
             goal = t + m.time
             if m.reachable and (goal < self._hand_goal_time
                                 or goal > self._hand_goal_time + REPLAN_SLACK):

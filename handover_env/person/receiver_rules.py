@@ -32,9 +32,12 @@ come (``docs/calibration/receiver_calibration.md``, section "Walks that are not 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from handover_env.compiled import kernel
 
 #: Take distance = TAKE_INTERCEPT + TAKE_CLOSEST * closest approach (m): the least-squares fit on
 #: the calibration half (folds 0-4, ID + OOD, 427 recordings, r = 0.44) of the shoulder-object
@@ -90,9 +93,71 @@ class Meeting:
     reachable: bool
 
 
-def _offsets(obj: np.ndarray, path: PathAhead) -> tuple[np.ndarray, np.ndarray]:
-    rel = obj - path.shoulder
-    return np.einsum("ij,ij->i", rel, path.forward), np.linalg.norm(rel, axis=1)
+@kernel
+def along(r0: float, r1: float, r2: float, f0: float, f1: float, f2: float) -> float:
+    """r . f of two 3-vectors, summed as ``np.einsum("ij,ij->i", ...)`` sums a row of 3 (its
+    two-lane loop: the first and third products, then the second), so bit for bit its value."""
+    return (r0 * f0 + r2 * f2) + r1 * f1
+
+
+@kernel
+def left_behind_rows(obj: np.ndarray, shoulder: np.ndarray, forward: np.ndarray, behind: float,
+                     within: float) -> bool:
+    """:func:`left_behind` on the rows of a path's shoulder (N, 3) and forward (N, 3)."""
+    for j in range(shoulder.shape[0]):
+        r0, r1, r2 = obj[0] - shoulder[j, 0], obj[1] - shoulder[j, 1], obj[2] - shoulder[j, 2]
+        fwd = along(r0, r1, r2, forward[j, 0], forward[j, 1], forward[j, 2])
+        dist = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        if j == 0:
+            if not (fwd < -behind and dist < within):
+                return False
+        elif fwd >= -behind and dist < within:
+            return False
+    return True
+
+
+@kernel
+def closest_rows(obj: np.ndarray, shoulder: np.ndarray) -> float:
+    """:func:`closest_approach` on the rows of a path's shoulder (N, 3) (NaN if any row is)."""
+    best = math.inf
+    for j in range(shoulder.shape[0]):
+        r0, r1, r2 = shoulder[j, 0] - obj[0], shoulder[j, 1] - obj[1], shoulder[j, 2] - obj[2]
+        d = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        if d < best or d != d:
+            best = d
+            if d != d:
+                break
+    return best
+
+
+@kernel
+def meet_rows(obj: np.ndarray, obj_vel: np.ndarray, time: np.ndarray, shoulder: np.ndarray,
+              forward: np.ndarray, reach: float, extrapolate: float, comfort: float,
+              closest: float, take: float, out: np.ndarray) -> None:
+    """:func:`meet` on a path's rows: ``closest`` / ``take`` < 0 stand for None; writes the
+    meeting's (time, distance, closest, take, reachable as 0 / 1) into ``out[:5]``."""
+    if closest < 0.0:
+        closest = closest_rows(obj, shoulder)
+    if take < 0.0:
+        take = min(max(TAKE_INTERCEPT + TAKE_CLOSEST * closest, MIN_TAKE), comfort)
+    first = -1
+    best, best_j = math.inf, -1
+    for j in range(time.shape[0]):
+        t = min(time[j], extrapolate)
+        r0 = (obj[0] + t * obj_vel[0]) - shoulder[j, 0]
+        r1 = (obj[1] + t * obj_vel[1]) - shoulder[j, 1]
+        r2 = (obj[2] + t * obj_vel[2]) - shoulder[j, 2]
+        fwd = along(r0, r1, r2, forward[j, 0], forward[j, 1], forward[j, 2])
+        dist = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        if dist <= take and fwd >= 0.0:
+            first = j
+            best = dist
+            break
+        if best_j < 0 or dist < best:
+            best, best_j = dist, j
+    j = first if first >= 0 else best_j
+    out[0], out[1], out[2], out[3] = time[j], best, closest, take
+    out[4] = 1.0 if best <= reach else 0.0
 
 
 def left_behind(obj: np.ndarray, path: PathAhead, behind: float, within: float) -> bool:
@@ -102,21 +167,25 @@ def left_behind(obj: np.ndarray, path: PathAhead, behind: float, within: float) 
     and at no later frame of the remaining path is it less than ``behind`` behind the shoulder
     within ``within`` of it (the person does not turn back to it).
     """
-    fwd, dist = _offsets(np.asarray(obj, dtype=np.float64), path)
-    if not (fwd[0] < -behind and dist[0] < within):
-        return False
-    return not bool(np.any((fwd[1:] >= -behind) & (dist[1:] < within)))
+    return bool(left_behind_rows(np.asarray(obj, dtype=np.float64), path.shoulder, path.forward,
+                                 float(behind), float(within)))
 
 
 def closest_approach(obj: np.ndarray, path: PathAhead) -> float:
     """The nearest the remaining path's shoulder comes to ``obj`` (held where it is), m."""
-    return float(np.min(np.linalg.norm(path.shoulder - np.asarray(obj, dtype=np.float64), axis=1)))
+    return float(closest_rows(np.asarray(obj, dtype=np.float64), path.shoulder))
 
 
 def take_distance(closest: float, comfort: float) -> float:
     """How far from the shoulder the person takes an object whose closest approach to their path
     is ``closest``, m, at most ``comfort`` (see the module docstring)."""
     return float(min(max(TAKE_INTERCEPT + TAKE_CLOSEST * closest, MIN_TAKE), comfort))
+
+
+def meeting_of(out: np.ndarray) -> Meeting:
+    """The :class:`Meeting` that :func:`meet_rows` wrote into ``out[:5]``."""
+    t, distance, closest, take, reachable = out[:5].tolist()
+    return Meeting(t, distance, closest, take, reachable > 0.0)
 
 
 def meet(
@@ -142,19 +211,12 @@ def meet(
             person keeps the one of their reach onset, so that an object brought toward their
             path is not put off to later and later).
     """
-    obj = np.asarray(obj, dtype=np.float64)
-    obj_vel = np.asarray(obj_vel, dtype=np.float64)
-    if closest is None:
-        closest = closest_approach(obj, path)
-    if take is None:
-        take = take_distance(closest, comfort)
-    future = obj + np.minimum(path.time, extrapolate)[:, None] * obj_vel
-    rel = future - path.shoulder
-    fwd = np.einsum("ij,ij->i", rel, path.forward)
-    dist = np.linalg.norm(rel, axis=1)
-    hit = np.flatnonzero((dist <= take) & (fwd >= 0.0))
-    j = int(hit[0]) if hit.size else int(np.argmin(dist))
-    return Meeting(float(path.time[j]), float(dist[j]), closest, take, bool(dist[j] <= reach))
+    out = np.empty(5)
+    meet_rows(np.asarray(obj, dtype=np.float64), np.asarray(obj_vel, dtype=np.float64),
+              np.asarray(path.time, dtype=np.float64), path.shoulder, path.forward, float(reach),
+              float(extrapolate), float(comfort), -1.0 if closest is None else float(closest),
+              -1.0 if take is None else float(take), out)
+    return meeting_of(out)
 
 
 __all__ = [
@@ -166,5 +228,6 @@ __all__ = [
     "closest_approach",
     "left_behind",
     "meet",
+    "meeting_of",
     "take_distance",
 ]
