@@ -1,6 +1,6 @@
 """The calibration of the simulated person against the recordings of the public dataset: analysis,
-not simulation (``handover-data transfer-stats``, ``walk-stats`` and ``sensing``, and
-``evaluate.py far-pass``).
+not simulation (``handover-data transfer-stats``, ``walk-stats``, ``sensing``, ``reach-spread``
+and ``calibrated-range``, and ``evaluate.py far-pass``).
 
 * :mod:`.detect`: the transfer, reach onset, giver release and the arm drawn back in a recording;
 * :mod:`.measures`: the per-recording measures at those events;
@@ -9,7 +9,9 @@ not simulation (``handover-data transfer-stats``, ``walk-stats`` and ``sensing``
 * :mod:`.markdown`, :mod:`.figures`: the report's Markdown table and PNG figures;
 * :mod:`.walks`, :mod:`.walks_report`: recorded and scripted walks measured alike;
 * :mod:`.sensing`: the camera model's numbers (jitter, hand error, re-fit bursts);
-* :mod:`.farpass`: the far-pass stress set's lateral range.
+* :mod:`.farpass`: the far-pass stress set's lateral range;
+* :mod:`.reach_spread`: the reach's giver-dependent line and the per-person offsets;
+* :mod:`.calibrated_range`: the range of walks the person was calibrated on.
 
 Every file goes through :mod:`handover_eval.reporting`'s writers. The Markdown pages quote the
 command and module paths that generated ``docs/calibration/`` when they lived in

@@ -14,15 +14,22 @@ Commands (each has ``--help``)::
                                        receiver calibration: when/where the object changes hands
     sensing PUBLIC_DIR [--limit N]     camera-model figures: jitter, hand error, re-fit bursts
     walk-stats PUBLIC_DIR --out DIR    walker calibration: scripted vs recorded walk statistics
+    reach-spread PUBLIC_DIR --out DIR  the reach: the giver's part and the per-person offsets
+    calibrated-range PUBLIC_DIR --out DIR
+                                       the walks the person was calibrated on (speed, height, ...)
+
+The module is over 500 lines because it holds the one parser of the eleven subcommands and a
+short handler for each (argparse lives only in ``cli/``).
 
 Wherever a dataset is read, PATH may be a ``.npz``, a public-dataset folder, or ``synthetic``
 for the embedded default (900 ID + 100 OOD, seed 0).
 
 The argument types are :mod:`handover_eval.cli.args`'s; the calibration commands
-(``transfer-stats``, ``sensing``, ``walk-stats``) run :mod:`handover_eval.calibration`, whose
-files go through :mod:`handover_eval.reporting`'s writers. A dataset file is written by its
-format's own writer (:meth:`HandoverDataset.save`), a LeRobot export by LeRobot's, a plot by
-:func:`handover_env.data.plot.plot_paths` (PNG, PDF or SVG).
+(``transfer-stats``, ``sensing``, ``walk-stats``, ``reach-spread``, ``calibrated-range``) run
+:mod:`handover_eval.calibration`, whose files go through :mod:`handover_eval.reporting`'s
+writers. A dataset file is written by its format's own writer (:meth:`HandoverDataset.save`), a
+LeRobot export by LeRobot's, a plot by :func:`handover_env.data.plot.plot_paths` (PNG, PDF or
+SVG).
 """
 
 from __future__ import annotations
@@ -249,6 +256,57 @@ def cmd_walk_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_reach_spread(args: argparse.Namespace) -> int:
+    from handover_eval.calibration.reach_spread import run_reach_spread
+
+    summary, written = run_reach_spread(
+        args.public_dir, args.out, folds=args.folds, seed=args.seed,
+        calibration_folds=args.calibration_folds, skip_bad=args.skip_bad,
+        figures=not args.no_figures,
+    )
+    line, off, held = summary["line"], summary["offset"], summary["held_out"]["all"]
+    print(f"line (calibration, n = {line['n']}): reach = {line['intercept']:.3f} + "
+          f"{line['slope']:.3f} x closest; offset SD {off['sd']:.3f} m "
+          f"({off['distribution']}); held out (n = {held['n']}): r = {held.get('r', 'nan'):.2f}, "
+          f"RMSE {held.get('rmse', 'nan'):.3f} m")
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
+def cmd_calibrated_range(args: argparse.Namespace) -> int:
+    from handover_eval.calibration.calibrated_range import run_calibrated_range
+
+    summary, written = run_calibrated_range(
+        args.public_dir, args.out, folds=args.folds, seed=args.seed,
+        calibration_folds=args.calibration_folds, skip_bad=args.skip_bad,
+    )
+    for name, (lo, hi) in summary["range"].items():
+        print(f"{name}: {lo:.3f} .. {hi:.3f} {summary['fields'][name]['unit']}")
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
+def _split_arguments(p: argparse.ArgumentParser) -> None:
+    """--folds, --seed, --calibration-folds and --skip-bad of the calibration commands."""
+    p.add_argument(
+        "--folds", type=FOLDS, default=10, help="number of Table I folds (default 10)"
+    )
+    p.add_argument(
+        "--seed", type=SEEDS, default=0, help="seed of the fold split (default 0, as Table I)"
+    )
+    p.add_argument(
+        "--calibration-folds",
+        type=CALIBRATION_FOLDS,
+        default=5,
+        help="folds 0 .. N-1 form the calibration half, the rest are held out (default 5)",
+    )
+    p.add_argument(
+        "--skip-bad", action="store_true", help="skip files that fail to load and list them"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser with one subcommand per operation."""
     parser = argparse.ArgumentParser(
@@ -428,6 +486,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--skip-bad", action="store_true", help="skip files that fail to load")
     p.add_argument("--no-figures", action="store_true", help="write only the .md and .json")
     p.set_defaults(func=cmd_walk_stats)
+
+    p = sub.add_parser(
+        "reach-spread",
+        help="the reach: the giver's part and the per-person offsets",
+        description="Fit, on the calibration half of Table I's folds, the line of the reach "
+        "(shoulder to object at the transfer) on the closest approach of the shoulder's path "
+        "to the object (the giver's part); describe its residuals (the per-person offsets: SD, "
+        "shape, the chosen distribution); report how the line predicts the held-out half "
+        "(r, RMSE). Writes reach_spread.md, reach_spread.json and reach_spread.png into --out. "
+        "Nothing per recording is written.",
+    )
+    p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
+    p.add_argument("--out", required=True, help="output folder (e.g. docs/calibration)")
+    _split_arguments(p)
+    p.add_argument("--no-figures", action="store_true", help="write only the .md and .json")
+    p.set_defaults(func=cmd_reach_spread)
+
+    p = sub.add_parser(
+        "calibrated-range",
+        help="the walks the person was calibrated on",
+        description="Measure, in every recording, the median walking speed, the body height, "
+        "the nearest the pelvis comes to the giver and the longest pause (the definitions the "
+        "env checks a walker or a replay with); state the calibration half's 2.5-97.5 %% range "
+        "of each (the pause: 0 .. 97.5 %% over walks that pause). Writes calibrated_range.md "
+        "and calibrated_range.json into --out. Nothing per recording is written.",
+    )
+    p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
+    p.add_argument("--out", required=True, help="output folder (e.g. docs/calibration)")
+    _split_arguments(p)
+    p.set_defaults(func=cmd_calibrated_range)
     return parser
 
 
