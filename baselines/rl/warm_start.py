@@ -109,7 +109,7 @@ def clone(policy: Any, config: RLConfig, obs: Any, actions: np.ndarray) -> list[
             opt.zero_grad()
             loss.backward()
             opt.step()
-            total += float(loss) * len(idx)
+            total += loss.item() * len(idx)
         losses.append(total / n)
     policy.set_training_mode(False)
     return losses

@@ -32,6 +32,7 @@ from baselines.rl.agent import RLAgent, make_base  # noqa: E402
 from baselines.rl.config import MAX_POLICY_PARAMS, QUICK, RLConfig  # noqa: E402
 from baselines.rl.envs import PolicyIO, make_handover_env  # noqa: E402
 from baselines.rl.files import (  # noqa: E402
+    CONFIG_REWARD_KEYS,
     REWARD_KEYS,
     env_action_space,
     record_of,
@@ -60,7 +61,7 @@ def snapshot(folder: Path) -> dict[str, tuple]:
 
 
 def _record(config: RLConfig, io: PolicyIO, training: dict) -> dict:
-    reward = {k: 1.0 for k in REWARD_KEYS} | {"shaping": config.shaping, "gamma": config.gamma}
+    reward = {k: 1.0 for k in REWARD_KEYS} | {k: getattr(config, k) for k in CONFIG_REWARD_KEYS}
     receivers = {"replay_ids": [], "base_fit_ids": []}
     return record_of(config, io, reward, receivers, training)
 
