@@ -28,7 +28,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m handover_eval.demo
+	$(PY) -m handover_eval.cli.demo
 
 # pytest-xdist: a test file per worker process (module fixtures stay shared), 2 = CI's cores
 TEST_WORKERS ?= 2

@@ -12,7 +12,7 @@ The one runner of the closed loop's families: ``evaluate.py closed-loop`` and it
   ran before in that env.
 * **An episode** (:func:`play`): :func:`handover_env.rollout.run_episode` with the env steps
   counted, the wall time and MuJoCo's instability warnings (:func:`instabilities`).
-* **A receiver** (:func:`run_receiver`): a :class:`~handover_eval.closedloop.receivers.ReceiverSpec`
+* **A receiver** (:func:`run_receiver`): a :class:`~handover_eval.receivers.ReceiverSpec`
   as the env's reset options (a scripted walker, or a replayed recording), the episode, and its
   row (:func:`episode_row`: who met whom, Θ, the final ``info`` flattened).
 """
@@ -31,7 +31,7 @@ from agents.base import Policy
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
 from handover_eval import roster
-from handover_eval.closedloop.receivers import ReceiverSpec, replay_source
+from handover_eval.receivers import ReceiverSpec, replay_source
 
 ENV_IDS = {"dynamic": "handover_env/DynamicHandover-v0", "static": "handover_env/StaticHandover-v0"}
 #: Envs kept open per process.

@@ -4,7 +4,7 @@ Receivers (:mod:`.protocol`): the test-seed scripted walkers (walker-id, walker-
 and the replays. Models: an agent that learns meets a replay of fold f with the model fitted on
 the other folds of ``--data`` and the walkers with the fold-0 model, or, with ``--replay-data``,
 every receiver with one model fitted on all of ``--data``
-(:data:`handover_eval.closedloop.receivers.FIT_ALL`). Built-in agents are the roster's
+(:data:`handover_eval.receivers.FIT_ALL`). Built-in agents are the roster's
 (:mod:`handover_eval.roster`); those that learn use the closed loop's fold models
 (:func:`handover_eval.closedloop.models.fold_model`, Table I's checkpoint cache); a plug-in is
 built by its factory and fitted once per worker and model fold. Each job is a chunk of receivers
@@ -41,7 +41,7 @@ from handover_eval.benchmark.outcomes import EVENTS, events, first_failure
 from handover_eval.benchmark.plugin import AgentSource, fit_plugin
 from handover_eval.benchmark.protocol import ENV_ID, SENSING, BenchReceiver
 from handover_eval.closedloop.models import fold_model, prepare_models
-from handover_eval.closedloop.receivers import FIT_ALL
+from handover_eval.receivers import FIT_ALL
 from handover_eval.episodes import ENV_IDS, Setting, clear_envs, env_for, run_receiver
 from handover_eval.methods import MethodOptions
 

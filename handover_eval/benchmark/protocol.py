@@ -29,7 +29,7 @@ import numpy as np
 
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.closedloop.receivers import ReceiverSpec
+from handover_eval.receivers import ReceiverSpec
 from handover_eval.openloop.protocol import OpenLoopProtocol
 
 PROTOCOL_VERSION = 1

@@ -35,7 +35,7 @@ from handover_eval.benchmark.protocol import (
     replay_receivers,
     walker_receivers,
 )
-from handover_eval.closedloop.receivers import (
+from handover_eval.receivers import (
     FIT_ALL,
     fold_of,
     other_replays,

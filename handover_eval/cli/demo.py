@@ -1,4 +1,4 @@
-"""``make demo``, ``handover-demo``, ``python -m handover_eval.demo``: the paper's question,
+"""``make demo``, ``handover-demo``, ``python -m handover_eval.cli.demo``: the paper's question,
 dynamic vs static handover, on the same seeded walkers.
 
 On the embedded default (the synthetic demonstrations; no data download), the SPGP planner is

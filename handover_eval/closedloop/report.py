@@ -23,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from handover_eval import roster
-from handover_eval.closedloop.receivers import SETS
+from handover_eval.receivers import SETS
 from handover_eval.closedloop.stats import (
     N_BOOTSTRAP,
     median_iqr,

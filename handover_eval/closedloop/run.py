@@ -19,7 +19,7 @@ The run, top to bottom (:func:`run_closed_loop`):
 With ``--replay-data`` (``replay`` below) the replays are every episode of that other dataset,
 none of them in ``--data``, and every learning agent meets every receiver (walkers and replays)
 with one model fitted on all of ``--data`` (model fold
-:data:`~handover_eval.closedloop.receivers.FIT_ALL`); the workers receive ``--data`` followed by
+:data:`~handover_eval.receivers.FIT_ALL`); the workers receive ``--data`` followed by
 the replays (:func:`handover_eval.methods.with_test_data`).
 
 The tables and the plot are made by :mod:`.report`, :mod:`.markdown` and :mod:`.plot`; the
@@ -44,7 +44,7 @@ from handover_env.sensors.profiles import PROFILES
 from handover_eval import roster
 from handover_eval.backend import map_folds
 from handover_eval.closedloop.models import ModelRecord, check_rl_receivers, prepare_models
-from handover_eval.closedloop.receivers import (
+from handover_eval.receivers import (
     FIT_ALL,
     SETS,
     ReceiverSpec,

@@ -8,6 +8,6 @@ seeded walkers, side by side.
 * :mod:`.report`: the side-by-side frames and the summary (success and median handover time);
 * :mod:`.output`: the mp4, the still, the Markdown and CSV summary.
 
-The command line is :mod:`handover_eval.cli.demo` (``python -m handover_eval.demo``,
+The command line is :mod:`handover_eval.cli.demo` (``python -m handover_eval.cli.demo``,
 ``handover-demo``).
 """

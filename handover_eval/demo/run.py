@@ -45,7 +45,7 @@ from handover_env.config import HandoverParams
 from handover_env.envs.observation import ObsLayout
 from handover_env.person.demos import load_any
 from handover_eval.benchmark.outcomes import events, first_failure
-from handover_eval.closedloop.receivers import ReceiverSpec
+from handover_eval.receivers import ReceiverSpec
 from handover_eval.demo.view import FramedView, ViewSize
 from handover_eval.episodes import Played, episode_row
 from handover_eval.episodes import play as play_episode

@@ -16,7 +16,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 import evaluate
 from handover_env.config import HandoverParams
 from handover_env.person.synthetic import generate_synthetic
-from handover_eval.closedloop.receivers import (
+from handover_eval.receivers import (
     ReceiverSpec,
     fold_of,
     pick_evenly,
