@@ -191,7 +191,8 @@ GEOM_NAMES = tuple(g[1] for g in _GEOMS)
 #: gain per segment (see the module docstring; ``tests/person/test_body_model.py`` re-measures
 #: it). The upper arms are the exception: pushed at the centre of mass they are held by the
 #: shoulder and the forearm chain, about 1.1 kN/m however weak their own weld, so their gain is
-#: left out of :func:`calibrate_weld_gains` (measured 1.09 and 1.15 kN/m for the right and left arm).
+#: left out of :func:`calibrate_weld_gains` (measured 1.09 and 1.15 kN/m for the right and left
+#: arm).
 WELD_GAIN = {
     "pelvis": 0.0952,
     "torso": 0.1288,

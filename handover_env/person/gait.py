@@ -26,7 +26,8 @@ import math
 
 import numpy as np
 
-from handover_env.person.rotations import length, swing, yaw_matrix
+from handover_env.person.posing import arm_constants, arm_kernel
+from handover_env.person.rotations import yaw_matrix
 from handover_env.person.skeleton import (
     SEG,
     SEGMENTS,
@@ -121,35 +122,14 @@ def arm_pose(shoulder: np.ndarray, torso_rot: np.ndarray, grip: np.ndarray, dims
         (upper arm, forearm, hand) world rotations, each (3, 3).
     """
     ua, fa = SEG["upper_arm_r"], SEG["forearm_r"]
-    rest_upper = dims.local(J["RIGHT_ELBOW"], ua)
-    rest_fore = dims.local(J["RIGHT_WRIST"], fa)
-    grip_local = dims.grip("r")
-    grip = np.asarray(grip, dtype=np.float64)
-    if hand_dir is None:
-        rest_lower = grip_local + rest_fore  # elbow -> grip with a straight wrist
-        end = grip
-    else:
-        hand_dir = np.asarray(hand_dir, dtype=np.float64) / max(
-            length(hand_dir), 1e-9
-        )
-        rest_lower = rest_fore
-        end = grip - length(grip_local) * hand_dir  # the wrist
-    l1, l2 = length(rest_upper), length(rest_lower)
-    d = end - shoulder
-    dist = length(d)
-    dist_c = min(max(dist, abs(l1 - l2) + 1e-4), (l1 + l2) * 0.9995)
-    u = d / max(dist, 1e-9)
-    pole = torso_rot @ np.array([0.0, -0.35, -1.0])  # down and to the right
-    pole = pole - (pole @ u) * u
-    if length(pole) < 1e-6:
-        pole = torso_rot @ np.array([-1.0, 0.0, 0.0])
-        pole = pole - (pole @ u) * u
-    pole /= length(pole)
-    a = (l1 * l1 - l2 * l2 + dist_c * dist_c) / (2.0 * dist_c)
-    h = math.sqrt(max(l1 * l1 - a * a, 0.0))
-    elbow = shoulder + a * u + h * pole
-    end_c = shoulder + dist_c * u
-    r_upper = swing(torso_rot @ rest_upper, elbow - shoulder) @ torso_rot
-    r_fore = swing(r_upper @ rest_lower, end_c - elbow) @ r_upper
-    r_hand = r_fore.copy() if hand_dir is None else swing(r_fore @ grip_local, hand_dir) @ r_fore
-    return r_upper, r_fore, r_hand
+    io = arm_constants(dims.local(J["RIGHT_SHOULDER"], SEG["torso"]),
+                       dims.local(J["RIGHT_ELBOW"], ua), dims.local(J["RIGHT_WRIST"], fa),
+                       dims.grip("r"))
+    level = hand_dir is not None
+    hd = (0.0, 0.0, 0.0) if hand_dir is None else tuple(
+        np.asarray(hand_dir, dtype=np.float64).tolist())
+    rots = arm_kernel(io, tuple(np.asarray(shoulder, dtype=np.float64).tolist()),
+                      tuple(np.asarray(torso_rot, dtype=np.float64).ravel().tolist()),
+                      tuple(np.asarray(grip, dtype=np.float64).tolist()), level, hd)
+    upper, fore, hand = (np.array(r).reshape(3, 3) for r in rots)
+    return upper, fore, hand

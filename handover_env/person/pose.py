@@ -15,9 +15,17 @@ import math
 
 import numpy as np
 
-from handover_env.person.gait import arm_pose
 from handover_env.person.person import RATE, PersonMotion
-from handover_env.person.rotations import length, mat_to_quat
+from handover_env.person.posing import (
+    HAND,
+    HAS_HAND,
+    SWING_ARM,
+    TAU,
+    arm_constants,
+    motion_rows,
+    pose_kernel,
+)
+from handover_env.person.rotations import length
 from handover_env.person.skeleton import RIGHT_ARM, SEG, SEGMENTS, J
 
 #: The arm counts as straight at this fraction of its full length (the elbow never locks).
@@ -83,6 +91,10 @@ class MotionPose:
             np.linalg.norm(dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"]))
             + np.linalg.norm(dims.grip("r") + dims.local(J["RIGHT_WRIST"], SEG["forearm_r"]))
         )
+        self._rows = motion_rows(motion.origin, motion.quat, motion.arm_swing)
+        self._io = arm_constants(self.shoulder_local, self._elbow_local, self._wrist_local,
+                                 self.grip_local, STRAIGHT_ARM * self.arm_reach, TRUNK_MAX_TURN,
+                                 SEG["torso"], RIGHT_ARM, UPPER_BODY, len(SEGMENTS))
 
     def body_frame(self, tau: float, rho: float) -> tuple[np.ndarray, np.ndarray, float]:
         """(right shoulder, walking direction (3,), walking speed) at playback position tau."""
@@ -150,9 +162,18 @@ class MotionPose:
         return interp(m.origin[:, SEG["hand_r"]], tau) + rot @ self.grip_local
 
     def at(
-        self, tau: float, hand: np.ndarray | None, swing_arm: bool
+        self, tau: float, hand: np.ndarray | None, swing_arm: bool,
+        out: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Segment origins (S, 3) and quaternions (S, 4) at playback position tau.
+        """Segment origins (S, 3) and quaternions (S, 4) at playback position tau
+        (:func:`handover_env.person.posing.pose_kernel`).
+
+        With a hand target the upper body turns and leans toward it when it lies beyond the
+        straight arm's reach: people reaching far bring their shoulder toward the target, so the
+        torso (with the head and arms) rotates about its base toward the target by the smallest
+        rotation that brings the shoulder close enough, at most ``TRUNK_MAX_TURN``. The right arm
+        is then posed to the target (:func:`handover_env.person.gait.arm_pose`'s rule), the hand
+        held level, pointing away from the shoulder.
 
         Args:
             tau: playback position, frames.
@@ -160,64 +181,18 @@ class MotionPose:
                 toward it), or None.
             swing_arm: without a hand target, pose the right arm in its walking swing (the
                 modelled hand) instead of leaving the motion's own arm (a recorded hand).
+            out: (S, 7) array to write the pose into (origins, then quaternions); a new one if
+                None. The returned arrays are views of it.
         """
-        m = self.motion
-        origin = interp(m.origin, tau)
-        quat = interp(m.quat, tau)
-        quat /= np.linalg.norm(quat, axis=-1, keepdims=True)
-        arm = None
-        if hand is not None:
-            self.lean_toward(origin, quat, hand)
-            torso = quat_to_mat(quat[SEG["torso"]])
-            shoulder = origin[SEG["torso"]] + torso @ self.shoulder_local
-            # A hand held out toward an object is level, pointing away from the shoulder.
-            level = hand - shoulder
-            level[2] = 0.0
-            n = length(level)
-            arm = arm_pose(shoulder, torso, hand, m.dims, level / n if n > 0.05 else None)
-        elif swing_arm:
-            torso = quat_to_mat(quat[SEG["torso"]])
-            rel = interp(m.arm_swing, tau)
-            arm = tuple(torso @ rel[k] for k in range(3))
-            shoulder = origin[SEG["torso"]] + torso @ self.shoulder_local
-        if arm is not None:
-            # (the torso and its shoulder are those above: only the arm's rotations change here)
-            rot_q = mat_to_quat(np.stack(arm))
-            prev = quat[list(RIGHT_ARM)]
-            rot_q *= np.where(np.sum(rot_q * prev, axis=-1, keepdims=True) < 0, -1.0, 1.0)
-            quat[list(RIGHT_ARM)] = rot_q
-            elbow = shoulder + arm[0] @ self._elbow_local
-            wrist = elbow + arm[1] @ self._wrist_local
-            origin[RIGHT_ARM[0]], origin[RIGHT_ARM[1]], origin[RIGHT_ARM[2]] = (
-                shoulder,
-                elbow,
-                wrist,
-            )
-        return origin, quat
-
-    def lean_toward(self, origin: np.ndarray, quat: np.ndarray, hand: np.ndarray) -> None:
-        """Turn and lean the upper body toward a hand target beyond the straight arm's reach.
-
-        People reaching far bring their shoulder toward the target by turning and leaning the
-        trunk. The torso (with the head and arms) rotates about its base toward the target by
-        the smallest rotation that brings the shoulder close enough, at most ``TRUNK_MAX_TURN``
-        (modifies ``origin`` and ``quat`` in place).
-        """
-        base = origin[SEG["torso"]]
-        torso = quat_to_mat(quat[SEG["torso"]])
-        s = torso @ self.shoulder_local
-        need = length(base + s - hand) - STRAIGHT_ARM * self.arm_reach
-        if need <= 0.0:
-            return
-        h = hand - base
-        axis = np.cross(s, h)
-        n = length(axis)
-        if n < 1e-9:
-            return
-        angle = min(need / length(s), TRUNK_MAX_TURN)
-        half = 0.5 * angle
-        dq = np.concatenate([[math.cos(half)], axis / n * math.sin(half)])
-        rot = quat_to_mat(dq)
-        for i in UPPER_BODY:
-            quat[i] = quat_mul(dq, quat[i])
-            origin[i] = base + rot @ (origin[i] - base)
+        io = self._io
+        io[TAU] = tau
+        if hand is None:
+            io[HAS_HAND] = 0.0
+        else:
+            io[HAS_HAND] = 1.0
+            io[HAND:HAND + 3] = hand
+        io[SWING_ARM] = 1.0 if swing_arm else 0.0
+        if out is None:
+            out = np.empty((len(SEGMENTS), 7))
+        pose_kernel(self._rows, io, out)
+        return out[:, :3], out[:, 3:]

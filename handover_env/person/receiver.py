@@ -312,8 +312,7 @@ class Receiver:
         # ---- what the hand does
         if object_free:
             self._decide(t1, grasp_point, object_vel)
-        key = self._pose_at(self.tau, (grasp_point, object_vel, dt))
-        self.targets.push(key)
+        self._pose_at(self.tau, (grasp_point, object_vel, dt), self.targets.next_key())
         self._t = t1
         self._dt = dt
 
@@ -485,11 +484,12 @@ class Receiver:
         self._hand = (x, v, a)
         return x
 
-    def _pose_at(self, tau: float, grasp: tuple | None) -> tuple[np.ndarray, np.ndarray]:
+    def _pose_at(self, tau: float, grasp: tuple | None,
+                 out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Segment origins (S, 3) and quaternions (S, 4) at playback position tau, the modelled
-        hand advanced by one env step."""
+        hand advanced by one env step (written into ``out`` (S, 7) when given)."""
         hand = self._hand_target(tau, grasp)
-        return self.pose.at(tau, hand, swing_arm=self.hand_mode == "reach")
+        return self.pose.at(tau, hand, swing_arm=self.hand_mode == "reach", out=out)
 
     def end_step(self, data: mujoco.MjData) -> None:
         """The env step's physics is done: record the person's effort over it."""

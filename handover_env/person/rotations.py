@@ -20,6 +20,8 @@ import math
 import mujoco
 import numpy as np
 
+from handover_env.person.posing import swing_mat
+
 #: Up to this many matrices, :func:`mat_to_quat` calls MuJoCo per matrix.
 _FEW_MATRICES = 32
 
@@ -58,23 +60,10 @@ def length(v: np.ndarray) -> float:
     return float(np.linalg.norm(v))
 
 
-def _unit3(v: np.ndarray) -> tuple[float, float, float]:
-    """:func:`_normalize` of one 3-vector, as floats (the same sum of squares, left to right)."""
-    x, y, z = v.tolist()
-    n = max(math.sqrt(x * x + y * y + z * z), 1e-12)
-    return x / n, y / n, z / n
-
-
 def _swing_one(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`swing` of one pair of 3-vectors: each elementwise step (normalise, cross product,
-    dot product) in floats, bit for bit numpy's, and the matrix product in numpy as there."""
-    a0, a1, a2 = _unit3(a)
-    b0, b1, b2 = _unit3(b)
-    v0, v1, v2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-    c = a0 * b0 + a1 * b1 + a2 * b2
-    vx = np.array([[0.0, -v2, v1], [v2, 0.0, -v0], [-v1, v0, 0.0]])
-    k = 1.0 / max(1.0 + c, 1e-9)
-    return np.eye(3) + vx + (vx @ vx) * k
+    """:func:`swing` of one pair of 3-vectors (:func:`handover_env.person.posing.swing_mat`, the
+    same arithmetic in the same order as the batched form: bit for bit its value)."""
+    return np.array(swing_mat(*a.tolist(), *b.tolist())).reshape(3, 3)
 
 
 def triad(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:

@@ -181,11 +181,12 @@ class BodyTargets:
         data.mocap_pos[b.mocap] = pose[0]
         data.mocap_quat[b.mocap] = pose[1]
 
-    def push(self, pose: Pose) -> None:
-        """The pose at the end of the next env step (the last one's end becomes its start)."""
+    def next_key(self) -> np.ndarray:
+        """The keyframe (S, 7) to pose for the end of the next env step, to be written in place
+        (origins, then quaternions); the last step's end becomes its start."""
         keys = self._keys
         keys[0] = keys[1]
-        keys[1, :, :3], keys[1, :, 3:] = pose
+        return keys[1]
 
     def plan_ticks(self, alphas: list[float]) -> None:
         """The fractions of this env step at which controller ticks fall; prepares the step's
