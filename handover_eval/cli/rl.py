@@ -185,10 +185,11 @@ def check_out(out: Path, seeds: list[int], resume: bool, overwrite: bool) -> Non
     """May the run write into ``out``? (one seed: the checkpoint rules of train.py; several: a
     folder of ``seed-S`` checkpoint folders.)"""
     from baselines.checkpoint_io import CheckpointError, check_out_dir
+    from handover_eval.rl.output import SEEDS_PNG, SEEDS_SUMMARY
 
     if len(seeds) > 1 and out.is_dir():
         others = sorted(p.name for p in out.iterdir() if not _SEED_DIR.fullmatch(p.name)
-                        and p.name not in (OUTPUT_LOCK,))
+                        and p.name not in (OUTPUT_LOCK, SEEDS_PNG, SEEDS_SUMMARY))
         if others:
             raise CheckpointError(f"--out {out} holds other files ({', '.join(others[:4])}); "
                                   "with several --seeds it holds only seed-S folders")
@@ -230,6 +231,10 @@ def run_rl_command(args: argparse.Namespace, load_data: Callable) -> None:
         for seed, folder, state in zip(seeds, seed_folders(out, seeds), states, strict=True):
             write_summary(folder, state, config, {"seed": seed, "n_replays": len(data.replays)})
             print(f"[rl] seed {seed}: {summary(state)} -> {folder}")
+        if len(seeds) > 1:
+            from handover_eval.rl.output import write_seeds
+
+            write_seeds(out, states, config)
         print(f"[rl] wrote {out}/ in {time.perf_counter() - t0:.0f} s")
 
 

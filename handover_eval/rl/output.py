@@ -13,11 +13,13 @@ from typing import Any
 
 from baselines.rl.config import RLConfig
 from handover_eval.reporting import write_csv, write_png, write_text
-from handover_eval.rl.report import curve_figure
+from handover_eval.rl.report import curve_figure, seeds_figure, seeds_summary
 
 CURVE_CSV = "train_log.csv"
 CURVE_PNG = "learning_curve.png"
 SUMMARY = "train_summary.json"
+SEEDS_PNG = "learning_curves.png"
+SEEDS_SUMMARY = "seeds_summary.json"
 
 
 def write_curve(out: Path, state: dict, config: RLConfig) -> None:
@@ -48,3 +50,11 @@ def finite_or_null(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [finite_or_null(v) for v in value]
     return value
+
+
+def write_seeds(out: Path, states: list[dict], config: RLConfig) -> None:
+    """With several seeds, beside their ``seed-S`` folders: ``learning_curves.png`` (every seed
+    and the IQM band) and ``seeds_summary.json`` (IQM and CI of the curve's start and end)."""
+    write_png(seeds_figure(states, config), out / SEEDS_PNG)
+    write_text(json.dumps(finite_or_null(seeds_summary(states)), indent=1, allow_nan=False),
+               out / SEEDS_SUMMARY)

@@ -44,3 +44,47 @@ def summary(state: dict) -> str:
     return (f"{state['steps']} env steps, {sum(state['episodes'])} episodes, "
             f"{state['wall_time_s']:.0f} s ({state['steps'] / max(state['wall_time_s'], 1e-9):.0f}"
             f" steps/s); start: {fmt(c[0])}; end: {fmt(c[-1])}")
+
+
+def seeds_figure(states: list[dict], config: RLConfig) -> Any:
+    """Success rate and return against env steps for every seed (thin lines) and their IQM with
+    its 95 % stratified bootstrap band (:func:`handover_eval.rl.statistics.curve_band`)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from handover_eval.rl.statistics import curve_band
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), constrained_layout=True)
+    for ax, (key, label) in zip(axes, (("success_rate", "success rate"),
+                                       ("return", "return (HandoverReward)")), strict=True):
+        curves = [[r[key] for r in s["curve"]] for s in states]
+        steps = [r["steps"] for r in min((s["curve"] for s in states), key=len)]
+        for c, s in zip(curves, states, strict=True):
+            ax.plot([r["steps"] for r in s["curve"]], c, lw=0.8, alpha=0.5)
+        mid, low, high = curve_band(curves)
+        ax.plot(steps, mid, color="k", lw=2, label=f"IQM of {len(states)} seeds")
+        ax.fill_between(steps, low, high, color="k", alpha=0.15, label="95 % CI (bootstrap)")
+        ax.set_xlabel("env steps")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="lower right", fontsize=8)
+    form = f"residual on {config.base}" if config.form == "residual" else "from scratch"
+    fig.suptitle(f"{config.algo.upper()} {form}: {config.curve_episodes} fixed training "
+                 "receivers")
+    return fig
+
+
+def seeds_summary(states: list[dict]) -> dict:
+    """IQM and 95 % stratified bootstrap CI over seeds of the learning curve's first and last
+    success rate and return (one score per seed: the runs of one task)."""
+    from handover_eval.rl.statistics import stratified_bootstrap_ci
+
+    out = {"seeds": len(states)}
+    for at, index in (("start", 0), ("end", -1)):
+        for key in ("success_rate", "return"):
+            scores = [[s["curve"][index][key]] for s in states]
+            point, low, high = stratified_bootstrap_ci(scores)
+            out[f"{at}_{key}"] = {"iqm": point, "ci95": [low, high]}
+    return out

@@ -412,19 +412,29 @@ def _reactive():
     return ReactiveAgent()
 
 
-TRAIN_TINY = """
+#: The levers of issue 36 on: PPO with gSDE, the action filter, the last action, the privileged
+#: critic and both penalties on the cv base; SAC from scratch with pink noise and a warm start.
+LEVERS = dict(base="cv", use_sde=True, sde_sample_freq=4, action_tau=0.1, last_actions=1,
+              privileged_critic=True, action_change=0.5, contact_penalty=1.0)
+SAC_LEVERS = dict(algo="sac", form="scratch", action_noise="pink", warm_start="cv",
+                  warm_start_episodes=1, warm_start_epochs=2, steps=96, n_steps=32,
+                  eval_every=96)
+TRAIN_TINY = f"""
 import sys, torch
 from baselines.rl.config import RLConfig
 from baselines.rl.train import train_policy
 if __name__ == "__main__":
-    cfg = RLConfig(steps=256, n_envs=2, n_steps=64, batch_size=32, n_epochs=2, net_arch=(16,),
-                   eval_every=256, curve_episodes=1, p_replay=0.0, seed=7)
-    train_policy(cfg, sys.argv[1], progress=False)
+    common = dict(steps=256, n_envs=2, n_steps=64, batch_size=32, n_epochs=2, net_arch=(16,),
+                  eval_every=256, curve_episodes=1, p_replay=0.0, seed=7)
+    train_policy(RLConfig(**{{**common, **{LEVERS!r}}}), sys.argv[1], progress=False)
+    train_policy(RLConfig(**{{**common, **{SAC_LEVERS!r}}}), sys.argv[1] + "-sac",
+                 progress=False)
 """
 
 
 def test_same_seed_and_envs_give_the_same_weights_bit_for_bit(tmp_path):
-    """Two tiny PPO runs (2 SubprocVecEnv envs each) in separate processes."""
+    """Two tiny PPO runs and two tiny SAC runs (2 SubprocVecEnv envs each), every lever of
+    issue 36 on, in separate processes."""
     script = tmp_path / "tiny.py"
     script.write_text(TRAIN_TINY)
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
@@ -433,15 +443,16 @@ def test_same_seed_and_envs_give_the_same_weights_bit_for_bit(tmp_path):
     for p in procs:
         _, err = p.communicate(timeout=900)  # a loaded machine once took over 300 s
         assert p.returncode == 0, err.decode()[-2000:]
-    a, b = (load_file(tmp_path / f"run{i}" / "model.safetensors") for i in range(2))
-    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    for suffix in ("-sac", ""):
+        a, b = (load_file(tmp_path / f"run{i}{suffix}" / "model.safetensors") for i in range(2))
+        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     from baselines.rl.envs import training_env
     from baselines.rl.policy import build_model
 
     cfg = RLConfig(steps=256, n_envs=1, n_steps=64, batch_size=32, n_epochs=2, net_arch=(16,),
-                   eval_every=256, curve_episodes=1, p_replay=0.0, seed=7)
+                   eval_every=256, curve_episodes=1, p_replay=0.0, seed=7, **LEVERS)
     vec = DummyVecEnv([lambda: training_env(cfg, 0, _reactive(), [])])
     initial = build_model(cfg, vec).policy.state_dict()
     vec.close()

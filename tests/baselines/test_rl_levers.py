@@ -268,3 +268,39 @@ def test_the_stratified_bootstrap_resamples_runs_within_each_task():
     assert looped == pytest.approx(a, abs=1e-12)
     mid, lo, hi = curve_band([[0.1, 0.5, 0.9], [0.1, 0.7, 0.9, 1.0]], reps=100)
     assert mid.shape == (3,) and mid[0] == pytest.approx(0.1) and lo[1] <= mid[1] <= hi[1]
+
+
+# ---------------------------------------------------------------------- benchmark row
+def test_the_benchmark_scores_a_checkpoint_on_the_closed_loop_track(lever_dirs, tmp_path):
+    import csv
+
+    import evaluate
+    from baselines.rl.benchmark import rl_agent
+
+    out = tmp_path / "bench"
+    argv = ["benchmark", "--quick", "--no-progress", "--agent", "baselines.rl.benchmark:rl_agent",
+            "--agent-config", json.dumps({"checkpoint": str(lever_dirs["ppo"])}),
+            "--tracks", "closedloop", "--name", "rl-levers", "--workers", "1", "--out", str(out)]
+    assert evaluate.main(argv) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["agent"]["name"] == "rl-levers" and result["tracks"] == ["closedloop"]
+    assert result["agent"]["config"]["config"]["base"] == "cv"
+    with (out / "closedloop_episodes.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    mine = sorted(r["receiver"] for r in rows if r["agent"] == "rl-levers")
+    assert mine and mine == sorted(r["receiver"] for r in rows if r["agent"] == "reactive")
+    with pytest.raises(ValueError, match="--tracks closedloop"):
+        rl_agent(str(lever_dirs["ppo"])).predict(np.zeros((30, 2)))
+
+
+def test_several_seeds_write_their_curves_with_the_iqm_band(tmp_path):
+    from handover_eval.rl.output import SEEDS_PNG, SEEDS_SUMMARY, write_seeds
+
+    states = [{"curve": [{"steps": s, "success_rate": 0.5 + 0.1 * i + 0.1 * k,
+                          "return": float(i), "handover_time": math.nan}
+                         for k, s in enumerate((0, 64))]} for i in range(3)]
+    write_seeds(tmp_path, states, RLConfig())
+    body = json.loads((tmp_path / SEEDS_SUMMARY).read_text())
+    assert body["seeds"] == 3 and body["end_success_rate"]["iqm"] == pytest.approx(0.7)
+    assert body["start_return"] == {"iqm": 1.0, "ci95": [0.0, 2.0]}  # 3 seeds: IQM = the mean
+    assert (tmp_path / SEEDS_PNG).read_bytes()[:4] == b"\x89PNG"

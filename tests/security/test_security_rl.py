@@ -30,7 +30,11 @@ import evaluate  # noqa: E402
 from baselines.checkpoint_io import CheckpointError  # noqa: E402
 from baselines.rl.agent import RLAgent, make_base  # noqa: E402
 from baselines.rl.config import MAX_POLICY_PARAMS, QUICK, RLConfig  # noqa: E402
-from baselines.rl.envs import PolicyIO, make_handover_env  # noqa: E402
+from baselines.rl.envs import (  # noqa: E402
+    PolicyIO,
+    make_handover_env,
+    training_observation_space,
+)
 from baselines.rl.files import (  # noqa: E402
     CONFIG_REWARD_KEYS,
     REWARD_KEYS,
@@ -69,7 +73,7 @@ def _record(config: RLConfig, io: PolicyIO, training: dict) -> dict:
 def write_rl_checkpoint(folder: Path, config: RLConfig) -> Path:
     """A loadable RL checkpoint of ``config``'s freshly built policy (no training)."""
     io = PolicyIO.for_env(config, env_action_space())
-    policy = build_policy(config, io.observation_space, io.action_space)
+    policy = build_policy(config, training_observation_space(config, io), io.action_space)
     folder.mkdir(parents=True)
     write_checkpoint(folder, policy, io,
                      _record(config, io, {"steps": 0, "episodes": 0, "wall_time_s": 0.0}))
@@ -393,3 +397,97 @@ def test_train_summary_is_strict_json(tmp_path):
     body = json.loads((tmp_path / "train_summary.json").read_text(), parse_constant=refuse)
     assert body["end"]["handover_time"] is None and body["wall_time_s"] is None
     assert body["end"]["return"] == -1.0
+
+
+# ---------------------------------------------------------------------- issue 36: new forms
+#: The policy forms the levers make, each a different state dict (gSDE's log std, the
+#: privileged critic's wider input, the remembered actions' wider observation).
+NEW_FORMS = {
+    "ppo-sde-privileged": dict(algo="ppo", use_sde=True, privileged_critic=True, last_actions=2,
+                               action_tau=0.1, base="cv"),
+    "sac-sde-privileged": dict(algo="sac", form="scratch", use_sde=True, privileged_critic=True,
+                               action_noise="pink", last_actions=1),
+    "sac-warm-start": dict(algo="sac", form="scratch", warm_start="cv", warm_start_episodes=3),
+}
+
+
+@pytest.mark.parametrize("form", sorted(NEW_FORMS))
+def test_the_layout_of_each_new_form_is_sb3s_state_dict_key_for_key(form):
+    config = RLConfig(net_arch=(8, 6), **NEW_FORMS[form])
+    io = PolicyIO.for_env(config, env_action_space())
+    policy = build_policy(config, training_observation_space(config, io), io.action_space)
+    assert policy_layout(config) == {k: tuple(v.shape) for k, v in policy.state_dict().items()}
+
+
+@pytest.fixture(scope="module")
+def new_forms(tmp_path_factory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("forms")
+    return {name: write_rl_checkpoint(root / name, RLConfig(net_arch=(8,), steps=256, n_envs=1,
+                                                            n_steps=64, **kw))
+            for name, kw in NEW_FORMS.items()}
+
+
+def _pickled_weights(folder: Path) -> None:
+    import pickle
+
+    from planted import PAYLOAD
+
+    class Boom:
+        def __reduce__(self):
+            return (exec, (PAYLOAD,))
+
+    (folder / "model.safetensors").write_bytes(pickle.dumps(Boom()))
+
+
+def _narrower_critic(folder: Path) -> None:
+    """The weights of the same config without the privileged critic (a critic input 18 short)."""
+    d = json.loads((folder / "config.json").read_text())
+    d["config"]["privileged_critic"] = False
+    config = RLConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in d["config"].items()})
+    other = folder.parent / (folder.name + "-plain")
+    write_rl_checkpoint(other, config)
+    (folder / "model.safetensors").write_bytes((other / "model.safetensors").read_bytes())
+
+
+NEW_FORM_TAMPERING = {
+    "use-sde-string": (lambda f: edit_config(f, "config", "use_sde", "yes"),
+                       "config field use_sde = 'yes' is not a bool"),
+    "privileged-int": (lambda f: edit_config(f, "config", "privileged_critic", 1),
+                       "config field privileged_critic = 1 is not a bool"),
+    "action-tau-huge": (lambda f: edit_config(f, "config", "action_tau", 1e300),
+                        r"action_tau must be a finite number in \[0, 10\]"),
+    "last-actions-1e9": (lambda f: edit_config(f, "config", "last_actions", 10**9),
+                         r"last_actions must be in \[0, 30\]"),
+    "noise-unknown": (lambda f: edit_config(f, "config", "action_noise", "os.system"),
+                      "action_noise must be one of"),
+    "sde-off": (lambda f: edit_config(f, "config", "use_sde", False),
+                "keys do not match the model|expected torch.float32"),
+    "reward-weight": (lambda f: edit_config(f, "reward", "contact_penalty", 5.0),
+                      "disagree with its config"),
+    "narrower-critic": (_narrower_critic, "bytes, more than the|expected torch.float32|"
+                        "keys do not match"),
+    "pickle-as-weights": (_pickled_weights, "not a readable safetensors file|bytes, more than"),
+}
+
+
+@pytest.mark.parametrize("form", sorted(NEW_FORMS))
+@pytest.mark.parametrize("case", sorted(NEW_FORM_TAMPERING))
+def test_a_tampered_checkpoint_of_each_new_form_is_one_named_error_and_runs_nothing(
+        new_forms, tmp_path, form, case):
+    tamper, message = NEW_FORM_TAMPERING[case]
+    if case == "narrower-critic" and not NEW_FORMS[form].get("privileged_critic"):
+        pytest.skip("no privileged critic in this form")
+    if case == "sde-off" and not NEW_FORMS[form].get("use_sde"):
+        pytest.skip("no gSDE in this form")
+    folder = _copy(new_forms[form], tmp_path / "ckpt")
+    assert RLAgent.load(folder).config.algo == NEW_FORMS[form]["algo"]  # untampered: loads
+    tamper(folder)
+    before = snapshot(tmp_path)
+    cwd = os.getcwd()
+    os.chdir(tmp_path)  # the payload would write MARKER here
+    try:
+        _timed_refusal(folder, message)
+    finally:
+        os.chdir(cwd)
+    assert not (tmp_path / "MARKER").exists()
+    assert snapshot(tmp_path) == before
