@@ -135,8 +135,8 @@ class RLConfig:
         form: ``"residual"``: the policy's action in [-1, 1]^4 times (residual_xyz, residual_yaw)
             is added to the base agent's Cartesian target; ``"scratch"``: the action maps affinely
             onto the env's whole action box.
-        base: the residual's base agent, ``"reactive"`` or ``"ours"`` (SPGP, fitted on the
-            training folds); ignored (``""``) for ``scratch``.
+        base: the residual's base agent, ``"reactive"``, ``"ours"`` (SPGP, fitted on the
+            training folds) or ``"cv"`` (constant velocity); ignored (``""``) for ``scratch``.
         residual_xyz: m, bound of the correction of x, y and z (default ±0.15 m).
         residual_yaw: rad, bound of the correction of the yaw (default ±0.3 rad).
         net_arch: hidden widths of the policy and value (critic) networks.

@@ -1,11 +1,12 @@
 """The RL checkpoint folder: policy weights in safetensors, everything else in JSON, loaded
 without unpickling and without writing anything.
 
-* ``config.json``: ``{"type": "rl", "format", "config"`` (:class:`RLConfig`), ``"reward"`` (the
-  final reward weights: HandoverReward's fields, the shaping weight, gamma), ``"io"`` (the
-  observation normalisation per part, the action box), ``"receivers"`` (seed ranges, training
-  folds, the recordings trained on, the base agent's fit), ``"training"`` (env steps, episodes,
-  wall time), ``"versions"}``.
+* ``config.json``: ``{"type": "rl", "format", "config"`` (:class:`RLConfig`, every lever of
+  docs/rl.md included), ``"reward"`` (the final reward weights: HandoverReward's fields, the
+  shaping weight, gamma, the action-change and contact penalties' weights), ``"io"`` (the
+  observation normalisation per part, the privileged state's for an asymmetric critic, the action
+  box), ``"receivers"`` (seed ranges, the warm start's, training folds, the recordings trained on,
+  the base agent's fit), ``"training"`` (env steps, episodes, wall time), ``"versions"}``.
 * ``model.safetensors``: ``policy.<key>``, the SB3 policy's state dict; ``io.offset``,
   ``io.scale``.
 * ``training_state/``: ``state.json`` (steps, episodes per env, the learning curve), the
