@@ -78,6 +78,10 @@ class MotionPose:
         shoulder_local: the right shoulder in the torso frame, m.
         grip_local: the right hand's grip point in the hand frame, m.
         arm_reach: shoulder to grip point of the straight right arm, m.
+        rows: the motion, one row per frame, as the compiled pose reads it
+            (:func:`handover_env.person.posing.motion_rows`).
+        io: the body's constants and a pose call's inputs
+            (:func:`handover_env.person.posing.arm_constants`).
     """
 
     def __init__(self, motion: PersonMotion) -> None:
@@ -91,8 +95,8 @@ class MotionPose:
             np.linalg.norm(dims.local(J["RIGHT_ELBOW"], SEG["upper_arm_r"]))
             + np.linalg.norm(dims.grip("r") + dims.local(J["RIGHT_WRIST"], SEG["forearm_r"]))
         )
-        self._rows = motion_rows(motion.origin, motion.quat, motion.arm_swing)
-        self._io = arm_constants(self.shoulder_local, self._elbow_local, self._wrist_local,
+        self.rows = motion_rows(motion.origin, motion.quat, motion.arm_swing, motion.heading)
+        self.io = arm_constants(self.shoulder_local, self._elbow_local, self._wrist_local,
                                  self.grip_local, STRAIGHT_ARM * self.arm_reach, TRUNK_MAX_TURN,
                                  SEG["torso"], RIGHT_ARM, UPPER_BODY, len(SEGMENTS))
 
@@ -184,7 +188,7 @@ class MotionPose:
             out: (S, 7) array to write the pose into (origins, then quaternions); a new one if
                 None. The returned arrays are views of it.
         """
-        io = self._io
+        io = self.io
         io[TAU] = tau
         if hand is None:
             io[HAS_HAND] = 0.0
@@ -194,5 +198,5 @@ class MotionPose:
         io[SWING_ARM] = 1.0 if swing_arm else 0.0
         if out is None:
             out = np.empty((len(SEGMENTS), 7))
-        pose_kernel(self._rows, io, out)
+        pose_kernel(self.rows, io, out)
         return out[:, :3], out[:, 3:]

@@ -308,13 +308,15 @@ def pose_kernel(motion: np.ndarray, io: np.ndarray, out: np.ndarray) -> None:
     out[h, 0], out[h, 1], out[h, 2] = w0, w1, w2
 
 
-def motion_rows(origin: np.ndarray, quat: np.ndarray, arm_swing: np.ndarray) -> np.ndarray:
+def motion_rows(origin: np.ndarray, quat: np.ndarray, arm_swing: np.ndarray,
+                heading: np.ndarray) -> np.ndarray:
     """One row per frame for :func:`pose_kernel`: the segment origins (S x 3), quaternions
-    (S x 4) and the right arm's swing rotations relative to the torso (3 x 3 x 3)."""
+    (S x 4), the right arm's swing rotations relative to the torso (3 x 3 x 3) and the walking
+    direction (yaw, rad): 7 S + 28 columns."""
     n = origin.shape[0]
     return np.ascontiguousarray(np.concatenate(
-        [origin.reshape(n, -1), quat.reshape(n, -1), arm_swing.reshape(n, -1)], axis=1),
-        dtype=np.float64)
+        [origin.reshape(n, -1), quat.reshape(n, -1), arm_swing.reshape(n, -1),
+         np.asarray(heading, dtype=np.float64).reshape(n, 1)], axis=1), dtype=np.float64)
 
 
 def arm_constants(shoulder: np.ndarray, elbow: np.ndarray, wrist: np.ndarray, grip: np.ndarray,

@@ -58,12 +58,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from handover_env.person import hand_path as hp
 from handover_env.person import motion as rm
 from handover_env.person import path_ahead as pa
 from handover_env.person.body_model import BodyIds, apply_dims
 from handover_env.person.effort import Effort
 from handover_env.person.grip import ArmGrip
-from handover_env.person.min_jerk import min_jerk_step
 from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
 from handover_env.person.pose import STRAIGHT_ARM, TRUNK_MAX_TURN, MotionPose, interp
 from handover_env.person.receiver_rules import Meeting, meeting_of
@@ -93,6 +93,9 @@ CLEAR_OF_GRIPPER = 0.1
 #: Where the static receiver holds the raised right hand: forward, right and up from the
 #: shoulder in the body frame, m (a hand held out in front, below shoulder height).
 PRESENT_OFFSET = (0.30, -0.15, -0.15)
+#: The hand's state codes for :func:`handover_env.person.hand_path.hand_kernel`.
+HAND_STATES = {"reaching": hp.REACHING, "holding": hp.HOLDING, "presenting": hp.PRESENTING,
+               "presented": hp.PRESENTING, "passed": hp.PASSED}
 
 
 @dataclass(frozen=True)
@@ -128,6 +131,7 @@ class Receiver:
         )
         self._v6 = np.zeros(6)
         self._judge_io = np.zeros(pa.IO_SIZE)
+        self._hand_io = np.zeros(hp.IO_SIZE)
         self.motion: PersonMotion | None = None
         self.kind, self.source_id, self.hand_mode = "id", "", "reach"
         self.present_after_walk = False
@@ -206,6 +210,8 @@ class Receiver:
             self.config.min_speed_factor, self.config.give_up_behind, PASS_DISTANCE)
         io[pa.REACH], io[pa.LEAD], io[pa.COMFORT] = (
             self._max_reach, self.config.reach_lead_time, self._comfort)
+        hp.hand_settings(self._hand_io, self.config, self._max_reach, self.pose.arm_reach, RATE,
+                         HOLD_TRACKING, CARRY_CLEARANCE, PRESENT_OFFSET)
         self._reset_state()
 
     def _reset_state(self) -> None:
@@ -413,76 +419,32 @@ class Receiver:
         self, tau: float, grasp: tuple[np.ndarray, np.ndarray, float] | None
     ) -> np.ndarray | None:
         """Advance the modelled hand one env step; None when the arm follows the nominal motion."""
-        cfg = self.config
         state = self.state
         if state == "walking" or (state == "passed" and self._hand is None):
             return None
         if grasp is None:
             return self._hand[0] if self._hand is not None else None
         grasp_point, object_vel, dt = grasp
-        shoulder, _, _ = self.pose.body_frame(tau, self.rho)
-        if state == "reaching":
-            # Approach the grasp point from the person's side and a little above: aim at a point
-            # ``approach_distance`` toward the shoulder (horizontally) and ``approach_height`` up,
-            # and close in over the last ``close_time``, so the hand does not sweep through the
-            # gripper holding the object.
-            away = shoulder - grasp_point
-            away[2] = 0.0
-            if self._gripper_axis is not None:
-                # From the fingertips' side of the gripper, if that side faces the person.
-                axis = self._gripper_axis.copy()
-                axis[2] = 0.0
-                if float(axis @ away) > 0.0:
-                    away = axis
-            norm = length(away)
-            if length(grasp_point - shoulder) > self._max_reach:
-                # Out of reach: hold the hand ready in front of the object; close in only once
-                # it can be taken.
-                self._hand_goal_time = max(self._hand_goal_time, self._t + cfg.close_time)
-            remaining = self._hand_goal_time - self._t
-            w = min(max(remaining / cfg.close_time, 0.0), 1.0)
-            w = w * w * (3.0 - 2.0 * w)
-            offset = away * (cfg.approach_distance * w / norm) if norm > 1e-6 else np.zeros(3)
-            offset[2] = self._grasp_side * cfg.approach_height * w
-            goal, goal_v = grasp_point + offset, object_vel
-        elif state == "holding" and self._t < self.t_grasp + cfg.hold_time:
-            # The arm stays out, moving with the body (the shared hold of the recordings).
-            pelvis, rot, vel = self.pose.pelvis(tau, self.rho)
-            goal, goal_v = pelvis + rot @ self._hold_rel, vel
-        elif state == "holding" and not self._clear:
-            # Draw the object out toward the body at the height it is held, not down across the
-            # gripper's fingers, until it is clear of the gripper.
-            pelvis, rot, vel = self.pose.pelvis(tau, self.rho)
-            pull = self._hold_rel.copy()
-            reach = length(pull[:2])
-            pull[:2] *= max(reach - cfg.pull_distance, min(reach, CARRY_CLEARANCE)) / max(
-                reach, 1e-6
-            )
-            goal, goal_v = pelvis + rot @ pull, vel
-        elif state == "holding":
-            swing = self.pose.swing_hand(tau, self.rho)
-            _, u, _ = self.pose.body_frame(tau, self.rho)
-            goal, goal_v = swing[0] + cfg.carry_forward * u, swing[1]
-        elif state in ("presenting", "presented"):
-            torso, _ = self.pose.arm_rotations(tau, self.motion.arm_swing)
-            goal, goal_v = shoulder + torso @ np.asarray(PRESENT_OFFSET), np.zeros(3)
-        else:  # passed: the hand returns to the swing
-            goal, goal_v = self.pose.swing_hand(tau, self.rho)[:2]
-        if state == "holding" and self._t < self.t_grasp + cfg.hold_time:
-            # Settle onto the body-fixed hold over the hold time (no yank to catch up).
-            remaining = max(self.t_grasp + cfg.hold_time - self._t, HOLD_TRACKING)
-        elif state == "passed":
-            remaining = max(self._hand_goal_time - self._t, cfg.pull_time)
+        io = self._hand_io
+        io[hp.STATE] = HAND_STATES[state]
+        io[hp.TAU], io[hp.RHO], io[hp.NOW], io[hp.DT] = tau, self.rho, self._t, dt
+        io[hp.T_GRASP], io[hp.CLEAR], io[hp.SIDE] = self.t_grasp, self._clear, self._grasp_side
+        if self._gripper_axis is None:
+            io[hp.HAS_AXIS] = 0.0
         else:
-            remaining = max(self._hand_goal_time - self._t, 0.1)
-        # Aim where the goal will be when the movement ends (it moves on at goal_v).
-        x, v, a = min_jerk_step(*self._hand, goal + goal_v * remaining, goal_v, remaining, dt)
-        off = x - shoulder
-        dist = length(off)
-        if dist > self.pose.arm_reach:
-            x = shoulder + off * (self.pose.arm_reach / dist)
-        self._hand = (x, v, a)
-        return x
+            io[hp.HAS_AXIS] = 1.0
+            io[hp.AXIS:hp.AXIS + 3] = self._gripper_axis
+        io[hp.GRASP:hp.GRASP + 3], io[hp.OBJ_VEL:hp.OBJ_VEL + 3] = grasp_point, object_vel
+        if state == "holding":
+            io[hp.HOLD_REL:hp.HOLD_REL + 3] = self._hold_rel
+        x, v, a = self._hand
+        io[hp.X:hp.X + 3], io[hp.V:hp.V + 3], io[hp.A:hp.A + 3] = x, v, a
+        io[hp.GOAL_TIME] = self._hand_goal_time
+        hp.hand_kernel(self.pose.rows, self.pose.io, io)
+        self._hand_goal_time = float(io[hp.GOAL_TIME])
+        self._hand = (io[hp.X:hp.X + 3].copy(), io[hp.V:hp.V + 3].copy(),
+                      io[hp.A:hp.A + 3].copy())
+        return self._hand[0]
 
     def _pose_at(self, tau: float, grasp: tuple | None,
                  out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
