@@ -32,7 +32,8 @@ We implement it as a torque controller, run every ``ticks`` physics steps on a g
   forces are updated at every 200 Hz tick. The reference filter is linear, so its next ticks
   are precomputed in one matrix product per replan. With Λ frozen the whole law is affine in
   the measured TCP pose and twists, so each planned tick gets one (7, 26) matrix at the replan
-  and a tick is J, three small products and the clip (see :class:`ImpedanceController`).
+  and a tick is J, three small products and the clip, one compiled call
+  (:mod:`handover_env.robot.impedance_tick`; the replan stays numpy's, about 30 Hz).
 
 This module is over 500 lines because the controller is one class whose per-tick law and the
 precomputation that makes it affine (gain maps, reference filter, frozen Λ) share the same
@@ -49,6 +50,8 @@ import mujoco
 import numpy as np
 
 from handover_env.config import HandoverParams
+from handover_env.mjdata_view import MjDataView
+from handover_env.robot import impedance_tick as tk
 from handover_env.robot.scene import TORQUE_LIMITS, SceneIds
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -215,9 +218,10 @@ class ImpedanceController:
     measured quantities ``z = [x (3), J q̇ (6), J_prev q̇ (6), 1, 1, vec R (9)]`` (TCP position,
     twist with this tick's and the previous tick's Jacobian, TCP orientation), so
     ``[wrench, trace(R_d Rᵀ)] = W_k z`` with one (7, 26) matrix per planned tick k, built at each
-    replan (:meth:`_refresh_dynamics`). A tick is then a few small products into preallocated
-    buffers (MuJoCo's ``mju_mulMatVec``/``mju_mulMatTVec``, which have the lowest call overhead at
-    this size; numpy's ``dot`` with ``out=`` where a strided view is involved).
+    replan (:meth:`_refresh_dynamics`). A tick is then J and a few small products, compiled
+    (:func:`~handover_env.robot.impedance_tick.impedance_tick`) on one float64 workspace whose
+    views are the buffers the replan writes (``_jac12``, ``_w_plan``, ...), with MuJoCo's order of
+    summation, so the torques are those of MuJoCo's ``mju_mulMatVec``/``mju_mulMatTVec``.
     """
 
     def __init__(
@@ -238,8 +242,24 @@ class ImpedanceController:
         self._tcp = ids.tcp_site
         self._payload_mass = 0.0  # mass of a held object to compensate, kg
         self.set_params(params)
+        # The tick's buffers live in one float64 workspace (fw) with an int64 one (iw) holding
+        # its offsets and the index lists: the compiled tick (impedance_tick) takes both.
+        sizes = {tk.I_JAC: 12 * nv, tk.I_W: n * 7 * _Z_SIZE, tk.I_Z: _Z_SIZE, tk.I_OUT: 7,
+                 tk.I_TAUF: nv, tk.I_TAU: 6, tk.I_POST: 6, tk.I_LIMITS: 6, tk.I_LAST: 6,
+                 tk.I_MINV: 36, tk.I_ACC: 6, tk.I_CORR: 6, tk.I_SCAL: 4}
+        chain = sorted(_chain_dofs(model, int(model.site_bodyid[ids.tcp_site])))
+        self._iw = iw = np.zeros(tk.I_SIZE + len(chain) + 12, dtype=np.int64)
+        iw[tk.I_NV], iw[tk.I_NCHAIN] = nv, len(chain)
+        iw[tk.I_SIZE:] = chain + np.asarray(ids.arm_dof).tolist() + np.asarray(ids.arm_act).tolist()
+        self._fw = fw = np.zeros(sum(sizes.values()))
+        views, at = {}, 0
+        for slot, size in sizes.items():
+            iw[slot] = at
+            views[slot] = fw[at:at + size]
+            at += size
+        self._scal = views[tk.I_SCAL]
         # Jacobians: rows 0:6 this tick's (translation, rotation), rows 6:12 the previous tick's.
-        self._jac12 = np.zeros((12, nv))
+        self._jac12 = views[tk.I_JAC].reshape(12, nv)
         self._jac_cur, self._jac_prev = self._jac12[0:6], self._jac12[6:12]
         self._jacp, self._jacr = self._jac12[0:3], self._jac12[3:6]
         self._jac_plan = np.zeros((6, nv))  # the speed scaling's Jacobian, at a replan
@@ -249,24 +269,19 @@ class ImpedanceController:
         self._j2 = self._jac12[:, self._dof]  # (12, 6) arm columns of both
         self._j = self._jac12[0:6, self._dof]
         # If the TCP moves only with the arm joints (a fixed-base arm), the other columns of its
-        # Jacobian are exactly zero and the products can run over all nv columns of the
+        # Jacobian are exactly zero and the replan's products can run over all nv columns of the
         # contiguous buffers (MuJoCo's mju_* products have the lowest call overhead).
         arm = set(np.asarray(ids.arm_dof).tolist())
         self._full_width = (
             isinstance(self._dof, slice)
             and _chain_dofs(model, int(model.site_bodyid[ids.tcp_site])) <= arm
         )
-        self._tau_full = np.zeros(nv)  # Jᵀ F over all dofs
-        self._tau_arm = (
-            self._tau_full[self._dof] if isinstance(self._dof, slice) else None
-        )  # a view
         self._minv_jt = np.zeros((6, nv))
         self._x_minv = self._minv_jt[:, self._dof]
         self._lam_inv = np.zeros((6, 6))
         self._damp6 = self.config.singular_damping * np.eye(6)
-        self._have_prev = False
         self._stale = True
-        self._tau_posture = np.zeros(6)
+        self._tau_posture = views[tk.I_POST]
         self._posture = self.config.posture_stiffness > 0.0 or self.config.posture_damping > 0.0
         self._kn, self._dn = self.config.posture_stiffness, self.config.posture_damping
         self._tau0 = np.zeros(6)
@@ -276,17 +291,15 @@ class ImpedanceController:
         self._eye6 = np.eye(6)
         self._lam = np.zeros((6, 6))
         self._lam_rows = [(self._lam[k], self._eye6[k]) for k in range(6)]
-        self._limits = TORQUE_LIMITS.copy()
-        self._neg_limits = -self._limits
+        self._limits = views[tk.I_LIMITS]
+        self._limits[:] = TORQUE_LIMITS
         # Joint speed / acceleration limiter (see _limit_joint_motion).
         self._arm_rows = np.zeros((6, nv))
         self._arm_rows[np.arange(6), np.asarray(ids.arm_dof)] = 1.0
         self._minv_rows = np.zeros((6, nv))
-        self._minv_aa = np.zeros((6, 6))
+        self._minv_aa = views[tk.I_MINV].reshape(6, 6)
         self._m_aa = np.zeros((6, 6))
-        self._acc = np.zeros(6)
-        self._lim_tmp = np.zeros(6)
-        self._lim_static = np.zeros(6)
+        self._corr = views[tk.I_CORR]
         self.limited_ticks = 0  # ticks at which the limiter reduced the torque (since reset)
         self._minv_age = 2  # 2: M^-1 stale, 1: M^-1 fresh and M stale, 0: both fresh
         # Reference filter state and target.
@@ -299,23 +312,25 @@ class ImpedanceController:
         self.yaw_d = 0.0
         self.yaw_rate_d = 0.0
         self._gains = np.zeros((6, _B_SIZE))  # Λ P + C (see _gain_maps)
-        self._w_plan = np.zeros((n, 7, _Z_SIZE))  # W_k for each planned tick
+        self._w_plan = views[tk.I_W].reshape(n, 7, _Z_SIZE)  # W_k for each planned tick
         self._rot_w = np.zeros((6, 9 * n))  # G_r L_k for all k, layout (6, 9, n)
         self._ff_w = np.zeros((6, n))  # feed-forward column of W_k for all k
-        self._z = np.zeros(_Z_SIZE)
+        self._z = views[tk.I_Z]
         self._z[_Z_CONST] = self._z[_Z_FF] = 1.0
         self._z_pos = self._z[_Z_POS:_Z_TWIST]
         self._z_twists = self._z[_Z_TWIST:_Z_CONST]
         self._z_rot = self._z[_Z_ROT:_Z_SIZE]
-        self._out = np.zeros(7)  # [wrench (6), trace(R_d Rᵀ)]
+        self._out = views[tk.I_OUT]  # [wrench (6), trace(R_d Rᵀ)]
         self._wrench = self._out[:6]
-        self._tau = np.zeros(6)
-        self.last_torque = np.zeros(6)
+        self._tau = views[tk.I_TAU]
+        self.last_torque = views[tk.I_LAST]
         self.last_unclipped = self._tau
         self._bound: mujoco.MjData | None = None
         self._static_views = isinstance(self._dof, slice) and isinstance(self._qpos_adr, slice)
         self.dt = model.opt.timestep * self.config.ticks
         self._inv_dt = 1.0 / self.dt
+        self._scal[tk.S_INV_DT] = self._inv_dt
+        self._scal[tk.S_GM] = -GRAVITY[2] * self._payload_mass
         self._set_limit_values()
         # Discrete critically damped filter on e = x_d - target: [e, v]_{k+1} = A [e, v]_k
         # (semi-implicit Euler), a_k = -w^2 e_k - 2 w v_k evaluated before the update.
@@ -367,6 +382,7 @@ class ImpedanceController:
     @payload_mass.setter
     def payload_mass(self, mass: float) -> None:
         self._payload_mass = float(mass)
+        self._scal[tk.S_GM] = -GRAVITY[2] * self._payload_mass  # the held weight, N per unit J_z
         self._gain_maps()
         self._stale = True  # the gain matrix includes it
 
@@ -427,6 +443,8 @@ class ImpedanceController:
         if self._vlim <= 0.0:
             self._vlim = math.inf
         self._scale_speed = c.speed_scaling and self._vlim < math.inf
+        self._iw[tk.I_LIMIT] = int(self._limit_motion)
+        self._scal[tk.S_VLIM], self._scal[tk.S_ALIM] = self._vlim, self._alim
 
     def set_limits(self, inertia: float | None = None, joint_speed_limit: float | None = None,
                    joint_accel_limit: float | None = None,
@@ -447,7 +465,7 @@ class ImpedanceController:
         self._gain_maps()
         self._stale = True
 
-    def _limit_joint_motion(self, tau: np.ndarray) -> None:
+    def _limit_joint_motion(self) -> None:
         """Reduce the commanded torque so that no arm joint exceeds its speed (or acceleration)
         limit at the next tick.
 
@@ -460,34 +478,24 @@ class ImpedanceController:
         already too fast (e.g. pushed) is brought back to the limit within the tick. A joint
         speed limit thus acts like the UR's own: the arm moves no faster, the Cartesian path
         bends while a joint is at its limit. The torque limits are applied afterwards.
+
+        The tick (:func:`~handover_env.robot.impedance_tick.impedance_tick`) computes q̈, checks
+        the bounds and leaves ``clip(q̈) - q̈`` in ``_corr``; this applies it (M inverted at most
+        once per replan, only when a correction needs it).
         """
-        if self._minv_age:  # M^-1 and M of the arm joints, with this replan's M(q)
-            mujoco.mj_solveM(self.model, self._bound, self._minv_rows, self._arm_rows)
-            self._minv_aa[...] = self._minv_rows[:, self._dof]
-            self._minv_age = 1  # M itself is inverted only if a correction needs it
-        static = self._lim_static
-        np.multiply(self._jacp[2, self._dof], -GRAVITY[2] * self._payload_mass, out=static)
-        static += self._bias_v
-        d = self._lim_tmp
-        np.subtract(tau, static, out=d)
-        mujoco.mju_mulMatVec(self._acc, self._minv_aa, d)
-        v, amax, inv_h = self._vlim, self._alim, self._inv_dt
-        corr = None
-        for i, (a_i, w_i) in enumerate(zip(self._acc.tolist(), self._qvel_v.tolist())):
-            lo, hi = (-v - w_i) * inv_h, (v - w_i) * inv_h
-            if amax > 0.0:
-                lo, hi = max(lo, -amax), min(hi, amax)
-            if a_i < lo or a_i > hi:
-                if corr is None:
-                    corr = [0.0] * 6
-                corr[i] = (lo if a_i < lo else hi) - a_i
-        if corr is None:
-            return
         if self._minv_age:
             self._m_aa[...] = np.linalg.inv(self._minv_aa)
             self._minv_age = 0
-        tau += self._m_aa @ np.array(corr)
+        self._tau += self._m_aa @ self._corr.copy()
         self.limited_ticks += 1
+
+    def _refresh_arm_inverse(self) -> None:
+        """M^-1 of the arm joints with this tick's M(q), for the joint motion limiter: at every
+        tick from a replan until the first correction, whose M^-1 (and M) then hold until the
+        next replan."""
+        mujoco.mj_solveM(self.model, self._bound, self._minv_rows, self._arm_rows)
+        self._minv_aa[...] = self._minv_rows[:, self._dof]
+        self._minv_age = 1  # M itself is inverted only if a correction needs it
 
     def reset(self, data: mujoco.MjData, rest_qpos: np.ndarray | None = None) -> None:
         """Start the reference at the current TCP pose with zero velocity."""
@@ -505,7 +513,7 @@ class ImpedanceController:
         self._plan_i = 0
         self.set_target(pos, self.yaw_d)
         self.last_torque[:] = 0.0
-        self._have_prev = False
+        self._iw[tk.I_HAVE_PREV] = 0
         self.limited_ticks = 0
         self.scaled_plans = 0
 
@@ -638,6 +646,15 @@ class ImpedanceController:
 
     def _bind(self, data: mujoco.MjData) -> None:
         """Keep views of the ``data`` arrays read at every tick (MjData buffers never move)."""
+        if data is not self._bound:
+            view = self._view = MjDataView(data)
+            iw, tcp = self._iw, self._tcp
+            root = int(self.model.body_rootid[self.model.site_bodyid[tcp]])
+            iw[tk.I_XPOS] = view.offset("site_xpos", tcp)
+            iw[tk.I_XMAT] = view.offset("site_xmat", tcp)
+            iw[tk.I_QVEL], iw[tk.I_CDOF] = view.offset("qvel"), view.offset("cdof")
+            iw[tk.I_COM] = view.offset("subtree_com", root)
+            iw[tk.I_BIAS], iw[tk.I_CTRL] = view.offset("qfrc_bias"), view.offset("ctrl")
         self._bound = data
         self._xpos_v = data.site_xpos[self._tcp]
         self._xmat_v = data.site_xmat[self._tcp]
@@ -655,9 +672,16 @@ class ImpedanceController:
         self._wrench += self._gains[:, _B_ROT] @ (e * (scale - 1.0))
 
     def compute(self, data: mujoco.MjData) -> np.ndarray:
-        """One control update: advance the reference, return the clipped joint torques (6,).
+        """One control update: advance the reference, write the clipped joint torques (6,) to
+        the arm's actuators in ``data.ctrl`` and return them.
 
-        The returned array is an internal buffer, overwritten by the next call.
+        The returned array is an internal buffer, overwritten by the next call. The tick itself
+        is :func:`~handover_env.robot.impedance_tick.impedance_tick` (J from this tick's
+        ``cdof``, J̇ q̇ by a backward difference of J over one tick, then Eq. 1 with M = Λ(q):
+        F = K Δx + B Δẋ + Λ (ẍ_d - J̇q̇) for translation (K, B from Θ), plus Λ (ω² e_r + 2ζω Δω)
+        for rotation, plus the held object's inertia and weight, all in one product
+        ``[wrench, tr] = W_i z``; then τ and the limits). At a replan Λ and W are refreshed
+        between the Jacobian and the law.
         """
         i = self._plan_i
         if i >= self._n_plan:
@@ -666,38 +690,21 @@ class ImpedanceController:
         self._plan_i = i + 1
         if data is not self._bound or not self._static_views:
             self._bind(data)
-        # J̇ q̇ by a backward difference of J over one tick (cheaper than mj_jacDot):
-        # (J_k - J_{k-1}) q̇_k / dt; on the first tick after reset J_{k-1} = J_k (no J̇ q̇ term).
-        if self._have_prev:
-            self._jac_prev[...] = self._jac_cur
-            mujoco.mj_jacSite(self.model, data, self._jacp, self._jacr, self._tcp)
-        else:
-            mujoco.mj_jacSite(self.model, data, self._jacp, self._jacr, self._tcp)
-            self._jac_prev[...] = self._jac_cur
-            self._have_prev = True
+        mem, fw, iw = self._view.mem, self._fw, self._iw
+        phase = tk.ALL
         if self._stale:
+            tk.impedance_tick(mem, fw, iw, i, tk.JAC)
             self._refresh_dynamics(data)
-        # Eq. 1 with M = Λ(q): F = K Δx + B Δẋ + Λ (ẍ_d - J̇q̇) for translation (K, B from Θ), plus
-        # Λ (ω² e_r + 2ζω Δω) for rotation (fixed gains on the decoupled rotational dynamics), plus
-        # the held object's inertia and weight at the TCP: all in one product, [wrench, tr] = W_i z.
-        self._z_pos[...] = self._xpos_v
-        self._z_rot[...] = self._xmat_v
-        if self._full_width:
-            mujoco.mju_mulMatVec(self._z_twists, self._jac12, self._qvel_full)
-        else:
-            np.dot(self._j2, self._qvel_v, out=self._z_twists)
-        mujoco.mju_mulMatVec(self._out, self._w_plan[i], self._z)
-        if self._out[6] < -0.5:  # trace(R_d Rᵀ): beyond ~120 deg
+            phase = tk.WRENCH | tk.TORQUE | tk.CLIP
+        if self._minv_age and self._limit_motion:
+            self._refresh_arm_inverse()
+        code = tk.impedance_tick(mem, fw, iw, i, phase)
+        if code == tk.FAR_ROTATION:
             self._far_rotation(i)
-        tau = self._tau
-        mujoco.mju_mulMatTVec(self._tau_full, self._jac_cur, self._wrench)  # Jᵀ F
-        arm = self._tau_arm if self._tau_arm is not None else self._tau_full[self._dof]
-        np.add(arm, self._bias_v, out=tau)
-        tau += self._tau_posture
-        if self._limit_motion:
-            self._limit_joint_motion(tau)
-        np.minimum(tau, self._limits, out=self.last_torque)
-        np.maximum(self.last_torque, self._neg_limits, out=self.last_torque)
+            code = tk.impedance_tick(mem, fw, iw, i, tk.TORQUE | tk.CLIP)
+        if code == tk.LIMITED:
+            self._limit_joint_motion()
+            tk.impedance_tick(mem, fw, iw, i, tk.CLIP)
         return self.last_torque
 
 
