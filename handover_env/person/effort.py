@@ -12,12 +12,35 @@ object. The recordings' median is 0.50 m, IQR 0.44-0.56 m
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
+from handover_env.compiled import kernel
 from handover_env.person.body_model import BodyIds
 from handover_env.person.rotations import length
 from handover_env.person.skeleton import RIGHT_ARM
+
+# Slots of Effort's array: the measures, then one step's inputs and the body's indices.
+REACH_DISTANCE, REACH_MAX, ARM_OUT_TIME, PATH_DEVIATION = 0, 1, 2, 3
+ARM_OUT, DT, TARGET_X, TARGET_Y, SHOULDER, GRIP, PELVIS = 4, 5, 6, 7, 8, 9, 10
+SLOTS = 11
+
+
+@kernel
+def track_kernel(xpos: np.ndarray, site_xpos: np.ndarray, acc: np.ndarray) -> None:
+    """One env step of :meth:`Effort.track` on MuJoCo's body and site positions."""
+    if acc[ARM_OUT] > 0.0:
+        acc[ARM_OUT_TIME] += acc[DT]
+        s, g = int(acc[SHOULDER]), int(acc[GRIP])
+        d0, d1, d2 = (site_xpos[g, 0] - xpos[s, 0], site_xpos[g, 1] - xpos[s, 1],
+                      site_xpos[g, 2] - xpos[s, 2])
+        reach = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        acc[REACH_MAX] = max(acc[REACH_MAX], reach)
+    p = int(acc[PELVIS])
+    off = math.hypot(xpos[p, 0] - acc[TARGET_X], xpos[p, 1] - acc[TARGET_Y])
+    acc[PATH_DEVIATION] = max(acc[PATH_DEVIATION], off)
 
 
 class Effort:
@@ -37,32 +60,33 @@ class Effort:
 
     def __init__(self, body: BodyIds) -> None:
         self.body = body
+        self._acc = np.zeros(SLOTS)
+        self._acc[SHOULDER] = body.bodies[RIGHT_ARM[0]]
+        self._acc[GRIP] = body.grip_site
+        self._acc[PELVIS] = body.bodies[0]
         self.reset()
+
+    reach_distance = property(lambda self: float(self._acc[REACH_DISTANCE]))
+    reach_max = property(lambda self: float(self._acc[REACH_MAX]))
+    arm_out_time = property(lambda self: float(self._acc[ARM_OUT_TIME]))
+    path_deviation = property(lambda self: float(self._acc[PATH_DEVIATION]))
 
     def reset(self) -> None:
         """Nothing measured yet (a new episode)."""
-        self.reach_distance = 0.0
-        self.reach_max = 0.0
-        self.arm_out_time = 0.0
-        self.path_deviation = 0.0
+        self._acc[:PATH_DEVIATION + 1] = 0.0
 
     def track(
         self, data: mujoco.MjData, arm_out: bool, pelvis_target: np.ndarray, dt: float
     ) -> None:
-        """Add one env step of ``dt`` s; ``pelvis_target`` is the nominal pelvis at its end."""
-        b = self.body
-        if arm_out:
-            self.arm_out_time += dt
-            shoulder = data.xpos[b.bodies[RIGHT_ARM[0]]]
-            grip = data.site_xpos[b.grip_site]
-            self.reach_max = max(self.reach_max, length(grip - shoulder))
-        pelvis = data.xpos[b.bodies[0]]
-        self.path_deviation = max(
-            self.path_deviation, float(np.hypot(*(pelvis[:2] - pelvis_target[:2])))
-        )
+        """Add one env step of ``dt`` s (:func:`track_kernel`); ``pelvis_target`` is the nominal
+        pelvis at its end."""
+        acc = self._acc
+        acc[ARM_OUT], acc[DT] = arm_out, dt
+        acc[TARGET_X], acc[TARGET_Y] = pelvis_target[0], pelvis_target[1]
+        track_kernel(data.xpos, data.site_xpos, acc)
 
     def took(self, data: mujoco.MjData, object_pos: np.ndarray) -> None:
         """The person took the object now: record the shoulder-object distance
         (``reach_distance``)."""
         shoulder = data.xpos[self.body.bodies[RIGHT_ARM[0]]]
-        self.reach_distance = length(np.asarray(object_pos) - shoulder)
+        self._acc[REACH_DISTANCE] = length(np.asarray(object_pos) - shoulder)
