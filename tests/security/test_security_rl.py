@@ -422,9 +422,12 @@ def test_the_layout_of_each_new_form_is_sb3s_state_dict_key_for_key(form):
 @pytest.fixture(scope="module")
 def new_forms(tmp_path_factory) -> dict[str, Path]:
     root = tmp_path_factory.mktemp("forms")
-    return {name: write_rl_checkpoint(root / name, RLConfig(net_arch=(8,), steps=256, n_envs=1,
-                                                            n_steps=64, **kw))
-            for name, kw in NEW_FORMS.items()}
+    out = {name: write_rl_checkpoint(root / name, RLConfig(net_arch=(8,), steps=256, n_envs=1,
+                                                           n_steps=64, **kw))
+           for name, kw in NEW_FORMS.items()}
+    for name, folder in out.items():  # untampered, each loads
+        assert RLAgent.load(folder).config.algo == NEW_FORMS[name]["algo"]
+    return out
 
 
 def _pickled_weights(folder: Path) -> None:
@@ -480,7 +483,6 @@ def test_a_tampered_checkpoint_of_each_new_form_is_one_named_error_and_runs_noth
     if case == "sde-off" and not NEW_FORMS[form].get("use_sde"):
         pytest.skip("no gSDE in this form")
     folder = _copy(new_forms[form], tmp_path / "ckpt")
-    assert RLAgent.load(folder).config.algo == NEW_FORMS[form]["algo"]  # untampered: loads
     tamper(folder)
     before = snapshot(tmp_path)
     cwd = os.getcwd()
