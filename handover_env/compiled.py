@@ -8,6 +8,8 @@ same settings:
   numba writes the cache next to the source (``__pycache__``); where the installed package is
   read-only it falls back on its own to a user cache folder (``NUMBA_CACHE_DIR`` if set, else the
   platform's user cache directory), so a read-only install still starts warm after its first run.
+  Where no folder at all is writable numba refuses ``cache=True``; the kernel is then compiled
+  without a cache (in every new process) and a warning says so.
 - ``fastmath=False``: IEEE arithmetic, in the order the source writes it, so a kernel gives the same
   bits as the numpy or Python expression it replaced, apart from the transcendental functions
   where numpy uses its own vectorised code (each kernel says where that applies).
@@ -17,6 +19,7 @@ same settings:
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -35,4 +38,11 @@ KERNEL_OPTIONS: dict[str, Any] = {
 
 def kernel(fn: F) -> F:
     """Compile ``fn`` with :data:`KERNEL_OPTIONS` (used as a decorator)."""
-    return njit(**KERNEL_OPTIONS)(fn)
+    try:
+        return njit(**KERNEL_OPTIONS)(fn)
+    except RuntimeError as err:  # numba: "cannot cache function ...: no locator available"
+        if "no locator available" not in str(err):
+            raise
+        warnings.warn(f"{err}: compiled without a cache (set NUMBA_CACHE_DIR to a writable "
+                      "folder to keep the machine code)", RuntimeWarning, stacklevel=2)
+        return njit(**{**KERNEL_OPTIONS, "cache": False})(fn)
