@@ -60,6 +60,7 @@ from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
 from handover_env.envs.tasks.dynamic import DynamicHandover
 from handover_env.envs.wrist import WristSensor
+from handover_env.mjdata_view import MjDataView
 from handover_env.person.motion import check_overrides
 from handover_env.person.receiver import CAMERA_RATE, Receiver
 from handover_env.robot.controller import ControllerConfig, ImpedanceController, inverse_kinematics
@@ -144,8 +145,10 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.dt = self.model.opt.timestep * FRAME_SKIP
         self._ticks = self.controller.config.ticks
         self._schedule_ticks()
+        self.data_view = MjDataView(self.data)
         self.wrist = WristSensor(
-            self.model, self.data, self.ids, self._ticks, self.sensor_profile.wrist.filter_tau
+            self.model, self.data, self.ids, self._ticks, self.sensor_profile.wrist.filter_tau,
+            self.data_view,
         )
         self._make_spaces()
         self.contacts = ContactMonitor(
@@ -231,9 +234,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
         d, ids = self.data, self.ids
         self._gripper_qpos = ids.gripper_driver_qpos
         self._object_body = ids.object_body
-        arm_act = np.asarray(ids.arm_act)
-        contiguous = arm_act.size and np.all(np.diff(arm_act) == 1)
-        self._arm_act = slice(int(arm_act[0]), int(arm_act[-1]) + 1) if contiguous else arm_act
         self._qpos_v = d.qpos
         self._eq_active_v = d.eq_active
         self._object_pos_v = d.xpos[ids.object_body]
@@ -241,7 +241,6 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._tcp_xmat_v = d.site_xmat[ids.tcp_site]
         self._grip_v = d.site_xpos[ids.body.grip_site]
         self._object_xmat_v = d.xmat[ids.object_body]
-        self._arm_ctrl_v = d.ctrl[self._arm_act] if isinstance(self._arm_act, slice) else None
 
     # ------------------------------------------------------------------ start state
     def _settled_start(self) -> tuple[np.ndarray, np.ndarray]:
@@ -261,7 +260,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         ctrl.set_target(READY_POS, READY_YAW)
         # The person stands at the model's parking spot, well away, while the arm settles.
         for _ in range(100):
-            d.ctrl[ids.arm_act] = ctrl.compute(d)
+            ctrl.compute(d)  # writes the arm's torques to d.ctrl
             mujoco.mj_step(m, d, nstep=ctrl.config.ticks)
         d.time = 0.0
         state = np.empty(mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_INTEGRATION))
@@ -519,18 +518,24 @@ class HandoverEnvBase(gym.Env, EzPickle):
         return math.sqrt(dx * dx + dy * dy + dz * dz) > self.clear_distance
 
     def _tick(self) -> None:
-        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques."""
+        """One 200 Hz controller tick: F/T estimate, release, grasps, contacts, torques.
+
+        The wrist sensor (:func:`handover_env.envs.wrist_tick.wrist_tick`) and the controller
+        (:func:`handover_env.robot.impedance_tick.impedance_tick`) are one compiled call each;
+        what stays here is the tick's decisions, each a comparison on floats.
+        """
         d = self.data
         f_mag = self.wrist.tick()
-        self.peak_wrist_force = max(self.peak_wrist_force, f_mag)
+        if f_mag > self.peak_wrist_force:
+            self.peak_wrist_force = f_mag
         rec = self.receiver
-        holds = rec.grip.active
+        grip = rec.grip
+        holds = grip.active
         if holds and self._gripper_holds:
-            pull = rec.grip.force
+            pull = grip.force  # what the person pulls with while both hold the object
             p = math.sqrt(float(pull[0] * pull[0] + pull[1] * pull[1] + pull[2] * pull[2]))
-            self.pull_force = max(
-                self.pull_force, p
-            )  # what the person pulls with while both hold the object
+            if p > self.pull_force:
+                self.pull_force = p
         if not self.released and f_mag > self.params.release_force:
             self.released = True
             self.released_while_held = bool(holds)
@@ -548,30 +553,33 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self.wrist.update_payload(self._gripper_holds)
         if rec.state == "reaching" and rec.try_grasp(self.model, d):
             self.transfer_object_pos = self._object_pos_v.copy()
-        rec.grip.apply(d)
-        self.contacts.count_object = self._gripper_holds or not rec.grip.active
-        if d.ncon or self.contacts.active:
-            self.contacts.scan(d)
-        if self._gripper_holds or rec.grip.active:
+        if grip.active:
+            grip.apply(d)
+        contacts = self.contacts
+        contacts.count_object = self._gripper_holds or not grip.active
+        if contacts.active or d.ncon:
+            contacts.scan(d)
+        if self._gripper_holds or grip.active:
             self._last_held_z = float(self._object_pos_v[2])
-        if self._arm_ctrl_v is not None:
-            self._arm_ctrl_v[...] = self.controller.compute(d)
-        else:
-            d.ctrl[self._arm_act] = self.controller.compute(d)
+        self.controller.compute(d)  # writes the arm's torques to d.ctrl
 
     def _track_jerk(self) -> None:
         """Robot TCP jerk from the third difference of its 30 Hz positions (RMS and peak)."""
-        tcp = self._tcp_pos_v.tolist()
         hist = self._tcp_hist
-        hist.append(tcp)
+        hist.append(self._tcp_pos_v.tolist())
         if len(hist) < 4:
             return
         r = CAMERA_RATE**3
-        p0, p1, p2, p3 = hist[-1], hist[-2], hist[-3], hist[-4]
-        j2 = sum(((a - 3.0 * b + 3.0 * c - e) * r) ** 2 for a, b, c, e in zip(p0, p1, p2, p3))
+        (a0, a1, a2), (b0, b1, b2), (c0, c1, c2), (e0, e1, e2) = (
+            hist[3], hist[2], hist[1], hist[0]
+        )
+        j2 = (((a0 - 3.0 * b0 + 3.0 * c0 - e0) * r) ** 2
+              + ((a1 - 3.0 * b1 + 3.0 * c1 - e1) * r) ** 2
+              + ((a2 - 3.0 * b2 + 3.0 * c2 - e2) * r) ** 2)
         self._jerk_sq += j2
         self._jerk_n += 1
-        self._jerk_peak_sq = max(self._jerk_peak_sq, j2)
+        if j2 > self._jerk_peak_sq:
+            self._jerk_peak_sq = j2
         del hist[0]
 
     def _after_step(self) -> None:

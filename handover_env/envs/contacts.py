@@ -37,6 +37,7 @@ ROBOT, OBJECT, PERSON = 1, 2, 4
 TRANSIENT_FACTOR = 2.0  # ISO/TS 15066 Annex A: transient limits are twice the quasi-static ones
 TRANSIENT_TIME = 0.5  # s: a contact over the quasi-static limit for longer is quasi-static
 FORCE_FILTER_TAU = 0.010  # s, first-order low-pass of the force per segment
+_FORCE_KEYS = tuple(f"contact_force_{s.name}" for s in SEGMENTS)  # info keys, segment order
 
 
 class ContactMonitor:
@@ -120,9 +121,8 @@ class ContactMonitor:
     def info(self) -> dict[str, float | bool]:
         """Flat info entries: ``contact_force_<segment>`` for every segment, the body's peak,
         penetration and the touched flags."""
-        out: dict[str, float | bool] = {
-            f"contact_force_{s.name}": float(self.peak[i]) for i, s in enumerate(SEGMENTS)
-        }
+        peak = self.peak.tolist()
+        out: dict[str, float | bool] = dict(zip(_FORCE_KEYS, peak))
         out["body_contact_force"] = float(self.peak.max())
         out["body_contact_force_raw"] = self.raw_peak
         out["penetration"] = self.penetration

@@ -31,6 +31,8 @@ import math
 import mujoco
 import numpy as np
 
+from handover_env.envs import wrist_tick as wt
+from handover_env.mjdata_view import MjDataView
 from handover_env.robot.scene import SceneIds
 from handover_env.sensors import WristFT, WristFTParams
 
@@ -44,46 +46,54 @@ class WristSensor:
         ids: scene indices.
         ticks: physics steps per controller tick (the filter's update interval).
         filter_tau: s, time constant of the force's first-order low-pass filter.
+        view: ``data`` as one array for the compiled tick (made here if not given).
 
     Attributes:
         f_ext: (3,) the measured (filtered) external force, N (world frame), updated at every
             tick: what the release compares with f_r and the agent observes.
-        f_true: (3,) the exact filtered estimate (the same array as ``f_ext`` without a sensor
-            model).
+        f_true: (3,) the exact filtered estimate.
         ft: the episode's UR5e sensor model, or None (exact).
         tau_ext: (3,) the external torque, N m (world frame), as of the last :meth:`torque`.
+        state: the compiled tick's state (:mod:`handover_env.envs.wrist_tick`); ``f_ext`` and
+            ``f_true`` are views of it.
     """
 
     def __init__(
         self, model: mujoco.MjModel, data: mujoco.MjData, ids: SceneIds, ticks: int,
-        filter_tau: float,
+        filter_tau: float, view: MjDataView | None = None,
     ) -> None:
         self.model, self.data, self.ids = model, data, ids
+        self.view = view if view is not None else MjDataView(data)
+        self.state = st = np.zeros(wt.SIZE)
+        self.f_ext = st[wt.F_EXT:wt.F_EXT + 3]
+        self.f_true = st[wt.F_TRUE:wt.F_TRUE + 3]
+        self._no_model = np.zeros(1)  # the sensor-model argument when there is no model
+        self._ft_state = self._no_model
         self._tick_dt = ticks * model.opt.timestep
         self.set_filter_tau(filter_tau)
         self.ft: WristFT | None = None
-        d = data
-        adrs = (ids.ft_force_adr, ids.ft_torque_adr, ids.ft_acc_adr)
-        lo = min(adrs)
-        self._ft_v = d.sensordata[lo:max(adrs) + 3]  # force, torque and accelerometer readings
-        self._ft_force_i, self._ft_torque_i, self._ft_acc_i = (a - lo for a in adrs)
-        self._ft_xmat_v = d.site_xmat[ids.ft_site]
-        self._grip_w_v = d.cvel[ids.gripper_root_body, 0:3]
-        self._grip_alpha_v = d.cacc[ids.gripper_root_body, 0:3]
+        v = self.view
+        st[wt.O_FORCE] = v.offset("sensordata") + ids.ft_force_adr
+        st[wt.O_ACC] = v.offset("sensordata") + ids.ft_acc_adr
+        st[wt.O_TORQUE] = v.offset("sensordata") + ids.ft_torque_adr
+        st[wt.O_XMAT] = v.offset("site_xmat", ids.ft_site)
+        st[wt.O_OMEGA] = v.offset("cvel", ids.gripper_root_body)
+        st[wt.O_ALPHA] = v.offset("cacc", ids.gripper_root_body)
+        self._ft_xmat_v = data.site_xmat[ids.ft_site]
+        self._ft_torque_v = data.sensordata[ids.ft_torque_adr:ids.ft_torque_adr + 3]
+        self._ft_acc_v = data.sensordata[ids.ft_acc_adr:ids.ft_acc_adr + 3]
         self.reset()
 
     def set_filter_tau(self, filter_tau: float) -> None:
         """The force filter's time constant, s (first order, updated at every tick)."""
         if not math.isfinite(filter_tau) or filter_tau < 0:
             raise ValueError(f"filter_tau must be a finite number >= 0 s, got {filter_tau!r}")
-        self._filter_alpha = self._tick_dt / (filter_tau + self._tick_dt)
+        self.state[wt.GAIN] = self._tick_dt / (filter_tau + self._tick_dt)
 
     def reset(self) -> None:
         """No force measured yet (a new episode); the filter starts from zero."""
-        self.f_ext = np.zeros(3)
-        self._f_ext_f = (0.0, 0.0, 0.0)
-        self.f_true = self.f_ext
-        self._f_true_f = (0.0, 0.0, 0.0)
+        self.f_ext[:] = 0.0
+        self.f_true[:] = 0.0
         self.tau_ext = np.zeros(3)
 
     def start(self, params: WristFTParams, rng: np.random.Generator) -> None:
@@ -95,26 +105,29 @@ class WristSensor:
         self.set_filter_tau(params.filter_tau)
         exact = (params.precision == 0.0 and params.accuracy == 0.0 and params.drift == 0.0
                  and params.mass_error == 0.0 and params.com_error == 0.0 and not params.zeroing)
+        st = self.state
         if exact:
             self.ft = None
-            self.f_true = self.f_ext
+            self._ft_state = self._no_model
+            st[wt.MODEL] = 0.0
             return
-        self.f_true = np.zeros(3)
-        self._f_true_f = (0.0, 0.0, 0.0)
+        st[wt.MODEL] = 1.0
         self.ft = WristFT(params).reset(rng, self._payload_mass, self._payload_com, self._tick_dt)
+        self._ft_state = self.ft.state
         self._configure()
-        g = self._estimate(self._conf_mass, self._conf_com_f)
-        self.ft.sense(g[0], g[1], g[2], self._ft_xmat_v.tolist())
+        g = wt.wrist_estimate(self.view.mem, st, st[wt.CONF_MASS], st[wt.CONF_COM],
+                              st[wt.CONF_COM + 1], st[wt.CONF_COM + 2])
+        self.ft.sense(g[0], g[1], g[2], self._ft_xmat_v)
         self.ft.zero()
-        self._f_ext_f = (0.0, 0.0, 0.0)
         self.f_ext[:] = 0.0
 
     def _configure(self) -> None:
         """The configured payload (mass, centre of mass in the site frame) from the model."""
         ft = self.ft
         assert ft is not None
-        self._conf_mass = ft.configured_mass
-        self._conf_com_f = tuple(ft.configured_com.tolist())
+        st = self.state
+        st[wt.CONF_MASS] = ft.configured_mass
+        st[wt.CONF_COM:wt.CONF_COM + 3] = ft.configured_com
 
     def update_payload(self, holds_object: bool) -> None:
         """Mass and centre of mass (in the F/T site frame) of what hangs below the sensor: the
@@ -130,113 +143,48 @@ class WristSensor:
         rot = d.site_xmat[ids.ft_site].reshape(3, 3)
         self._payload_mass = mass
         self._payload_com = rot.T @ (com - d.site_xpos[ids.ft_site])
-        self._payload_com_f = tuple(self._payload_com.tolist())
+        st = self.state
+        st[wt.MASS] = mass
+        st[wt.COM:wt.COM + 3] = self._payload_com
         if self.ft is not None:  # the configured payload keeps the episode's errors
             self.ft.set_payload(mass, self._payload_com)
             self._configure()
 
-    def _estimate(self, m_p: float, c: tuple[float, float, float]) -> tuple[float, float, float]:
-        """The external force (world frame, unfiltered) with payload mass ``m_p`` and centre of
-        mass ``c`` (site frame), in plain floats (3-vectors are cheaper that way than as numpy
-        arrays); see the module docstring for the formula."""
-        ft = self._ft_v.tolist()
-        i = self._ft_acc_i
-        a0, a1, a2 = ft[i], ft[i + 1], ft[i + 2]
-        i = self._ft_force_i
-        s0, s1, s2 = ft[i], ft[i + 1], ft[i + 2]
-        l0, l1, l2 = m_p * a0 - s0, m_p * a1 - s1, m_p * a2 - s2  # site frame
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
-        c0, c1, c2 = c
-        cx = r00 * c0 + r01 * c1 + r02 * c2
-        cy = r10 * c0 + r11 * c1 + r12 * c2
-        cz = r20 * c0 + r21 * c1 + r22 * c2
-        # Rigid-payload inertia beyond the site's linear acceleration: m (α × c + ω × (ω × c)),
-        # with ω, α of the gripper (world frame, from cvel/cacc) and c its centre of mass.
-        wx, wy, wz = self._grip_w_v.tolist()
-        ax, ay, az = self._grip_alpha_v.tolist()
-        vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx  # ω × c
-        gx = r00 * l0 + r01 * l1 + r02 * l2 + m_p * (ay * cz - az * cy + wy * vz - wz * vy)
-        gy = r10 * l0 + r11 * l1 + r12 * l2 + m_p * (az * cx - ax * cz + wz * vx - wx * vz)
-        gz = r20 * l0 + r21 * l1 + r22 * l2 + m_p * (ax * cy - ay * cx + wx * vy - wy * vx)
-        return gx, gy, gz
-
-    def _both(self) -> tuple[float, ...]:
-        """The exact estimate (true payload) and the configured-payload one, (gx, gy, gz, hx, hy,
-        hz), from one read of the sensors: :meth:`_estimate` twice, sharing the reads."""
-        ft = self._ft_v.tolist()
-        i = self._ft_acc_i
-        a0, a1, a2 = ft[i], ft[i + 1], ft[i + 2]
-        i = self._ft_force_i
-        s0, s1, s2 = ft[i], ft[i + 1], ft[i + 2]
-        r = self._ft_xmat_v.tolist()
-        self._r = r
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = r
-        wx, wy, wz = self._grip_w_v.tolist()
-        ax, ay, az = self._grip_alpha_v.tolist()
-        out = []
-        for m_p, (c0, c1, c2) in ((self._payload_mass, self._payload_com_f),
-                                  (self._conf_mass, self._conf_com_f)):
-            l0, l1, l2 = m_p * a0 - s0, m_p * a1 - s1, m_p * a2 - s2
-            cx = r00 * c0 + r01 * c1 + r02 * c2
-            cy = r10 * c0 + r11 * c1 + r12 * c2
-            cz = r20 * c0 + r21 * c1 + r22 * c2
-            vx, vy, vz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx
-            ex = m_p * (ay * cz - az * cy + wy * vz - wz * vy)
-            ey = m_p * (az * cx - ax * cz + wz * vx - wx * vz)
-            ez = m_p * (ax * cy - ay * cx + wx * vy - wy * vx)
-            out.append(r00 * l0 + r01 * l1 + r02 * l2 + ex)
-            out.append(r10 * l0 + r11 * l1 + r12 * l2 + ey)
-            out.append(r20 * l0 + r21 * l1 + r22 * l2 + ez)
-        return tuple(out)
-
     def tick(self) -> float:
-        """Estimate and filter the external force at this tick; returns the measured magnitude, N.
+        """Estimate and filter the external force at this tick; returns the measured magnitude, N
+        (:func:`handover_env.envs.wrist_tick.wrist_tick`).
 
         The exact estimate (true payload) is filtered into :attr:`f_true`. With the UR5e model
         (:meth:`start`) the reading is the estimate with the *configured* payload through the
         sensor's errors, tare and filter (:meth:`handover_env.sensors.WristFT.sense`); without it
         the reading is the exact estimate.
         """
-        ft = self.ft
-        if ft is None:
-            gx, gy, gz = self._estimate(self._payload_mass, self._payload_com_f)
-        else:
-            gx, gy, gz, hx, hy, hz = self._both()
-        k = self._filter_alpha
-        fx, fy, fz = self._f_true_f
-        fx += k * (gx - fx)
-        fy += k * (gy - fy)
-        fz += k * (gz - fz)
-        self._f_true_f = (fx, fy, fz)
-        if ft is not None:
-            f_true = self.f_true
-            f_true[0], f_true[1], f_true[2] = fx, fy, fz
-            fx, fy, fz = ft.sense(hx, hy, hz, self._r)
-        self._f_ext_f = (fx, fy, fz)
-        self.f_ext[0], self.f_ext[1], self.f_ext[2] = fx, fy, fz
-        return math.sqrt(fx * fx + fy * fy + fz * fz)
+        f = wt.wrist_tick(self.view.mem, self.state, self._ft_state)
+        if f < 0.0:  # the sensor model's normals are used up: the next block, then the tick
+            self.ft.refill()  # type: ignore[union-attr]
+            f = wt.wrist_tick(self.view.mem, self.state, self._ft_state)
+        return f
 
     def true_magnitude(self) -> float:
         """N, the exact (filtered) external force's magnitude."""
-        fx, fy, fz = self._f_true_f
+        fx, fy, fz = self.f_true.tolist()
         return math.sqrt(fx * fx + fy * fy + fz * fz)
 
     def magnitude(self) -> float:
         """N, the filtered external force's magnitude (what the release compares with f_r)."""
-        fx, fy, fz = self._f_ext_f
+        fx, fy, fz = self.f_ext.tolist()
         return math.sqrt(fx * fx + fy * fy + fz * fz)
 
     def torque(self) -> np.ndarray:
         """External torque at the sensor (world frame), static load removed (per env step)."""
-        ft = self._ft_v.tolist()
         m_p = self._payload_mass
-        i = self._ft_acc_i
-        l0, l1, l2 = m_p * ft[i], m_p * ft[i + 1], m_p * ft[i + 2]
-        i = self._ft_torque_i
-        c0, c1, c2 = self._payload_com_f
-        t0 = (c1 * l2 - c2 * l1) - ft[i]
-        t1 = (c2 * l0 - c0 * l2) - ft[i + 1]
-        t2 = (c0 * l1 - c1 * l0) - ft[i + 2]
+        a0, a1, a2 = self._ft_acc_v.tolist()
+        l0, l1, l2 = m_p * a0, m_p * a1, m_p * a2
+        f0, f1, f2 = self._ft_torque_v.tolist()
+        c0, c1, c2 = self.state[wt.COM:wt.COM + 3].tolist()
+        t0 = (c1 * l2 - c2 * l1) - f0
+        t1 = (c2 * l0 - c0 * l2) - f1
+        t2 = (c0 * l1 - c1 * l0) - f2
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
         self.tau_ext = np.array([r00 * t0 + r01 * t1 + r02 * t2, r10 * t0 + r11 * t1 + r12 * t2,
                                  r20 * t0 + r21 * t1 + r22 * t2])

@@ -26,11 +26,13 @@ Deterministic given the Generator passed to :meth:`reset` (normals drawn in bloc
 the "ideal" profile (no errors, no zeroing) draws no random numbers and returns the filtered input
 (the env then bypasses the model altogether: its own exact path).
 
-Two entry points: :meth:`WristFT.measure` (checked arrays; it adds the payload error of step 1
-itself) and :meth:`WristFT.sense`, the env's 200 Hz path in plain floats without checks, which
-takes the force already compensated with the configured payload (the env computes it with
+Steps 2-4 are one compiled kernel, :func:`handover_env.sensors.ft_sense.ft_sense`, on the
+sensor's state array (:attr:`WristFT.state`). Two entry points: :meth:`WristFT.measure` (checked
+arrays; it adds the payload error of step 1 itself) and :meth:`WristFT.sense`, without checks,
+which takes the force already compensated with the configured payload (the env computes it with
 :attr:`WristFT.configured_mass` / :attr:`WristFT.configured_com` in the same formula as the exact
-estimate); validation is at :meth:`WristFT.reset` and :meth:`WristFT.set_tick`.
+estimate, and calls the kernel from its own compiled tick, :mod:`handover_env.envs.wrist_tick`);
+validation is at :meth:`WristFT.reset` and :meth:`WristFT.set_tick`.
 """
 
 from __future__ import annotations
@@ -39,9 +41,8 @@ import math
 
 import numpy as np
 
+from handover_env.sensors import ft_sense as fs
 from handover_env.sensors.profiles import WristFTParams
-
-_BLOCK = 256  # ticks of random numbers drawn from the Generator at a time
 
 
 def _vec3(x: object, name: str) -> np.ndarray:
@@ -68,6 +69,8 @@ class WristFT:
             raise ValueError(f"params must be WristFTParams, got {type(params).__name__}")
         self.params = params or WristFTParams()
         self._rng: np.random.Generator | None = None
+        #: the sensor's state for the compiled tick (see :mod:`handover_env.sensors.ft_sense`)
+        self.state = np.zeros(fs.SIZE)
 
     def reset(self, rng: np.random.Generator, payload_mass: float = 0.0,
               payload_com: object = (0.0, 0.0, 0.0), dt: float = 0.005) -> WristFT:
@@ -85,14 +88,11 @@ class WristFT:
         self._rng = rng
         self.mass_error = float(rng.normal(0.0, p.mass_error)) if p.mass_error > 0 else 0.0
         self.com_error = (rng.normal(0.0, p.com_error, 3) if p.com_error > 0 else np.zeros(3))
-        self._bias = (tuple(rng.normal(0.0, p.accuracy / 3.0, 3).tolist()) if p.accuracy > 0
-                      else (0.0, 0.0, 0.0))
-        self._offset = (0.0, 0.0, 0.0)
-        self._filt = (0.0, 0.0, 0.0)
-        self._clean = (0.0, 0.0, 0.0)
-        self._started = False
-        self._z: list[float] = []
-        self._zi = 0
+        st = self.state
+        st[:] = 0.0
+        if p.accuracy > 0:
+            st[fs.BIAS:fs.BIAS + 3] = rng.normal(0.0, p.accuracy / 3.0, 3)
+        st[fs.ZI] = 6 * fs.BLOCK  # no normals drawn yet
         self.set_tick(dt)
         self.set_payload(payload_mass, payload_com)
         return self
@@ -121,57 +121,34 @@ class WristFT:
         dt = float(dt)
         tau = p.filter_tau
         a = 1.0 if tau <= 0 else dt / (tau + dt)
-        self._dt, self._a = dt, a
-        self._noise_scale = p.precision / 3.0 * math.sqrt((2.0 - a) / a)
-        self._drift_step = p.drift * math.sqrt(dt)
-        self._draws = p.drift > 0 or p.precision > 0
+        self._dt = dt
+        st = self.state
+        st[fs.GAIN] = a
+        st[fs.NOISE_SCALE] = p.precision / 3.0 * math.sqrt((2.0 - a) / a)
+        st[fs.DRIFT_STEP] = p.drift * math.sqrt(dt)
+        self.draws = p.drift > 0 or p.precision > 0
+        st[fs.DRAWS] = float(self.draws)
 
-    def _normals(self) -> list[float]:
-        """Six standard normals (noise x, y, z; drift x, y, z), drawn in blocks from the rng."""
-        i = self._zi
-        if i >= len(self._z):
-            self._z = self._rng.standard_normal(6 * _BLOCK).tolist()  # type: ignore[union-attr]
-            i = 0
-        self._zi = i + 6
-        return self._z[i:i + 6]
+    def refill(self) -> None:
+        """Draw the next block of normals if the sensor draws and has used up its block (call
+        before each tick; the block is 256 ticks of six standard normals from the rng)."""
+        st = self.state
+        if self.draws and st[fs.ZI] >= 6 * fs.BLOCK:
+            st[fs.NORMALS:] = self._rng.standard_normal(6 * fs.BLOCK)  # type: ignore[union-attr]
+            st[fs.ZI] = 0.0
 
-    def sense(self, gx: float, gy: float, gz: float, r: list[float]) -> tuple[float, float, float]:
+    def sense(self, gx: float, gy: float, gz: float, r: np.ndarray) -> tuple[float, float, float]:
         """The fast path, one tick: the filtered reading (world frame, N) from the force the robot
         computes with its *configured* payload (``gx, gy, gz``: the external force estimate
         ``R (m_c a_s - F_s) + m_c (α × c_c + ω × (ω × c_c))``, world frame) and the sensor-to-world
-        rotation ``r`` (9 floats, row-major).
+        rotation ``r`` (a float64 array of 9 numbers, row-major).
 
         Plain floats, no checks: :meth:`reset` and :meth:`set_tick` validated everything. Steps 2-4
         of the module docstring: offset + drift + white noise in the sensor frame, the tare, the
         filter. Uses the tick interval of :meth:`set_tick`.
         """
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = r
-        b0, b1, b2 = self._bias
-        # sensor frame: Rᵀ g + bias (the noise-free reading a tare would see)
-        c0 = r00 * gx + r10 * gy + r20 * gz + b0
-        c1 = r01 * gx + r11 * gy + r21 * gz + b1
-        c2 = r02 * gx + r12 * gy + r22 * gz + b2
-        self._clean = (c0, c1, c2)
-        if self._draws:
-            z0, z1, z2, z3, z4, z5 = self._normals()
-            k = self._drift_step
-            self._bias = (b0 + k * z3, b1 + k * z4, b2 + k * z5)
-            k = self._noise_scale
-            c0, c1, c2 = c0 + k * z0, c1 + k * z1, c2 + k * z2
-        o0, o1, o2 = self._offset
-        c0, c1, c2 = c0 - o0, c1 - o1, c2 - o2
-        mx = r00 * c0 + r01 * c1 + r02 * c2
-        my = r10 * c0 + r11 * c1 + r12 * c2
-        mz = r20 * c0 + r21 * c1 + r22 * c2
-        if not self._started:
-            self._started = True
-            self._filt = (mx, my, mz)
-            return self._filt
-        a = self._a
-        fx, fy, fz = self._filt
-        f = (fx + a * (mx - fx), fy + a * (my - fy), fz + a * (mz - fz))
-        self._filt = f
-        return f
+        self.refill()
+        return fs.ft_sense(self.state, gx, gy, gz, r, 0)
 
     def measure(self, true_force_world: object, payload_accel_world: object,
                 gripper_rotation: object, dt: float, omega_world: object = None,
@@ -207,7 +184,7 @@ class WristFT:
         if float(dt) != self._dt:
             self.set_tick(float(dt))
         g = (f + err).tolist()
-        return np.array(self.sense(g[0], g[1], g[2], rot.reshape(9).tolist()))
+        return np.array(self.sense(g[0], g[1], g[2], np.ascontiguousarray(rot).reshape(9)))
 
     def zero(self) -> None:
         """Tare the sensor at the current reading (URScript ``zero_ftsensor()``).
@@ -219,7 +196,8 @@ class WristFT:
         """
         if self._rng is None:
             raise RuntimeError("WristFT.zero() called before reset(rng)")
-        if not self.params.zeroing or not self._started:
+        st = self.state
+        if not self.params.zeroing or st[fs.STARTED] == 0.0:
             return
-        self._offset = self._clean
-        self._filt = (0.0, 0.0, 0.0)
+        st[fs.OFFSET:fs.OFFSET + 3] = st[fs.CLEAN:fs.CLEAN + 3]
+        st[fs.FILT:fs.FILT + 3] = 0.0

@@ -1,0 +1,66 @@
+"""The compiled per-tick kernels give the bits of the library calls they stand for: MuJoCo's
+``mju_mulMatVec`` and ``mj_jacSite``, numpy's small ``matmul``; and MjData's fields reach them
+through one array (:class:`handover_env.mjdata_view.MjDataView`)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+import handover_env  # noqa: F401
+from handover_env.kernel_math import mat3_mul, mat3_vec, mat3t_vec, mj_dot
+from handover_env.mjdata_view import MjDataView
+
+
+def test_mj_dot_is_mujocos_dot_product_bit_for_bit() -> None:
+    rng = np.random.default_rng(0)
+    for n in list(range(1, 20)) + [26, 62, 63]:
+        for _ in range(50):
+            m, v, out = rng.standard_normal((1, n)), rng.standard_normal(n), np.zeros(1)
+            mujoco.mju_mulMatVec(out, m, v)
+            assert mj_dot(m[0], 0, v, 0, n) == out[0]
+
+
+def test_3x3_products_are_numpys_matmul_bit_for_bit() -> None:
+    rng = np.random.default_rng(1)
+    out = np.zeros(9)
+    for _ in range(500):
+        a, b, x = rng.standard_normal((3, 3)), rng.standard_normal((3, 3)), rng.standard_normal(3)
+        mat3_mul(out, 0, a.ravel(), 0, b.ravel(), 0, False)
+        assert np.array_equal(out.reshape(3, 3), a @ b)
+        mat3_mul(out, 0, a.ravel(), 0, b.ravel(), 0, True)
+        assert np.array_equal(out.reshape(3, 3), a @ b.T)
+        assert np.array_equal(np.array(mat3_vec(a.ravel(), 0, *x)), a @ x)
+        assert np.array_equal(np.array(mat3t_vec(a.ravel(), 0, *x)), a.T @ x)
+
+
+def test_data_view_reads_and_writes_the_mjdata_fields() -> None:
+    env = gym.make("handover_env/DynamicHandover-v0").unwrapped
+    env.reset(seed=0)
+    d = env.data
+    view = MjDataView(d)
+    for name in ("qpos", "qvel", "ctrl", "site_xmat", "cdof", "cvel", "qfrc_bias"):
+        a = np.asarray(getattr(d, name)).ravel()
+        o = view.offset(name)
+        assert np.array_equal(view.mem[o:o + a.size], a)
+    view.mem[view.offset("ctrl") + 2] = 12.5
+    assert d.ctrl[2] == 12.5
+    assert view.offset("site_xmat", 1) == view.offset("site_xmat") + 9
+
+
+def test_controller_tick_jacobian_and_torques_are_mujocos() -> None:
+    env = gym.make("handover_env/DynamicHandover-v0").unwrapped
+    obs, _ = env.reset(seed=3)
+    m, d, c = env.model, env.data, env.controller
+    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    for _ in range(10):
+        obs, *_ = env.step(np.array([0.5, -0.6, 1.2, -1.0], dtype=np.float32))
+        tau = c.compute(d).copy()
+        mujoco.mj_jacSite(m, d, jacp, jacr, c.ids.tcp_site)
+        assert np.array_equal(c._jac12[:3], jacp) and np.array_equal(c._jac12[3:6], jacr)
+        assert np.array_equal(d.ctrl[np.asarray(c.ids.arm_act)], tau)  # written to ctrl
+        twist = np.zeros(6)
+        mujoco.mju_mulMatVec(twist, c._jac12[:6], d.qvel)
+        assert np.array_equal(c._z[3:9], twist)  # z = [x, J q̇, J_prev q̇, 1, 1, vec R]
+        assert np.all(np.abs(tau) <= c._limits)
