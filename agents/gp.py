@@ -47,6 +47,10 @@ variance sigma2_k across demos, so all flows must share one prior scale; per-dem
 marginal-likelihood fits would make a demo with small fitted s2 look "close" everywhere.
 The same triple is used by the exact GP (IAAL), so FITC and exact differ only by the sparse
 approximation.
+
+The module is over 500 lines because the two models, their textbook forms (for the tests) and
+the bank that batches them share the formulas above; the per-frame arithmetic is compiled
+apart in :mod:`agents.flow_kernels`.
 """
 
 from __future__ import annotations
@@ -56,6 +60,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import cho_solve, cholesky, eigh, solve_triangular
+
+from agents.flow_kernels import exponent_kernel, flow_kernel
 
 DEFAULT_RCOND = (
     1e-14  # eigenvalues of K_mm below rcond * max are treated as zero (float64 round-off)
@@ -377,10 +383,6 @@ class FlowBank:
         self._seg_top = np.concatenate(seg_top)  # 2 per demo: mean rows start, T rows start
         self._seg_bot = np.concatenate(seg_bot)
         self._mean_idx = np.concatenate(mean_idx)[self._unsort]  # (N, D) in the caller's order
-        self._empty_bot = np.array(
-            [bk.bottom.shape[1] == 0 for bk in self.buckets for _ in range(bk.n_demos)]
-        )
-        self._empty_top = np.array([bk.h == 0 for bk in self.buckets for _ in range(bk.n_demos)])
         self.z_all = np.concatenate(z_all)  # (P, 2) every (padded) inducing point of every demo
         c = -0.5 / hyp.lengthscale**2
         self._c = c
@@ -390,32 +392,75 @@ class FlowBank:
             mask, c * np.sum(self.z_all**2, axis=1) + np.log(hyp.signal_var), -np.inf
         )
         self._z_t = np.ascontiguousarray(self.z_all.T)  # (2, P)
-        self._any_empty_top, self._any_empty_bot = bool(self._empty_top.any()), bool(
-            self._empty_bot.any())
         self._single: tuple | None = None  # buffers of a one-point query, built on first use
+        self._segs: tuple | None = None  # per-demo rows of the products, built on first use
 
     def __getstate__(self) -> dict:
         # The one-point buffers hold views of each other, which a copy would not keep: a copy
         # (pickle, deepcopy, a worker process) builds its own on first use.
-        return {**self.__dict__, "_single": None}
+        return {**self.__dict__, "_single": None, "_segs": None}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update({**state, "_single": None, "_segs": None})
+
+    def _segments(self) -> tuple:
+        """Per demo (the caller's order): its mean rows in ``top``, its ``[start, stop)`` rows of
+        ``T k`` in ``top`` and in ``bottom``; and log s2 (built once)."""
+        if self._segs is None:
+            stops = (np.append(self._seg_top[1:], self._top_off[-1])[1::2],
+                     np.append(self._seg_bot[1:], self._bot_off[-1]))
+            segs = [np.column_stack([lo, hi])[self._unsort].astype(np.int64)
+                    for lo, hi in zip((self._seg_top[1::2], self._seg_bot), stops)]
+            self._segs = (self._mean_idx.astype(np.int64), *segs, np.log(self.hyp.signal_var))
+        return self._segs
+
+    def _bucket_views(self, kt: np.ndarray, top: np.ndarray, bot: np.ndarray) -> list:
+        """Per bucket: its two stored blocks, the kernel columns (of ``kt`` (P, Q)) they multiply
+        and the rows of ``top`` / ``bot`` (rows, Q) the products go to."""
+        q, views = kt.shape[1], []
+        for b, t0, t1, b0, b1 in zip(
+            self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]
+        ):
+            kb = kt[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, q)
+            views.append((b.top, kb, top[t0:t1].reshape(b.n_demos, -1, q),
+                          (b.bottom, kb[:, b.h :], bot[b0:b1].reshape(b.n_demos, -1, q))
+                          if b1 > b0 else None))
+        return views
 
     def _single_query(self) -> tuple:
-        """Buffers of a one-point query (the streaming frame): the kernel row, the product
-        outputs and, per bucket, the views the two products read and write (built once)."""
+        """Buffers of a one-point query (the streaming frame), built once: the query, the
+        exponent and kernel rows, the product outputs, their per-bucket views and the flows."""
         if self._single is None:
-            k = np.empty((1, self.z_all.shape[0]), dtype=self.dtype)
+            p, n = self.z_all.shape[0], self.n_demos
+            e, k = np.empty((1, p), dtype=self.dtype), np.empty((1, p), dtype=self.dtype)
             top = np.empty((self._top_off[-1], 1), dtype=self.dtype)
             bot = np.empty((max(self._bot_off[-1], 1), 1), dtype=self.dtype)
-            kt, views = k.T, []
-            for b, t0, t1, b0, b1 in zip(
-                self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]
-            ):
-                kb = kt[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, 1)
-                views.append((b.top, kb, top[t0:t1].reshape(b.n_demos, -1, 1),
-                              (b.bottom, kb[:, b.h :], bot[b0:b1].reshape(b.n_demos, -1, 1))
-                              if b1 > b0 else None))
-            self._single = (k, top, bot, views)
+            self._single = (np.empty((1, 2)), e, k, top, bot, self._bucket_views(k.T, top, bot),
+                            np.empty((1, n, self.out_dim)), np.empty((1, n)))
         return self._single
+
+    def _flows(self, xq: np.ndarray, e: np.ndarray, k: np.ndarray, top: np.ndarray,
+               bot: np.ndarray, views: list | None, mean: np.ndarray,
+               var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The flows at queries ``xq`` (Q, 2) into ``mean``, ``var``: the kernel's exponent
+        (``e`` (Q, P)), ``k = exp(e)`` (numpy's own exp), the products of every bucket (``views``,
+        or built on ``k`` now), then every demo's mean and variance from them."""
+        mean_rows, top_seg, bot_seg, log_s2 = self._segments()
+        exponent_kernel(xq, self._c, self._z_t, self._log_base, log_s2, e)
+        np.exp(e, out=k)
+        for t, kb, out, rest in self._bucket_views(k.T, top, bot) if views is None else views:
+            np.matmul(t, kb, out=out)
+            if rest is not None:
+                np.matmul(*rest[:2], out=rest[2])
+        flow_kernel(top, bot, mean_rows, top_seg, bot_seg, self.hyp.signal_var, mean, var)
+        return mean, var
+
+    def predict_point(self, x0: float, x1: float) -> tuple[np.ndarray, np.ndarray]:
+        """Every demo's flow at one query point (the streaming frame): mean (1, N, D) and latent
+        variance (1, N), as :meth:`predict` gives them, in buffers the next call overwrites."""
+        xq, e, k, top, bot, views, mean, var = self._single_query()
+        xq[0, 0], xq[0, 1] = x0, x1
+        return self._flows(xq, e, k, top, bot, views, mean, var)
 
     @property
     def n_stored(self) -> int:
@@ -431,47 +476,14 @@ class FlowBank:
         """
         xq = np.asarray(xq, dtype=np.float64).reshape(-1, 2)
         q = xq.shape[0]
-        e = (-2.0 * self._c * xq) @ self._z_t  # (Q, P); the expansion is exact to ~1e-15 in float64
-        e += self._log_base
-        e += (self._c * np.sum(xq**2, axis=1))[:, None]
-        np.minimum(e, np.log(self.hyp.signal_var), out=e)  # round-off can not push k above s2
-        if q == 1:  # the streaming frame: the same products on buffers and views built once
-            k, top, bot, views = self._single_query()
-            if self.dtype == np.float32:  # float32 exp is ~3x faster; exponent error ~1e-7
-                np.exp(e.astype(np.float32), out=k)
-            else:
-                np.exp(e, out=k)
-            for t, kb, out, rest in views:
-                np.matmul(t, kb, out=out)
-                if rest is not None:
-                    np.matmul(*rest[:2], out=rest[2])
-        else:
-            if self.dtype == np.float32:
-                k = np.exp(e.astype(np.float32)).T
-            else:
-                k = np.exp(e, out=e).T  # (P, Q)
-            top = np.empty((self._top_off[-1], q), dtype=self.dtype)
-            bot = np.empty((max(self._bot_off[-1], 1), q), dtype=self.dtype)
-            for b, t0, t1, b0, b1 in zip(
-                self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]
-            ):
-                kb = k[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, q)
-                np.matmul(b.top, kb, out=top[t0:t1].reshape(b.n_demos, -1, q))
-                if b1 > b0:
-                    np.matmul(b.bottom, kb[:, b.h :], out=bot[b0:b1].reshape(b.n_demos, -1, q))
-        mean = top[self._mean_idx].astype(np.float64)  # (N, D, Q)
-        top *= top
-        bot *= bot
-        sq = np.add.reduceat(top, self._seg_top, axis=0)[1::2].astype(np.float64)  # (N_sorted, Q)
-        if self._any_empty_top:
-            sq[self._empty_top] = 0.0  # reduceat returns one element for an empty segment
-        if self._bot_off[-1] > 0:
-            sq_bot = np.add.reduceat(bot, np.minimum(self._seg_bot, bot.shape[0] - 1), axis=0)
-            if self._any_empty_bot:
-                sq_bot[self._empty_bot] = 0.0
-            sq += sq_bot
-        var = self.hyp.signal_var - sq[self._unsort]
-        return mean.transpose(2, 0, 1), var.T
+        if q == 1:
+            mean, var = self.predict_point(float(xq[0, 0]), float(xq[0, 1]))
+            return mean.copy(), var.copy()
+        top = np.empty((self._top_off[-1], q), dtype=self.dtype)
+        bot = np.empty((max(self._bot_off[-1], 1), q), dtype=self.dtype)
+        e = np.empty((q, self.z_all.shape[0]), dtype=self.dtype)
+        return self._flows(np.ascontiguousarray(xq), e, e, top, bot, None,
+                           np.empty((q, self.n_demos, self.out_dim)), np.empty((q, self.n_demos)))
 
 
 def build_bank(

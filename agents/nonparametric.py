@@ -69,6 +69,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agents.base import validate_history
+from agents.flow_kernels import blend_rows_kernel, cosine_rows_kernel, terms_kernel
 from agents.gp import DEFAULT_RCOND, FlowBank, GPHyperparameters, build_bank
 from agents.predictive import ClosedLoopConfig, PredictiveAgent
 from handover_env.config import HandoverParams
@@ -137,11 +138,15 @@ def backward_velocity(xy: np.ndarray, rate_hz: float) -> np.ndarray:
 
 
 def cosine_distance(a: np.ndarray, b: np.ndarray, min_speed: float) -> np.ndarray:
-    """``1 - a.b / (max(|a|, v0) max(|b|, v0))`` over the last axis (2D; the zero-velocity rule)."""
-    a0, a1, b0, b1 = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
-    na = np.maximum(np.sqrt(a0 * a0 + a1 * a1), min_speed)
-    nb = np.maximum(np.sqrt(b0 * b0 + b1 * b1), min_speed)
-    return 1.0 - (a0 * b0 + a1 * b1) / (na * nb)
+    """``1 - a.b / (max(|a|, v0) max(|b|, v0))`` over the last axis (2D; the zero-velocity rule),
+    ``a`` and ``b`` broadcast against each other."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    if a.shape[-1:] != (2,):
+        raise ValueError(f"cosine_distance takes 2D velocities (..., 2), got {a.shape}")
+    out = np.empty(a.shape[:-1])
+    cosine_rows_kernel(np.ascontiguousarray(a.reshape(-1, 2)),
+                       np.ascontiguousarray(b.reshape(-1, 2)), float(min_speed), out.reshape(-1))
+    return out
 
 
 @dataclass
@@ -208,7 +213,7 @@ class NonparametricAgent(PredictiveAgent):
         )
         lengths = dataset.lengths
         n, lmax = len(dataset), int(lengths.max())
-        self.lengths = lengths
+        self.lengths = np.ascontiguousarray(lengths, dtype=np.int64)
         self.receivers = np.full((n, lmax, 2), _FAR)
         self.givers = np.zeros((n, lmax, 3))
         for k, ep in enumerate(dataset):  # fit time only
@@ -218,10 +223,8 @@ class NonparametricAgent(PredictiveAgent):
         self._rr = np.sum(
             self.receivers**2, axis=2
         )  # (N, Lmax): |r|^2 for the closest-frame search
-        self._giver_rows = self.givers.reshape(-1, 3)  # (N * Lmax, 3), a view
         self.n_demos = n
         self._top_k = min(c.top_k, n)
-        self._steps = np.arange(c.horizon)
         self.reset()
         return self
 
@@ -235,8 +238,11 @@ class NonparametricAgent(PredictiveAgent):
         N)."""
         self._check_fitted()
         mean, var = self.bank.predict(np.asarray(xy) - self.origin)  # (F, N, 2), (F, N)
-        dcos = cosine_distance(vel[:, None, :], mean * self.output_scale, self.config.min_speed)
-        return self.config.kappa * dcos + var
+        c = self.config
+        terms = np.empty_like(var)
+        terms_kernel(np.ascontiguousarray(vel, dtype=np.float64).reshape(-1, 2), mean, var,
+                     self.output_scale, c.min_speed, c.kappa, terms)
+        return terms
 
     def _terms_batched(self, hist: np.ndarray) -> np.ndarray:
         """Summands of every frame of a history (T, 2): (T, N), in batches of frames."""
@@ -263,11 +269,12 @@ class NonparametricAgent(PredictiveAgent):
         ds = d[sel]
         w = np.exp(-(ds - ds.min()))
         w /= w.sum()
-        # t_k = argmin_t |r_{k,t} - x|^2 = argmin_t (|r_{k,t}|^2 - 2 r_{k,t}.x)
-        t_k = np.argmin(self._rr[sel] - self.receivers[sel] @ (2.0 * xy), axis=1)
-        rows = np.minimum(t_k[:, None] + self._steps[None, :], self.lengths[sel, None] - 1)
-        rows += (sel * self.givers.shape[1])[:, None]  # flat row index into every demo's rows
-        return (w @ self._giver_rows[rows.reshape(-1)].reshape(k, -1)).reshape(-1, 3)
+        # t_k = argmin_t |r_{k,t} - x|^2 = argmin_t (|r_{k,t}|^2 - 2 r_{k,t}.x), and the H giver
+        # rows from t_k on (flow_kernels.blend_rows_kernel)
+        rows = np.empty((k, 3 * self.config.horizon))
+        x0, x1 = (float(v) for v in xy)
+        blend_rows_kernel(sel, self._rr, self.receivers, x0, x1, self.lengths, self.givers, rows)
+        return (w @ rows).reshape(-1, 3)
 
     def predict(self, receiver_history: np.ndarray) -> np.ndarray:
         """(H, 3) predicted giver trajectory; row 0 is the current frame (open-loop use)."""
@@ -315,12 +322,12 @@ class NonparametricAgent(PredictiveAgent):
             v0, v1 = (x0 - l0) * self.config.rate_hz, (x1 - l1) * self.config.rate_hz
         # frame_terms(xy, vel) of one frame, in the same float64 operations
         o0, o1 = self.origin.tolist()
-        mean, var = self.bank.predict(np.array([[x0 - o0, x1 - o1]]))
-        scaled = mean[0] * self.output_scale
-        terms = cosine_distance(np.array([v0, v1]), scaled, self.config.min_speed)
-        terms *= self.config.kappa  # kappa * d_cos + sigma2: the frame's Eq. d summands
-        terms += var[0]
-        s.sums += terms
+        mean, var = self.bank.predict_point(x0 - o0, x1 - o1)
+        c = self.config
+        terms = np.empty((1, self.n_demos))
+        terms_kernel(np.array([[v0, v1]]), mean, var, self.output_scale, c.min_speed, c.kappa,
+                     terms)
+        s.sums += terms[0]
         s.count += 1
         s.last = np.array([x0, x1])
 
