@@ -241,15 +241,18 @@ class ImpedanceController:
         self._qpos_adr = _as_slice(ids.arm_qpos)
         self._tcp = ids.tcp_site
         self._payload_mass = 0.0  # mass of a held object to compensate, kg
-        self.set_params(params)
         # The tick's buffers live in one float64 workspace (fw) with an int64 one (iw) holding
         # its offsets and the index lists: the compiled tick (impedance_tick) takes both.
         sizes = {tk.I_JAC: 12 * nv, tk.I_W: n * 7 * _Z_SIZE, tk.I_Z: _Z_SIZE, tk.I_OUT: 7,
                  tk.I_TAUF: nv, tk.I_TAU: 6, tk.I_POST: 6, tk.I_LIMITS: 6, tk.I_LAST: 6,
-                 tk.I_MINV: 36, tk.I_ACC: 6, tk.I_CORR: 6, tk.I_SCAL: 4}
+                 tk.I_MINV: 36, tk.I_MINVR: 6 * nv, tk.I_ACC: 6, tk.I_CORR: 6, tk.I_SCAL: 5,
+                 tk.I_MINVJT: 6 * nv, tk.I_LAMINV: 36, tk.I_LAM: 36, tk.I_GAINS: 6 * _B_SIZE,
+                 tk.I_PGAIN: 6 * _B_SIZE, tk.I_CGAIN: 6 * _B_SIZE, tk.I_TRAJ: n * 12,
+                 tk.I_ROTMAPS: 36 * n, tk.I_PLAN: tk.P_SIZE, tk.I_POWERS: 9 * n, tk.I_CS: 3 * n,
+                 tk.I_ROTB: 108, tk.I_JACPLAN: 36, tk.I_TWIST: 6 * n}
         chain = sorted(_chain_dofs(model, int(model.site_bodyid[ids.tcp_site])))
         self._iw = iw = np.zeros(tk.I_SIZE + len(chain) + 12, dtype=np.int64)
-        iw[tk.I_NV], iw[tk.I_NCHAIN] = nv, len(chain)
+        iw[tk.I_NV], iw[tk.I_NCHAIN], iw[tk.I_NPLAN] = nv, len(chain), n
         iw[tk.I_SIZE:] = chain + np.asarray(ids.arm_dof).tolist() + np.asarray(ids.arm_act).tolist()
         self._fw = fw = np.zeros(sum(sizes.values()))
         views, at = {}, 0
@@ -258,28 +261,22 @@ class ImpedanceController:
             views[slot] = fw[at:at + size]
             at += size
         self._scal = views[tk.I_SCAL]
+        self._p_gain = views[tk.I_PGAIN].reshape(6, _B_SIZE)
+        self._c_gain = views[tk.I_CGAIN].reshape(6, _B_SIZE)
+        self._scal[tk.S_DAMP] = self.config.singular_damping
+        self.set_params(params)
         # Jacobians: rows 0:6 this tick's (translation, rotation), rows 6:12 the previous tick's.
         self._jac12 = views[tk.I_JAC].reshape(12, nv)
         self._jac_cur, self._jac_prev = self._jac12[0:6], self._jac12[6:12]
         self._jacp, self._jacr = self._jac12[0:3], self._jac12[3:6]
-        self._jac_plan = np.zeros((6, nv))  # the speed scaling's Jacobian, at a replan
-        self._jacp_plan, self._jacr_plan = self._jac_plan[0:3], self._jac_plan[3:6]
-        self._plan_twist = np.zeros((self.config.plan_ticks, 6))
+        self._plan_twist = views[tk.I_TWIST].reshape(n, 6)  # the speed check's twists
+        self._jjt = views[tk.I_PLAN][tk.P_JJT:tk.P_JJT + 36].reshape(6, 6)
         self.scaled_plans = 0  # replans slowed by the joint speed limit (since reset)
         self._j2 = self._jac12[:, self._dof]  # (12, 6) arm columns of both
         self._j = self._jac12[0:6, self._dof]
-        # If the TCP moves only with the arm joints (a fixed-base arm), the other columns of its
-        # Jacobian are exactly zero and the replan's products can run over all nv columns of the
-        # contiguous buffers (MuJoCo's mju_* products have the lowest call overhead).
-        arm = set(np.asarray(ids.arm_dof).tolist())
-        self._full_width = (
-            isinstance(self._dof, slice)
-            and _chain_dofs(model, int(model.site_bodyid[ids.tcp_site])) <= arm
-        )
-        self._minv_jt = np.zeros((6, nv))
+        self._minv_jt = views[tk.I_MINVJT].reshape(6, nv)
         self._x_minv = self._minv_jt[:, self._dof]
-        self._lam_inv = np.zeros((6, 6))
-        self._damp6 = self.config.singular_damping * np.eye(6)
+        self._lam_inv = views[tk.I_LAMINV].reshape(6, 6)
         self._stale = True
         self._tau_posture = views[tk.I_POST]
         self._posture = self.config.posture_stiffness > 0.0 or self.config.posture_damping > 0.0
@@ -288,33 +285,27 @@ class ImpedanceController:
         self._tmp6 = np.zeros(6)
         self._tmp6b = np.zeros(6)
         self._rest = np.zeros(6) if rest_qpos is None else np.asarray(rest_qpos, float).copy()
-        self._eye6 = np.eye(6)
-        self._lam = np.zeros((6, 6))
-        self._lam_rows = [(self._lam[k], self._eye6[k]) for k in range(6)]
+        self._lam = views[tk.I_LAM].reshape(6, 6)
         self._limits = views[tk.I_LIMITS]
         self._limits[:] = TORQUE_LIMITS
         # Joint speed / acceleration limiter (see _limit_joint_motion).
         self._arm_rows = np.zeros((6, nv))
         self._arm_rows[np.arange(6), np.asarray(ids.arm_dof)] = 1.0
-        self._minv_rows = np.zeros((6, nv))
+        self._minv_rows = views[tk.I_MINVR].reshape(6, nv)
         self._minv_aa = views[tk.I_MINV].reshape(6, 6)
         self._m_aa = np.zeros((6, 6))
         self._corr = views[tk.I_CORR]
         self.limited_ticks = 0  # ticks at which the limiter reduced the torque (since reset)
         self._minv_age = 2  # 2: M^-1 stale, 1: M^-1 fresh and M stale, 0: both fresh
         # Reference filter state and target.
-        self._x_start = np.zeros(3)  # reference state at the start of the current plan
-        self.v_d = np.zeros(3)
+        self._ps = ps = views[tk.I_PLAN]
+        self._x_start = ps[tk.P_X:tk.P_X + 3]  # reference state at the start of the current plan
+        self.v_d = ps[tk.P_V:tk.P_V + 3]
         self.a_d = np.zeros(3)
-        self.target_pos = np.zeros(3)
-        self.goal_pos = np.zeros(3)
-        self.target_yaw = 0.0
-        self.yaw_d = 0.0
-        self.yaw_rate_d = 0.0
-        self._gains = np.zeros((6, _B_SIZE))  # Λ P + C (see _gain_maps)
+        self.target_pos = ps[tk.P_TARGET:tk.P_TARGET + 3]
+        self.goal_pos = ps[tk.P_GOAL:tk.P_GOAL + 3]
+        self._gains = views[tk.I_GAINS].reshape(6, _B_SIZE)  # Λ P + C (see _gain_maps)
         self._w_plan = views[tk.I_W].reshape(n, 7, _Z_SIZE)  # W_k for each planned tick
-        self._rot_w = np.zeros((6, 9 * n))  # G_r L_k for all k, layout (6, 9, n)
-        self._ff_w = np.zeros((6, n))  # feed-forward column of W_k for all k
         self._z = views[tk.I_Z]
         self._z[_Z_CONST] = self._z[_Z_FF] = 1.0
         self._z_pos = self._z[_Z_POS:_Z_TWIST]
@@ -346,21 +337,17 @@ class ImpedanceController:
             rows.append(np.vstack([state, a_row]))
         # (plan_ticks, 3, 3): tick k -> (x_d, v after the tick, a during it) from (e, v, target) at
         # the start of the plan, e = x_d - target; the third column adds the target to x_d.
-        self._powers = np.zeros((n, 3, 3))
+        self._powers = views[tk.I_POWERS].reshape(n, 3, 3)
         self._powers[:, :, :2] = np.array(rows)
         self._powers[:, 0, 2] = 1.0
-        self._powers_rows = self._powers.reshape(3 * n, 3)
         # Plan buffers, overwritten at each replan. Columns of the filter state: x, y, z, yaw.
-        self._traj = np.zeros((n, 3, 4))  # tick k -> rows (x_d, v, a), columns (x, y, z, yaw)
-        self._traj12 = self._traj.reshape(n, 12)
-        self._traj_rows = self._traj.reshape(3 * n, 4)
+        # tick k -> rows (x_d, v, a), columns (x, y, z, yaw)
+        self._traj = views[tk.I_TRAJ].reshape(n, 3, 4)
         self._x_plan = self._traj[:, 0, :3]
-        self._yaw_plan = self._traj[:, 0, 3]
-        self._v_plan = self._traj[:, 1, :3]
-        self._yaw_rate_plan = self._traj[:, 1, 3]
-        self._cs = np.ones((3, n))  # [1, cos ψ_k, sin ψ_k] for each tick k (columns)
-        self._rot_basis_t = np.ascontiguousarray(_rotation_error_basis().T)  # (36, 3)
-        self._rot_maps = np.zeros((36, n))  # _rotation_error_map(R_d,k) flattened, layout (4, 9, n)
+        self._rot_basis_t = views[tk.I_ROTB].reshape(36, 3)
+        self._rot_basis_t[...] = _rotation_error_basis().T
+        # _rotation_error_map(R_d,k) flattened, layout (4, 9, n)
+        self._rot_maps = views[tk.I_ROTMAPS].reshape(36, n)
         self._rot_l = self._rot_maps[:27].reshape(3, 9 * n)  # L_k for all k, layout (3, 9, n)
         self._plan_i = 0
 
@@ -372,7 +359,34 @@ class ImpedanceController:
 
     @x_d.setter
     def x_d(self, value: np.ndarray) -> None:
-        self._x_start = np.asarray(value, dtype=float).copy()
+        self._x_start[:] = np.asarray(value, dtype=float)
+
+    @property
+    def yaw_d(self) -> float:
+        """The reference's yaw at the start of the current plan, rad."""
+        return float(self._ps[tk.P_YAW])
+
+    @yaw_d.setter
+    def yaw_d(self, value: float) -> None:
+        self._ps[tk.P_YAW] = value
+
+    @property
+    def yaw_rate_d(self) -> float:
+        """The reference's yaw rate at the start of the current plan, rad/s."""
+        return float(self._ps[tk.P_YAW_RATE])
+
+    @yaw_rate_d.setter
+    def yaw_rate_d(self, value: float) -> None:
+        self._ps[tk.P_YAW_RATE] = value
+
+    @property
+    def target_yaw(self) -> float:
+        """The goal's yaw, rad."""
+        return float(self._ps[tk.P_GOAL_YAW])
+
+    @target_yaw.setter
+    def target_yaw(self, value: float) -> None:
+        self._ps[tk.P_GOAL_YAW] = value
 
     @property
     def payload_mass(self) -> float:
@@ -430,14 +444,15 @@ class ImpedanceController:
             sel[col, _B_FF.start + r] = 1.0
         for k in range(3):
             sel[3 + k, _B_ROT.start + k] = 1.0
-        self._p_gain = p_g @ sel
-        self._c_gain = c_g @ sel
+        self._p_gain[...] = p_g @ sel
+        self._c_gain[...] = c_g @ sel
         self._c_gain[0:3, _Z_CONST] = -self._payload_mass * GRAVITY
 
     def _set_limit_values(self) -> None:
         c = self.config
         w = c.ref_omega
         self._max_step = min(c.max_linear_speed * math.e / w, c.max_linear_accel / w**2)
+        self._ps[tk.P_MAX_STEP] = self._max_step
         self._vlim, self._alim = c.joint_speed_limit, c.joint_accel_limit
         self._limit_motion = self._vlim > 0.0 or self._alim > 0.0
         if self._vlim <= 0.0:
@@ -489,14 +504,6 @@ class ImpedanceController:
         self._tau += self._m_aa @ self._corr.copy()
         self.limited_ticks += 1
 
-    def _refresh_arm_inverse(self) -> None:
-        """M^-1 of the arm joints with this tick's M(q), for the joint motion limiter: at every
-        tick from a replan until the first correction, whose M^-1 (and M) then hold until the
-        next replan."""
-        mujoco.mj_solveM(self.model, self._bound, self._minv_rows, self._arm_rows)
-        self._minv_aa[...] = self._minv_rows[:, self._dof]
-        self._minv_age = 1  # M itself is inverted only if a correction needs it
-
     def reset(self, data: mujoco.MjData, rest_qpos: np.ndarray | None = None) -> None:
         """Start the reference at the current TCP pose with zero velocity."""
         if rest_qpos is not None:
@@ -504,7 +511,7 @@ class ImpedanceController:
         self._bind(data)
         pos = data.site_xpos[self.ids.tcp_site]
         self.x_d = pos.copy()
-        self.v_d = np.zeros(3)
+        self.v_d[:] = 0.0
         self.a_d = np.zeros(3)
         self.target_pos[:] = pos
         z = data.site_xmat[self.ids.tcp_site].reshape(3, 3)[:, 2]
@@ -528,76 +535,32 @@ class ImpedanceController:
 
         The filter's input is the goal, but moved at most ``min(v_max e / ω, a_max / ω²)`` from the
         current reference: the critically damped response to such a step peaks at ``v_max`` and
-        starts with acceleration ``a_max``. With a joint speed limit, the plan is then speed-scaled
-        (:meth:`_speed_scale`). Replanning every ``plan_ticks`` (about one 30 Hz
+        starts with acceleration ``a_max``. Replanning every ``plan_ticks`` (about one 30 Hz
         step) lets the reference approach far goals at a bounded speed and acceleration.
+
+        With a joint speed limit the plan is speed-scaled. The UR controller does not bend a
+        commanded path at a joint speed limit: it slows the whole motion down ("speed scaling",
+        reported as RTDE ``speed_scaling``; see the UR ROS 2 driver's
+        ``scaled_joint_trajectory_controller`` and ros2_controllers' speed-scaling page,
+        "On-Robot speed scaling ... One example of such robots are the Universal Robots
+        manipulators"). Here: the joint velocities ``J⁻¹ [v_d; ψ̇_d ẑ]`` the plan's reference
+        twist asks for at each tick (this state's arm Jacobian, damped as Λ is), and the plan
+        slowed by ``q̇_max`` over their largest magnitude if that exceeds ``q̇_max``. The plan is
+        linear in its step and initial velocity, so scaling both scales every velocity of it by
+        the same factor while its start stays where the reference is. The torque-level limiter
+        (:meth:`_limit_joint_motion`) stays as the backstop for the feedback's own joint speeds.
+
+        Compiled (:func:`~handover_env.robot.impedance_tick.impedance_plan` and
+        :func:`~handover_env.robot.impedance_tick.impedance_plan_scale`) around numpy's solve of
+        the damped least squares (LAPACK's, whose order of operations the kernel does not copy).
         """
-        i = self._plan_i - 1
-        if i >= 0:  # the reference state reached by the last tick of the current plan
-            self._x_start = self._x_plan[i].copy()
-            self.v_d = self._v_plan[i].copy()
-            self.yaw_d = float(self._yaw_plan[i])
-            self.yaw_rate_d = float(self._yaw_rate_plan[i])
-        x0, x1, x2 = self._x_start.tolist()
-        g0, g1, g2 = self.goal_pos.tolist()
-        d0, d1, d2 = g0 - x0, g1 - x1, g2 - x2
-        dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        if dist > self._max_step:
-            f = self._max_step / dist
-            d0, d1, d2 = d0 * f, d1 * f, d2 * f
-        t0, t1, t2 = x0 + d0, x1 + d1, x2 + d2
-        target = self.target_pos
-        target[0], target[1], target[2] = t0, t1, t2
-        # The yaw goes through the same filter, along the shorter way round.
-        yaw_t = self.target_yaw
-        dyaw = (self.yaw_d - yaw_t + math.pi) % (2 * math.pi) - math.pi
-        v0, v1, v2 = self.v_d.tolist()
-        s0 = np.array(
-            ((x0 - t0, x1 - t1, x2 - t2, dyaw), (v0, v1, v2, self.yaw_rate_d), (t0, t1, t2, yaw_t))
-        )
-        # (n, 3 rows: x_d, v, a; 4 columns: x, y, z, yaw)
-        mujoco.mju_mulMatMat(self._traj_rows, self._powers_rows, s0)
-        if self._scale_speed and self._bound is not None:
-            scale = self._speed_scale()
-            if scale < 1.0:  # the same plan, slowed: its displacement and velocities times scale
-                s0[:2, :] *= scale
-                t0, t1, t2 = x0 - s0[0, 0], x1 - s0[0, 1], x2 - s0[0, 2]
-                s0[2, :] = (t0, t1, t2, self.yaw_d - s0[0, 3])
-                target[0], target[1], target[2] = t0, t1, t2
-                mujoco.mju_mulMatMat(self._traj_rows, self._powers_rows, s0)
-                self.scaled_plans += 1
-        cs = self._cs
-        np.cos(self._yaw_plan, out=cs[1])
-        np.sin(self._yaw_plan, out=cs[2])
-        mujoco.mju_mulMatMat(self._rot_maps, self._rot_basis_t, cs)
-        self._w_plan[:, 6, _Z_ROT:] = self._rot_maps[27:].T  # trace(R_d Rᵀ)
+        check = self._scale_speed and self._bound is not None
+        mem = self._view.mem if self._bound is not None else self._fw
+        if tk.impedance_plan(mem, self._fw, self._iw, self._plan_i - 1, check):
+            sol = np.linalg.solve(self._jjt, self._plan_twist.T)  # (6, n) damped least squares
+            self.scaled_plans += tk.impedance_plan_scale(self._fw, self._iw, sol)
         self._plan_i = 0
         self._stale = True
-
-    def _speed_scale(self) -> float:
-        """The factor (<= 1) that keeps the plan's reference within the joint speed limit.
-
-        The UR controller does not bend a commanded path at a joint speed limit: it slows the
-        whole motion down ("speed scaling", reported as RTDE ``speed_scaling``; see the UR ROS 2
-        driver's ``scaled_joint_trajectory_controller`` and ros2_controllers' speed-scaling page,
-        "On-Robot speed scaling ... One example of such robots are the Universal Robots
-        manipulators"). Here: the joint velocities ``J⁻¹ [v_d; ψ̇_d ẑ]`` the plan's reference twist
-        asks for at each tick (this tick's arm Jacobian, damped as Λ is), and ``q̇_max`` over their
-        largest magnitude if that exceeds ``q̇_max``. The plan is linear in its step and initial
-        velocity, so scaling both scales every velocity of it by the same factor while its start
-        stays where the reference is. The torque-level limiter (:meth:`_limit_joint_motion`) stays
-        as the backstop for the feedback's own joint speeds.
-        """
-        mujoco.mj_jacSite(self.model, self._bound, self._jacp_plan, self._jacr_plan, self._tcp)
-        j = self._jac_plan[:, self._dof]
-        twist = self._plan_twist
-        twist[:, :3] = self._v_plan
-        twist[:, 5] = self._yaw_rate_plan
-        jjt = j @ j.T
-        jjt.flat[::7] += self.config.singular_damping
-        qd = j.T @ np.linalg.solve(jjt, twist.T)  # (6, n) damped least squares
-        peak = float(np.abs(qd).max())
-        return self._vlim / peak if peak > self._vlim else 1.0
 
     def _refresh_dynamics(self, data: mujoco.MjData) -> None:
         """Λ(q) (as a Cholesky factor of Λ^-1), J M^-1, the null-space posture torque and W_k.
@@ -607,29 +570,14 @@ class ImpedanceController:
         this tick's Jacobian (already in ``_jac_cur``).
         """
         mujoco.mj_solveM(self.model, data, self._minv_jt, self._jac_cur)  # rows of J M^-1
+        # Λ^-1 = J M^-1 Jᵀ + damping (Cholesky-factored in place), Λ, and W_k z = G s_k + c for
+        # every planned tick k, with s = [x_d - x, L_k vec R, v_d - J q̇, a_d - (J q̇ - J_prev q̇)
+        # / dt] (x_d, v_d, a_d, R_d from the plan; L_k the rotation error map of R_d,k):
+        # compiled (impedance_refresh), in MuJoCo's and numpy's order of summation.
+        tk.impedance_refresh(self._fw, self._iw)
         j = self._j
         x = self._x_minv
         lam_inv = self._lam_inv
-        if self._full_width:
-            mujoco.mju_mulMatMatT(lam_inv, self._minv_jt, self._jac_cur)
-        else:
-            np.dot(x, j.T, out=lam_inv)
-        lam_inv += self._damp6
-        mujoco.mju_cholFactor(lam_inv, 0.0)  # Λ^-1 = L Lᵀ; Λ v = cholSolve(v)
-        for lam_k, e_k in self._lam_rows:
-            mujoco.mju_cholSolve(lam_k, lam_inv, e_k)  # Λ is symmetric: rows = columns
-        # W_k z = G s_k + c for every planned tick k, with
-        #   s = [x_d - x, L_k vec R, v_d - J q̇, a_d - (J q̇ - J_prev q̇) / dt]
-        # (x_d, v_d, a_d, R_d from the plan; L_k the rotation error map of R_d,k).
-        b = self._gains
-        np.dot(self._lam, self._p_gain, out=b)
-        b += self._c_gain
-        w_plan, n = self._w_plan, self._n_plan
-        w_plan[:, :6, :_B_TICK] = b[:, :_B_TICK]
-        np.dot(b[:, _B_FF], self._traj12.T, out=self._ff_w)
-        w_plan[:, :6, _Z_FF] = self._ff_w.T
-        np.dot(b[:, _B_ROT], self._rot_l, out=self._rot_w)
-        w_plan[:, :6, _Z_ROT:] = self._rot_w.reshape(6, 9, n).transpose(2, 0, 1)
         self._minv_age = 2  # the limiter's M^-1 and M of the arm are refreshed when used
         # Null-space posture term, N = I - Jᵀ J̄ᵀ with J̄ᵀ = Λ J M^-1.
         if self._posture:
@@ -697,11 +645,16 @@ class ImpedanceController:
             self._refresh_dynamics(data)
             phase = tk.WRENCH | tk.TORQUE | tk.CLIP
         if self._minv_age and self._limit_motion:
-            self._refresh_arm_inverse()
+            # The limiter's M^-1 of the arm joints with this tick's M(q), at every tick from a
+            # replan until the first correction, whose M^-1 (and M) then hold until the next
+            # replan; the tick gathers its arm columns (GATHER).
+            mujoco.mj_solveM(self.model, data, self._minv_rows, self._arm_rows)
+            self._minv_age = 1  # M itself is inverted only if a correction needs it
+            phase |= tk.GATHER
         code = tk.impedance_tick(mem, fw, iw, i, phase)
         if code == tk.FAR_ROTATION:
             self._far_rotation(i)
-            code = tk.impedance_tick(mem, fw, iw, i, tk.TORQUE | tk.CLIP)
+            code = tk.impedance_tick(mem, fw, iw, i, tk.TORQUE | tk.CLIP | (phase & tk.GATHER))
         if code == tk.LIMITED:
             self._limit_joint_motion()
             tk.impedance_tick(mem, fw, iw, i, tk.CLIP)
