@@ -55,6 +55,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import EzPickle
 
+from handover_env.envs import observe as ob
 from handover_env.envs.config import EnvConfig
 from handover_env.envs.contacts import ContactMonitor
 from handover_env.envs.tasks.base import TERMS, HandoverReward, HandoverTask
@@ -216,9 +217,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
             ACTION_LOW.astype(np.float64).tolist(),
             ACTION_HIGH.astype(np.float64).tolist(),
         )
-        self._obs_low64, self._obs_high64 = low.astype(np.float64), high.astype(np.float64)
-        self._obs_out = np.zeros(self.layout.size, dtype=np.float64)
-        self._obs_views = {k: self._obs[v] for k, v in self._slices.items()}
+        self._obs_bounds = np.vstack([low, high]).astype(np.float64)
+        self._obs_pv = np.zeros(ob.PV_SIZE)
         self._vel6 = np.zeros(6)
 
     def default_task(self, reward: HandoverReward) -> HandoverTask:
@@ -232,6 +232,23 @@ class HandoverEnvBase(gym.Env, EzPickle):
         valid; they save the attribute lookups and index arithmetic in the hot loop.
         """
         d, ids = self.data, self.ids
+        m, view, sl = self.model, self.data_view, self._slices
+        oi = self._obs_oi = np.zeros(ob.OI_SIZE, dtype=np.int64)
+        for slot, name in ((ob.O_HIST, "receiver_xy_history"), (ob.O_SEEN, "receiver_frames_seen"),
+                           (ob.O_EEPOS, "ee_pos"), (ob.O_QUAT, "ee_quat"),
+                           (ob.O_LIN, "ee_linvel"), (ob.O_ANG, "ee_angvel"),
+                           (ob.O_OBJ, "object_pos"), (ob.O_HELD, "object_held"),
+                           (ob.O_FORCE, "wrist_force"), (ob.O_TORQUE, "wrist_torque"),
+                           (ob.O_OPEN, "gripper_open"), (ob.O_TIME, "time"),
+                           (ob.O_HAND, "receiver_hand_xyz"), (ob.O_ENABLED, "robot_enabled")):
+            oi[slot] = sl[name].start
+        oi[ob.O_W] = self.layout.history
+        tcp_body = int(m.site_bodyid[ids.tcp_site])
+        oi[ob.M_TCP_POS] = view.offset("site_xpos", ids.tcp_site)
+        oi[ob.M_TCP_MAT] = view.offset("site_xmat", ids.tcp_site)
+        oi[ob.M_TCP_CVEL] = view.offset("cvel", tcp_body)
+        oi[ob.M_TCP_COM] = view.offset("subtree_com", int(m.body_rootid[tcp_body]))
+        oi[ob.M_OBJ_POS] = view.offset("xpos", ids.object_body)
         self._gripper_qpos = ids.gripper_driver_qpos
         self._object_body = ids.object_body
         self._qpos_v = d.qpos
@@ -595,33 +612,18 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.outcome = self.task.outcome(self)
 
     def _observation(self) -> np.ndarray:
-        d, v = self.data, self._obs_views
-        t = float(d.time)
-        n = self._n_hist
-        w = self.layout.history
-        frames = self._frames_buf[max(0, n - w):n]
-        hist = v["receiver_xy_history"].reshape(w, 2)
-        hist[w - frames.shape[0]:] = frames
-        hist[: w - frames.shape[0]] = frames[0]
-        v["receiver_frames_seen"][0] = self._frames_seen
-        v["ee_pos"][...] = self._tcp_pos_v
-        mujoco.mju_mat2Quat(v["ee_quat"], self._tcp_xmat_v)
-        vel = self._vel6
-        mujoco.mj_objectVelocity(self.model, d, mujoco.mjtObj.mjOBJ_SITE, self.ids.tcp_site, vel, 0)
-        v["ee_linvel"][...] = vel[3:]
-        v["ee_angvel"][...] = vel[:3]
-        v["object_pos"][...] = self._object_pos_v
-        v["object_held"][0] = 1.0 if self._gripper_holds else 0.0
-        v["wrist_force"][...] = self.wrist.f_ext
-        v["wrist_torque"][...] = self.wrist.torque()
-        v["gripper_open"][0] = 1.0 if self.released else 0.0
-        v["time"][0] = t
-        v["receiver_hand_xyz"][...] = self._hand_obs
-        v["robot_enabled"][0] = 1.0 if t >= self.t_enabled else 0.0
-        out = self._obs_out  # np.clip to the Box bounds (float64 copies of them), then float32
-        np.minimum(self._obs, self._obs_high64, out=out)
-        np.maximum(out, self._obs_low64, out=out)
-        return out.astype(np.float32)
+        """The observation (:func:`handover_env.envs.observe.observe`, one compiled call)."""
+        pv = self._obs_pv
+        t = self.data.time
+        pv[ob.V_NHIST] = self._n_hist
+        pv[ob.V_SEEN] = self._frames_seen
+        pv[ob.V_HELD] = 1.0 if self._gripper_holds else 0.0
+        pv[ob.V_OPEN] = 1.0 if self.released else 0.0
+        pv[ob.V_TIME] = t
+        pv[ob.V_ENABLED] = 1.0 if t >= self.t_enabled else 0.0
+        pv[ob.V_HAND:ob.V_HAND + 3] = self._hand_obs
+        return ob.observe(self.data_view.mem, self._obs, self._obs_bounds, self._obs_oi, pv,
+                          self._frames_buf, self.wrist.state)
 
     def _info(self) -> dict[str, Any]:
         """Episode facts; values not yet defined (no release, no grasp) are ``None``.

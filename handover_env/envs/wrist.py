@@ -54,8 +54,8 @@ class WristSensor:
         f_true: (3,) the exact filtered estimate.
         ft: the episode's UR5e sensor model, or None (exact).
         tau_ext: (3,) the external torque, N m (world frame), as of the last :meth:`torque`.
-        state: the compiled tick's state (:mod:`handover_env.envs.wrist_tick`); ``f_ext`` and
-            ``f_true`` are views of it.
+        state: the compiled tick's state (:mod:`handover_env.envs.wrist_tick`); ``f_ext``,
+            ``f_true`` and ``tau_ext`` are views of it.
     """
 
     def __init__(
@@ -67,6 +67,7 @@ class WristSensor:
         self.state = st = np.zeros(wt.SIZE)
         self.f_ext = st[wt.F_EXT:wt.F_EXT + 3]
         self.f_true = st[wt.F_TRUE:wt.F_TRUE + 3]
+        self.tau_ext = st[wt.TAU:wt.TAU + 3]
         self._no_model = np.zeros(1)  # the sensor-model argument when there is no model
         self._ft_state = self._no_model
         self._tick_dt = ticks * model.opt.timestep
@@ -80,8 +81,6 @@ class WristSensor:
         st[wt.O_OMEGA] = v.offset("cvel", ids.gripper_root_body)
         st[wt.O_ALPHA] = v.offset("cacc", ids.gripper_root_body)
         self._ft_xmat_v = data.site_xmat[ids.ft_site]
-        self._ft_torque_v = data.sensordata[ids.ft_torque_adr:ids.ft_torque_adr + 3]
-        self._ft_acc_v = data.sensordata[ids.ft_acc_adr:ids.ft_acc_adr + 3]
         self.reset()
 
     def set_filter_tau(self, filter_tau: float) -> None:
@@ -94,7 +93,7 @@ class WristSensor:
         """No force measured yet (a new episode); the filter starts from zero."""
         self.f_ext[:] = 0.0
         self.f_true[:] = 0.0
-        self.tau_ext = np.zeros(3)
+        self.tau_ext[:] = 0.0
 
     def start(self, params: WristFTParams, rng: np.random.Generator) -> None:
         """An episode's sensor (call after :meth:`update_payload`, the arm settled at the ready
@@ -176,16 +175,7 @@ class WristSensor:
         return math.sqrt(fx * fx + fy * fy + fz * fz)
 
     def torque(self) -> np.ndarray:
-        """External torque at the sensor (world frame), static load removed (per env step)."""
-        m_p = self._payload_mass
-        a0, a1, a2 = self._ft_acc_v.tolist()
-        l0, l1, l2 = m_p * a0, m_p * a1, m_p * a2
-        f0, f1, f2 = self._ft_torque_v.tolist()
-        c0, c1, c2 = self.state[wt.COM:wt.COM + 3].tolist()
-        t0 = (c1 * l2 - c2 * l1) - f0
-        t1 = (c2 * l0 - c0 * l2) - f1
-        t2 = (c0 * l1 - c1 * l0) - f2
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self._ft_xmat_v.tolist()
-        self.tau_ext = np.array([r00 * t0 + r01 * t1 + r02 * t2, r10 * t0 + r11 * t1 + r12 * t2,
-                                 r20 * t0 + r21 * t1 + r22 * t2])
-        return self.tau_ext
+        """External torque at the sensor (world frame), static load removed (per env step; a
+        copy of :attr:`tau_ext`, :func:`handover_env.envs.wrist_tick.wrist_torque`)."""
+        wt.wrist_torque(self.view.mem, self.state)
+        return self.tau_ext.copy()

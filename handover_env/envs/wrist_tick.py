@@ -19,7 +19,8 @@ from handover_env.sensors.ft_sense import BLOCK, DRAWS, ZI, ft_sense
 
 MASS, COM, CONF_MASS, CONF_COM, GAIN, F_TRUE, F_EXT, MODEL = 0, 1, 4, 5, 8, 9, 12, 15
 O_FORCE, O_ACC, O_TORQUE, O_XMAT, O_OMEGA, O_ALPHA = 16, 17, 18, 19, 20, 21
-SIZE = 22
+TAU = 22  # the external torque (world frame) as of the last wrist_torque
+SIZE = 25
 
 
 @kernel
@@ -75,3 +76,21 @@ def wrist_tick(mem, ws, ft):  # type: ignore[no-untyped-def]
         fx, fy, fz = ft_sense(ft, hx, hy, hz, mem, int(ws[O_XMAT]))
     ws[F_EXT], ws[F_EXT + 1], ws[F_EXT + 2] = fx, fy, fz
     return math.sqrt(fx * fx + fy * fy + fz * fz)
+
+
+@kernel
+def wrist_torque(mem, ws):  # type: ignore[no-untyped-def]
+    """External torque at the sensor (world frame), static load removed, into ``ws[TAU:]``:
+    ``R ((c × m a) - T)`` with the true payload (mass m, centre of mass c in the sensor frame)."""
+    m_p = ws[MASS]
+    i = int(ws[O_ACC])
+    l0, l1, l2 = m_p * mem[i], m_p * mem[i + 1], m_p * mem[i + 2]
+    i = int(ws[O_TORQUE])
+    c0, c1, c2 = ws[COM], ws[COM + 1], ws[COM + 2]
+    t0 = (c1 * l2 - c2 * l1) - mem[i]
+    t1 = (c2 * l0 - c0 * l2) - mem[i + 1]
+    t2 = (c0 * l1 - c1 * l0) - mem[i + 2]
+    i = int(ws[O_XMAT])
+    ws[TAU] = mem[i] * t0 + mem[i + 1] * t1 + mem[i + 2] * t2
+    ws[TAU + 1] = mem[i + 3] * t0 + mem[i + 4] * t1 + mem[i + 5] * t2
+    ws[TAU + 2] = mem[i + 6] * t0 + mem[i + 7] * t1 + mem[i + 8] * t2

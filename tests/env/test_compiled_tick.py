@@ -64,3 +64,21 @@ def test_controller_tick_jacobian_and_torques_are_mujocos() -> None:
         mujoco.mju_mulMatVec(twist, c._jac12[:6], d.qvel)
         assert np.array_equal(c._z[3:9], twist)  # z = [x, J q̇, J_prev q̇, 1, 1, vec R]
         assert np.all(np.abs(tau) <= c._limits)
+
+
+def test_observation_is_mujocos_pose_and_twist_of_the_tcp() -> None:
+    env = gym.make("handover_env/DynamicHandover-v0").unwrapped
+    obs, _ = env.reset(seed=5)
+    m, d, layout = env.model, env.data, env.layout
+    tcp = env.ids.tcp_site
+    for _ in range(8):
+        obs, *_ = env.step(np.array([0.4, -0.5, 1.1, -1.2], dtype=np.float32))
+        quat, vel = np.zeros(4), np.zeros(6)
+        mujoco.mju_mat2Quat(quat, d.site_xmat[tcp])
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, tcp, vel, 0)
+        assert np.array_equal(layout.part(obs, "ee_quat"), quat.astype(np.float32))
+        assert np.array_equal(layout.part(obs, "ee_linvel"), vel[3:].astype(np.float32))
+        assert np.array_equal(layout.part(obs, "ee_angvel"), vel[:3].astype(np.float32))
+        assert np.array_equal(layout.part(obs, "ee_pos"), d.site_xpos[tcp].astype(np.float32))
+        assert np.array_equal(layout.part(obs, "wrist_torque"),
+                              env.wrist.tau_ext.astype(np.float32))
