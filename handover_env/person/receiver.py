@@ -136,6 +136,7 @@ class Receiver:
         self.kind, self.source_id, self.hand_mode = "id", "", "reach"
         self.present_after_walk = False
         self.targets = BodyTargets(model, ids.body)
+        self._pelvis_target = self.targets.key1[0][0]  # a view: the nominal pelvis at step end
         self.measured = Effort(ids.body)
         self.pose: MotionPose | None = None
         self._reset_state()
@@ -459,7 +460,7 @@ class Receiver:
             self.state == "holding" and not self._released
         )
         # the nominal pelvis at the end of this step
-        self.measured.track(data, arm_out, self.targets.key1[0][0], self._dt)
+        self.measured.track(data, arm_out, self._pelvis_target, self._dt)
 
     # ------------------------------------------------------------------ grasp
     def grasp_point(self, data: mujoco.MjData) -> np.ndarray:
