@@ -30,6 +30,11 @@ agent's target (the residual is the place for that). ``info["reward_shaping"]`` 
 beside the env's ``reward_time``, ``reward_force`` and ``reward_outcome``, and
 ``info["reward_action_change"]`` and ``info["reward_contact"]`` the penalties of
 :mod:`baselines.rl.penalties` (0 with their weights at 0); the reward is the sum of all six.
+Mid-episode a step's info holds only these six terms, and a reset's only the receiver drawn
+(``train_receiver``, ``train_seed``): SB3 reads an info only at an episode's end (success,
+terminal observation), and a ``SubprocVecEnv`` worker pickles every step's info and the last
+reset's through its pipe (2.9 kB a step with the env's 48-key infos, 0.7 kB without). The step
+that ends an episode carries the env's whole info.
 """
 
 from __future__ import annotations
@@ -260,8 +265,7 @@ class HandoverTrainingEnv(gym.Wrapper):
             self._target = np.asarray(self.base.act(obs), dtype=np.float64)
         self._phi = self.shaping.potential(obs)
         self.memory.reset()
-        info = {**info, "train_receiver": kind, "train_seed": s}
-        return self._observation(obs), info
+        return self._observation(obs), {"train_receiver": kind, "train_seed": s}
 
     def _observation(self, obs: np.ndarray) -> Any:
         """The policy's observation (and, for an asymmetric critic, the privileged state)."""
@@ -280,8 +284,11 @@ class HandoverTrainingEnv(gym.Wrapper):
         change = action_change_cost(c.action_change, u, before) if c.action_change else 0.0
         contact = contact_cost(c.contact_penalty, segment_forces(self.env)) \
             if c.contact_penalty else 0.0
-        info = {**info, "reward_shaping": shaping, "reward_action_change": change,
-                "reward_contact": contact}
+        terms = {"reward_shaping": shaping, "reward_action_change": change,
+                 "reward_contact": contact}
+        info = {**info, **terms} if terminated or truncated else {
+            "reward_time": info["reward_time"], "reward_force": info["reward_force"],
+            "reward_outcome": info["reward_outcome"], **terms}
         if self.base is not None and not (terminated or truncated):
             self._target = np.asarray(self.base.act(obs), dtype=np.float64)
         return (self._observation(obs), float(reward) + shaping + change + contact, terminated,
