@@ -97,6 +97,8 @@ _DIVERGED = tuple(
         mujoco.mjtWarning.mjWARN_BADQACC,
     )
 )
+#: info keys of the reward terms a task reports (``reward_<term>``)
+_REWARD_KEYS = {term: f"reward_{term}" for term in TERMS}
 #: reset() options the envs understand; anything else is warned about by name.
 RESET_OPTIONS = ("receiver", "episode", "height", "speed", "hand_mode", "walker")
 
@@ -258,6 +260,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._tcp_xmat_v = d.site_xmat[ids.tcp_site]
         self._grip_v = d.site_xpos[ids.body.grip_site]
         self._object_xmat_v = d.xmat[ids.object_body]
+        # MuJoCo's warning counters of a diverging state (the binding's objects view MjData)
+        self._diverged = tuple(d.warning[w] for w in _DIVERGED)
 
     # ------------------------------------------------------------------ start state
     def _settled_start(self) -> tuple[np.ndarray, np.ndarray]:
@@ -603,12 +607,12 @@ class HandoverEnvBase(gym.Env, EzPickle):
         if math.isinf(self.t_enabled):  # the task tells when the robot may move, once it knows
             self.t_detect = self.task.detection_time(self)
             self.t_enabled = self.task.enabled_time(self)
-        warning = self.data.warning
-        if any(warning[w].number for w in _DIVERGED):
+        bad_qpos, bad_qvel, bad_qacc = self._diverged
+        if bad_qpos.number or bad_qvel.number or bad_qacc.number:
             # MuJoCo found a diverging acceleration and reset the simulation: the episode is void.
             self.outcome = "unstable"
             return
-        self.peak_contact_force = max(self.peak_wrist_force, float(self.contacts.peak.max()))
+        self.peak_contact_force = max(self.peak_wrist_force, self.contacts.peak_max)
         self.outcome = self.task.outcome(self)
 
     def _observation(self) -> np.ndarray:
@@ -636,27 +640,31 @@ class HandoverEnvBase(gym.Env, EzPickle):
         (``contact_force_<segment>``, ``body_contact_force``, ``penetration``,
         ``body_contact_robot``, ``body_contact_object``).
         """
-        ok = self.outcome == "success"
+        outcome = self.outcome
+        ok = outcome == "success"
         rec = self.receiver
-        delay = self.task.handover_delay
         # Paper Sec. V-C: from when the receiver leaves the start point to the gripper release;
         # the static baseline's stabilisation delay is subtracted ("handover_time") or not.
-        t_ho = self.t_release - rec.t_depart
+        t_depart = rec.t_depart
+        t_ho = self.t_release - t_depart
+        f_rel, t_rel = self.release_force, self.t_release
+        t_grasp, t_reach = rec.t_grasp, rec.t_reach
+        # (x != x: x is NaN, math.isnan without its call)
         info: dict[str, Any] = {
             "is_success": ok,
-            "outcome": self.outcome,
-            "handover_time": (t_ho - delay) if ok else None,
+            "outcome": outcome,
+            "handover_time": (t_ho - self.task.handover_delay) if ok else None,
             "handover_time_with_delay": t_ho if ok else None,
-            "release_force": None if math.isnan(self.release_force) else self.release_force,
+            "release_force": None if f_rel != f_rel else f_rel,
             "released": self.released,
-            "release_time": None if math.isnan(self.t_release) else self.t_release,
+            "release_time": None if t_rel != t_rel else t_rel,
             "peak_contact_force": self.peak_contact_force,
             "peak_wrist_force": self.peak_wrist_force,
             "receiver_id": f"{rec.kind}:{rec.source_id}",
             "receiver_state": rec.state,
-            "receiver_grasp_time": None if math.isnan(rec.t_grasp) else rec.t_grasp,
-            "transfer_time": None if math.isnan(rec.t_grasp) else rec.t_grasp,
-            "reach_onset_time": None if math.isnan(rec.t_reach) else rec.t_reach,
+            "receiver_grasp_time": None if t_grasp != t_grasp else t_grasp,
+            "transfer_time": None if t_grasp != t_grasp else t_grasp,
+            "reach_onset_time": None if t_reach != t_reach else t_reach,
             "transfer_pelvis_xy": None
             if rec.grasp_pelvis_xy is None
             else tuple(rec.grasp_pelvis_xy.tolist()),
@@ -665,17 +673,18 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 if self.transfer_object_pos is None
                 else tuple(self.transfer_object_pos.tolist())
             ),
-            "departure_time": rec.t_depart,
+            "departure_time": t_depart,
             "pull_force": self.pull_force,
             "robot_jerk_rms": math.sqrt(self._jerk_sq / self._jerk_n) if self._jerk_n else 0.0,
             "robot_jerk_peak": math.sqrt(self._jerk_peak_sq),
-            "time": float(self.data.time),
+            "time": self.data.time,
             "sensing": self.sensor_profile.name,
         }
+        keys = _REWARD_KEYS
         for term, value in self.reward_terms.items():
-            info[f"reward_{term}"] = value
+            info[keys[term] if term in keys else f"reward_{term}"] = value
         info.update(rec.effort())
-        info.update(self.contacts.info())
+        info.update(self.contacts.entries)
         return info
 
     # ------------------------------------------------------------------ rendering

@@ -45,6 +45,8 @@ class ContactMonitor:
 
     Attributes:
         peak: (S,) peak contact force on each body segment so far, N.
+        peak_max: the largest of :attr:`peak`, N (a float).
+        entries: the info entries (:meth:`info`) as of the last scan; read, do not change.
         penetration: deepest robot/object-person penetration so far, m (0 if none).
         touched_robot, touched_object: whether the robot / the object touched the person.
         unsafe_segment: index of the first segment whose force exceeded its ISO limit, or -1.
@@ -78,6 +80,7 @@ class ContactMonitor:
         self.touched_robot = False
         self.touched_object = False
         self.unsafe_segment = -1
+        self._summarise()
 
     def scan(self, data: mujoco.MjData) -> None:
         """Look at this tick's contacts (call at every tick with contacts, and while
@@ -117,15 +120,21 @@ class ContactMonitor:
         if long.size and self.unsafe_segment < 0:
             self.unsafe_segment = int(long[0])
         self.active = bool(force.max() > 1e-3)
+        self._summarise()
+
+    def _summarise(self) -> None:
+        """The body's peak (:attr:`peak_max`) and the info entries, as of the last scan (they
+        change only in :meth:`scan` and :meth:`reset`, so a step without contacts reads them)."""
+        self.peak_max = float(self.peak.max())
+        entries: dict[str, float | bool] = dict(zip(_FORCE_KEYS, self.peak.tolist()))
+        entries["body_contact_force"] = self.peak_max
+        entries["body_contact_force_raw"] = self.raw_peak
+        entries["penetration"] = self.penetration
+        entries["body_contact_robot"] = self.touched_robot
+        entries["body_contact_object"] = self.touched_object
+        self.entries = entries
 
     def info(self) -> dict[str, float | bool]:
         """Flat info entries: ``contact_force_<segment>`` for every segment, the body's peak,
-        penetration and the touched flags."""
-        peak = self.peak.tolist()
-        out: dict[str, float | bool] = dict(zip(_FORCE_KEYS, peak))
-        out["body_contact_force"] = float(self.peak.max())
-        out["body_contact_force_raw"] = self.raw_peak
-        out["penetration"] = self.penetration
-        out["body_contact_robot"] = self.touched_robot
-        out["body_contact_object"] = self.touched_object
-        return out
+        penetration and the touched flags (a new dict; :attr:`entries` is the monitor's own)."""
+        return dict(self.entries)
