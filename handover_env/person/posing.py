@@ -11,9 +11,9 @@ into quaternions as MuJoCo's ``mju_mat2Quat`` does (:func:`mat_quat`). It runs o
 The small products are summed as numpy sums them, so the pose is bit for bit the numpy one:
 a 3x3 matrix times a 3x3 matrix or a 3-vector is OpenBLAS's (:func:`mat_mat`, :func:`mat_vec`:
 numpy's ``matmul`` hands both to OpenBLAS, whose Haswell kernels fuse the multiply-adds, see
-:func:`fma`), the norm of a vector is a plain sum of squares left to right (OpenBLAS's ``ddot``
-on 3 or 4 numbers, numpy's row reductions), and sines, cosines and square roots are the C
-library's, as Python's ``math`` calls them.
+:func:`handover_env.kernel_math.fma`), the norm of a vector is a plain sum of squares left to
+right (OpenBLAS's ``ddot`` on 3 or 4 numbers, numpy's row reductions), and sines, cosines and
+square roots are the C library's, as Python's ``math`` calls them.
 
 Layouts: a 3x3 matrix is a 9-tuple, row-major; the motion is one row per frame (:func:`motion_rows`)
 and the person's constants and the call's inputs are the slots of one array (``io``, see
@@ -25,11 +25,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from llvmlite import ir
-from numba.core import types
-from numba.extending import intrinsic
 
 from handover_env.compiled import kernel
+from handover_env.kernel_math import fma
 
 Mat3 = tuple[float, float, float, float, float, float, float, float, float]
 
@@ -39,20 +37,6 @@ SHOULDER, ELBOW, WRIST, GRIP, REST_LOWER = 6, 9, 12, 15, 18  # local vectors (3 
 STRAIGHT_REACH, MAX_TURN, GRIP_LEN, L_UPPER, L_FORE, L_LOWER = 21, 22, 23, 24, 25, 26
 SEGS, TORSO, ARM, UPPER = 27, 28, 29, 32  # segment count, torso, right arm (3), upper-body mask
 IO_BASE = 32  # + one upper-body flag per segment
-
-
-@intrinsic
-def fma(typingctx, a, b, c):  # type: ignore[no-untyped-def]
-    """``a * b + c`` rounded once (LLVM's ``llvm.fma.f64``: the FMA instruction, or the C
-    library's ``fma`` where the CPU has none, which rounds the same way)."""
-    sig = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        dbl = ir.DoubleType()
-        fn = builder.module.declare_intrinsic("llvm.fma", [dbl], ir.FunctionType(dbl, [dbl] * 3))
-        return builder.call(fn, args)
-
-    return sig, codegen
 
 
 @kernel
