@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from handover_env.compiled import kernel
-from handover_env.person.posing import fma
+from handover_env.kernel_math import fma
 
 
 @kernel
