@@ -48,11 +48,15 @@ from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
+from numpy.linalg import _umath_linalg
 
 from handover_env.config import HandoverParams
 from handover_env.mjdata_view import MjDataView
 from handover_env.robot import impedance_tick as tk
 from handover_env.robot.scene import TORQUE_LIMITS, SceneIds
+
+#: LAPACK's dgesv as numpy.linalg.solve calls it (the same gufunc, without the wrapper)
+_lapack_solve = _umath_linalg.solve
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
@@ -249,7 +253,7 @@ class ImpedanceController:
                  tk.I_MINVJT: 6 * nv, tk.I_LAMINV: 36, tk.I_LAM: 36, tk.I_GAINS: 6 * _B_SIZE,
                  tk.I_PGAIN: 6 * _B_SIZE, tk.I_CGAIN: 6 * _B_SIZE, tk.I_TRAJ: n * 12,
                  tk.I_ROTMAPS: 36 * n, tk.I_PLAN: tk.P_SIZE, tk.I_POWERS: 9 * n, tk.I_CS: 3 * n,
-                 tk.I_ROTB: 108, tk.I_JACPLAN: 36, tk.I_TWIST: 6 * n}
+                 tk.I_ROTB: 108, tk.I_JACPLAN: 36, tk.I_TWIST: 6 * n, tk.I_ARMROWS: 6 * nv}
         chain = sorted(_chain_dofs(model, int(model.site_bodyid[ids.tcp_site])))
         self._iw = iw = np.zeros(tk.I_SIZE + len(chain) + 12, dtype=np.int64)
         iw[tk.I_NV], iw[tk.I_NCHAIN], iw[tk.I_NPLAN] = nv, len(chain), n
@@ -264,6 +268,7 @@ class ImpedanceController:
         self._p_gain = views[tk.I_PGAIN].reshape(6, _B_SIZE)
         self._c_gain = views[tk.I_CGAIN].reshape(6, _B_SIZE)
         self._scal[tk.S_DAMP] = self.config.singular_damping
+        self._jjt_regular = self.config.singular_damping > 0.0
         self.set_params(params)
         # Jacobians: rows 0:6 this tick's (translation, rotation), rows 6:12 the previous tick's.
         self._jac12 = views[tk.I_JAC].reshape(12, nv)
@@ -289,7 +294,7 @@ class ImpedanceController:
         self._limits = views[tk.I_LIMITS]
         self._limits[:] = TORQUE_LIMITS
         # Joint speed / acceleration limiter (see _limit_joint_motion).
-        self._arm_rows = np.zeros((6, nv))
+        self._arm_rows = views[tk.I_ARMROWS].reshape(6, nv)
         self._arm_rows[np.arange(6), np.asarray(ids.arm_dof)] = 1.0
         self._minv_rows = views[tk.I_MINVR].reshape(6, nv)
         self._minv_aa = views[tk.I_MINV].reshape(6, 6)
@@ -557,7 +562,14 @@ class ImpedanceController:
         check = self._scale_speed and self._bound is not None
         mem = self._view.mem if self._bound is not None else self._fw
         if tk.impedance_plan(mem, self._fw, self._iw, self._plan_i - 1, check):
-            sol = np.linalg.solve(self._jjt, self._plan_twist.T)  # (6, n) damped least squares
+            # (6, n) damped least squares: LAPACK's dgesv through numpy's gufunc, as
+            # np.linalg.solve calls it; with damping J Jᵀ + d I is positive definite, so the
+            # wrapper's singular-matrix check (an errstate context per call) is only needed
+            # without it
+            if self._jjt_regular:
+                sol = _lapack_solve(self._jjt, self._plan_twist.T, signature="dd->d")
+            else:
+                sol = np.linalg.solve(self._jjt, self._plan_twist.T)
             self.scaled_plans += tk.impedance_plan_scale(self._fw, self._iw, sol)
         self._plan_i = 0
         self._stale = True
@@ -569,10 +581,10 @@ class ImpedanceController:
         slowly with q, while J, the errors and the bias forces are updated at every tick. Uses
         this tick's Jacobian (already in ``_jac_cur``).
         """
-        mujoco.mj_solveM(self.model, data, self._minv_jt, self._jac_cur)  # rows of J M^-1
-        # Λ^-1 = J M^-1 Jᵀ + damping (Cholesky-factored in place), Λ, and W_k z = G s_k + c for
-        # every planned tick k, with s = [x_d - x, L_k vec R, v_d - J q̇, a_d - (J q̇ - J_prev q̇)
-        # / dt] (x_d, v_d, a_d, R_d from the plan; L_k the rotation error map of R_d,k):
+        # J M^-1 (mj_solveM), Λ^-1 = J M^-1 Jᵀ + damping (Cholesky-factored in place), Λ, and
+        # W_k z = G s_k + c for every planned tick k, with
+        # s = [x_d - x, L_k vec R, v_d - J q̇, a_d - (J q̇ - J_prev q̇) / dt]
+        # (x_d, v_d, a_d, R_d from the plan; L_k the rotation error map of R_d,k):
         # compiled (impedance_refresh), in MuJoCo's and numpy's order of summation.
         tk.impedance_refresh(self._fw, self._iw)
         j = self._j
@@ -603,6 +615,9 @@ class ImpedanceController:
             iw[tk.I_QVEL], iw[tk.I_CDOF] = view.offset("qvel"), view.offset("cdof")
             iw[tk.I_COM] = view.offset("subtree_com", root)
             iw[tk.I_BIAS], iw[tk.I_CTRL] = view.offset("qfrc_bias"), view.offset("ctrl")
+            if data.qvel.shape[0] != self.model.nv:
+                raise ValueError("data is not an MjData of this controller's model")
+            iw[tk.I_MODEL], iw[tk.I_DATA] = self.model._address, data._address
         self._bound = data
         self._xpos_v = data.site_xpos[self._tcp]
         self._xmat_v = data.site_xmat[self._tcp]
@@ -648,7 +663,6 @@ class ImpedanceController:
             # The limiter's M^-1 of the arm joints with this tick's M(q), at every tick from a
             # replan until the first correction, whose M^-1 (and M) then hold until the next
             # replan; the tick gathers its arm columns (GATHER).
-            mujoco.mj_solveM(self.model, data, self._minv_rows, self._arm_rows)
             self._minv_age = 1  # M itself is inverted only if a correction needs it
             phase |= tk.GATHER
         code = tk.impedance_tick(mem, fw, iw, i, phase)

@@ -11,8 +11,9 @@ One call does, by the bits of ``phase``:
 - :data:`TORQUE`: ``τ = Jᵀ F + qfrc_bias + τ_posture``, and with a joint speed or acceleration
   limit the joint accelerations ``q̈ = M_arm^-1 (τ - c)`` checked against their bounds;
 - :data:`CLIP`: τ clipped to the torque limits, kept and written to the arm's ``ctrl``;
-- :data:`GATHER` (with ``TORQUE``): first copy the arm columns of the rows ``M^-1 e_arm``
-  (``minv_rows``, solved by the caller with ``mj_solveM``) into the limiter's ``M_arm^-1``.
+- :data:`GATHER` (with ``TORQUE``): first solve the rows ``M^-1 e_arm`` (``minv_rows``, MuJoCo's
+  ``mj_solveM`` called from the kernel, :mod:`handover_env.mujoco_calls`) and copy their arm
+  columns into the limiter's ``M_arm^-1``.
 
 The products are MuJoCo's (``mju_mulMatVec``, ``mju_mulMatTVec``) in MuJoCo's order
 (:func:`handover_env.kernel_math.mj_dot`), so the tick gives the same bits as those calls.
@@ -29,6 +30,7 @@ import math
 
 from handover_env.compiled import kernel
 from handover_env.kernel_math import fma, mj_dot
+from handover_env.mujoco_calls import mj_solve_m
 
 JAC, WRENCH, TORQUE, CLIP, GATHER = 1, 2, 4, 8, 16
 ALL = JAC | WRENCH | TORQUE | CLIP
@@ -46,7 +48,9 @@ I_TRAJ, I_ROTMAPS, I_NPLAN = 31, 32, 33
 # The plan's (impedance_plan): its state, the filter's powers (n, 3, 3), [1, cos, sin] (3, n), the
 # rotation error basis (36, 3), the speed check's arm Jacobian (6, 6) and twists (n, 6).
 I_PLAN, I_POWERS, I_CS, I_ROTB, I_JACPLAN, I_TWIST = 34, 35, 36, 37, 38, 39
-I_SIZE = 40  # the fixed slots; then the chain dofs, the 6 arm dofs and the 6 arm actuators
+# MuJoCo's model and data (addresses, for mj_solveM) and the unit rows e_arm (6, nv) in fw.
+I_MODEL, I_DATA, I_ARMROWS = 40, 41, 42
+I_SIZE = 43  # the fixed slots; then the chain dofs, the 6 arm dofs and the 6 arm actuators
 # Scalars (float workspace at iw[I_SCAL]): payload weight factor 9.81 m, joint speed limit,
 # joint acceleration limit, 1 / tick.
 S_GM, S_VLIM, S_ALIM, S_INV_DT, S_DAMP = 0, 1, 2, 3, 4
@@ -120,6 +124,8 @@ def impedance_tick(mem, fw, iw, i, phase):  # type: ignore[no-untyped-def]
             fw[tau + k] += fw[post + k]
         if phase & GATHER:
             minv, rows = iw[I_MINV], iw[I_MINVR]
+            base = fw.ctypes.data
+            mj_solve_m(iw[I_MODEL], iw[I_DATA], base + 8 * rows, base + 8 * iw[I_ARMROWS], N_ARM)
             for r in range(N_ARM):
                 for c in range(N_ARM):
                     fw[minv + N_ARM * r + c] = fw[rows + r * nv + iw[arm + c]]
@@ -172,7 +178,7 @@ def qv_arm(iw, k):  # type: ignore[no-untyped-def]
 
 @kernel
 def impedance_refresh(fw, iw):  # type: ignore[no-untyped-def]
-    """The replan's Λ and W_k from ``J M^-1`` (already in the workspace, by ``mj_solveM``).
+    """The replan's ``J M^-1`` (MuJoCo's ``mj_solveM`` on this tick's J), Λ and W_k.
 
     ``Λ^-1 = J M^-1 Jᵀ + d I`` (MuJoCo's ``mju_mulMatMatT``), factored in place as MuJoCo's
     ``mju_cholFactor`` does, ``Λ`` row by row with ``mju_cholSolve``; then ``B = Λ P + C`` and
@@ -182,6 +188,8 @@ def impedance_refresh(fw, iw):  # type: ignore[no-untyped-def]
     """
     nv, n = iw[I_NV], iw[I_NPLAN]
     jac, mjt, li, lam = iw[I_JAC], iw[I_MINVJT], iw[I_LAMINV], iw[I_LAM]
+    base = fw.ctypes.data
+    mj_solve_m(iw[I_MODEL], iw[I_DATA], base + 8 * mjt, base + 8 * jac, 6)  # rows of J M^-1
     damp = fw[iw[I_SCAL] + S_DAMP]
     for r in range(6):
         for c in range(6):
