@@ -25,6 +25,8 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	$(if $(TORCH_INDEX),$(PY) -m pip install --quiet torch --index-url $(TORCH_INDEX))
 	$(PY) -m pip install --quiet -e '.[test]'
+	# compile the env's numba kernels once into the cache, before test workers or the demo start
+	$(PY) -m handover_env.envs.warmup
 	@touch $(STAMP)
 
 demo: $(STAMP)
