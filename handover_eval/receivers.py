@@ -18,7 +18,7 @@ instead: none of it is in ``--data``, the models fit on all of ``--data``
 one dataset the workers receive (:func:`handover_eval.methods.with_test_data`).
 
 For recordings, :func:`recorded_transfer` gives when and where the recorded receiver took the
-object (``handover_eval.calibration.detect.detect_transfer`` on the smoothed skeleton and
+object (``handover_env.data.detect.detect_transfer`` on the smoothed skeleton and
 object), the reference that the simulated transfer is compared with (Δt, Δx).
 """
 
@@ -183,9 +183,9 @@ def other_replays(
 
 def recorded_transfer(path: str) -> tuple[float, float]:
     """``(time s, pelvis x m)`` of the recorded receiver's grasp, NaNs when none is detected."""
+    from handover_env.data.detect import detect_transfer
     from handover_env.data.filtering import smooth_track
     from handover_env.person.recording import load_recording
-    from handover_eval.calibration.detect import detect_transfer
 
     rec = load_recording(path)
     pose = smooth_track(rec.receiver_pose, RATE_HZ)

@@ -2,7 +2,9 @@
 not simulation (``handover-data transfer-stats``, ``walk-stats``, ``sensing``, ``reach-spread``
 and ``calibrated-range``, and ``evaluate.py far-pass``).
 
-* :mod:`.detect`: the transfer, reach onset, giver release and the arm drawn back in a recording;
+* the transfer and the reach onset in a recording are detected by :mod:`handover_env.data.detect`
+  (the simulator replays a recorded person's own reach with it); :mod:`.release`: the giver's
+  release and the arm drawn back;
 * :mod:`.measures`: the per-recording measures at those events;
 * :mod:`.decisions`: the person's decision rules checked on the recordings, and the reach fit;
 * :mod:`.report`: the run over a dataset folder (calibration and held-out halves, quantiles);

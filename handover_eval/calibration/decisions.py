@@ -31,11 +31,11 @@ import math
 
 import numpy as np
 
+from handover_env.data.detect import PELVIS, R_SHOULDER, WalkingFrame
 from handover_env.person.receiver_rules import PathAhead, closest_approach, left_behind
 from handover_env.person.settings import PASS_DISTANCE, ReceiverConfig
-from handover_eval.calibration.detect import PELVIS, R_SHOULDER, WalkingFrame
 
-#: Slower than this (m/s, the walking speed of :func:`~handover_eval.calibration.detect.
+#: Slower than this (m/s, the walking speed of :func:`~handover_env.data.detect.
 #: walking_frame`) the receiver pauses.
 PAUSE_SPEED = 0.2
 #: The simulated person's default ``give_up_behind`` (m).

@@ -10,7 +10,7 @@ the moment of transfer, over all recordings with a detected transfer, the range 
 
 so the set stays within what people did and does not extrapolate past the 5 % tail.
 :func:`pelvis_y_at_transfer` measures one recording (the smoothed skeleton and object, the
-transfer detector of :mod:`handover_eval.calibration.detect`, as the closed loop's recorded
+transfer detector of :mod:`handover_env.data.detect`, as the closed loop's recorded
 transfer); :func:`derive_range` the quantiles over a folder. ``evaluate.py far-pass --data
 PATH/whole_motions`` prints them; the protocol's :data:`.protocol.FAR_PASS_Y` holds the values
 measured on the 875-recording development copy.
@@ -34,9 +34,9 @@ LOW_Q, HIGH_Q = 0.05, 0.25
 
 def pelvis_y_at_transfer(path: str | Path) -> float:
     """The recorded receiver's smoothed pelvis y (m) at the detected transfer, NaN if none."""
+    from handover_env.data.detect import detect_transfer
     from handover_env.data.filtering import smooth_track
     from handover_env.person.recording import load_recording
-    from handover_eval.calibration.detect import detect_transfer
 
     rec = load_recording(path)
     pose = smooth_track(rec.receiver_pose, RATE_HZ)

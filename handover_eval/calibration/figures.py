@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handover_eval.calibration.detect import RATE_HZ
+from handover_env.data.detect import RATE_HZ
 from handover_eval.calibration.measures import trace_lags
 from handover_eval.reporting import write_png
 

@@ -207,7 +207,7 @@ def write_markdown(
         f"docs/calibration` from `{summary['source']}` ({summary['recordings']} recordings"
         + (f", first {summary['limit']} of each kind only" if summary.get("limit") else "")
         + f", {summary['skipped_files']} skipped). Statistics over recordings only; no recording's "
-        "own values are stored. Code: `handover_eval/calibration/detect.py` (rules), "
+        "own values are stored. Code: `handover_env/data/detect.py` (rules), "
         "`calibration/measures.py` and `calibration/decisions.py` (quantities), "
         "`handover_env/data/filtering.py` (the track filter).",
         "",

@@ -1,12 +1,12 @@
 """Per-recording quantities for the receiver calibration (issue 12, section 2), from the events of
-:mod:`handover_eval.calibration.detect`.
+:mod:`handover_env.data.detect`.
 
 :func:`analyse_recording` smooths one recording with
 :func:`~handover_env.data.filtering.smooth_track`,
 detects transfer, reach onset, giver release and arm-back, and returns every quantity of
 :data:`MEASURES` (NaN where its events are missing). :func:`track_noise` measures the recorded
 tracks' speed spikes and jumps before and after the filter. Body-frame coordinates are (forward,
-left, up-from-pelvis) as in :func:`~handover_eval.calibration.detect.to_body_frame`; heights
+left, up-from-pelvis) as in :func:`~handover_env.data.detect.to_body_frame`; heights
 labelled "above pelvis" add the pelvis height (``pelvis_z_transfer``) to become heights above the
 floor.
 """
@@ -17,9 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from handover_env.data.filtering import lowpass, smooth_track
-from handover_eval.calibration.decisions import WALK_MEASURES, walk_measures
-from handover_eval.calibration.detect import (
+from handover_env.data.detect import (
     GIVER_HAND_JOINTS,
     HEADING_CUTOFF_HZ,
     PELVIS,
@@ -30,15 +28,16 @@ from handover_eval.calibration.detect import (
     arm_length,
     baseline_slice,
     check_recording,
-    detect_arm_back,
     detect_reach_onset,
-    detect_release,
     detect_transfer,
     hand_height,
     nearest_distance,
     to_body_frame,
     walking_frame,
 )
+from handover_env.data.filtering import lowpass, smooth_track
+from handover_eval.calibration.decisions import WALK_MEASURES, walk_measures
+from handover_eval.calibration.release import detect_arm_back, detect_release
 
 #: Slow-down window around the transfer, s (before, after).
 SLOWDOWN_WINDOW = (1.0, 0.5)
@@ -172,7 +171,7 @@ class RecordingAnalysis:
         reasons: why an event is missing, by event name.
         measures: every name of :data:`MEASURES` -> value (NaN when undefined).
         traces: aligned traces on the grid of :data:`TRACE_WINDOW` (NaN outside the recording).
-        failure: the :data:`~handover_eval.calibration.detect.FAILURES` category when there is no
+        failure: the :data:`~handover_env.data.detect.FAILURES` category when there is no
             transfer, else "".
     """
 

@@ -2,7 +2,7 @@
 (``handover-data reach-spread PATH/whole_motions --out docs/calibration``).
 
 The take distance (right shoulder to object at the detected transfer) is modelled as the
-giver-dependent part plus a per-person offset (:mod:`handover_env.data.reach_offset`).
+giver-dependent part plus a per-person offset (:mod:`handover_env.person.reach_offset`).
 :func:`run_reach_spread`
 
 1. analyses every recording as ``transfer-stats`` does
@@ -15,7 +15,7 @@ giver-dependent part plus a per-person offset (:mod:`handover_env.data.reach_off
    :func:`~handover_eval.calibration.decisions.reach_fit` does, and compares it with the
    person's :data:`~handover_env.person.receiver_rules.TAKE_INTERCEPT` / ``TAKE_CLOSEST``;
 3. takes the line's residuals on the calibration half as the per-person offsets
-   (:func:`handover_env.data.reach_offset.reach_offset`) and describes them: mean, SD, a robust
+   (:func:`handover_env.person.reach_offset.reach_offset`) and describes them: mean, SD, a robust
    SD (1.4826 MAD), skewness and excess kurtosis with their standard errors, Shapiro-Wilk, and
    quantiles; the **distribution** is chosen by :func:`choose_distribution` (normal unless the
    skewness or the excess kurtosis lies beyond two standard errors of a normal's, then the
@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from handover_env.data.reach_offset import reach_offset
+from handover_env.person.reach_offset import reach_offset
 from handover_env.person.receiver_rules import TAKE_CLOSEST, TAKE_INTERCEPT
 from handover_eval.calibration.report import (
     DEFAULT_CALIBRATION_FOLDS,
@@ -252,7 +252,7 @@ def markdown(summary: dict, figure: str | None) -> str:
         f"({summary['recordings']} recordings; {sizes['calibration']} calibration and "
         f"{sizes['held_out']} held-out recordings with a transfer and a reach onset). Code: "
         "`handover_eval/calibration/reach_spread.py` (this page), "
-        "`handover_env/data/reach_offset.py` (the offset of one recording, the distribution the "
+        "`handover_env/person/reach_offset.py` (the offset of one recording, the distribution the "
         "person draws from). Statistics over recordings only.\n\n"
         "The reach statistic is the right shoulder's distance from the object at the detected "
         "transfer (`object_shoulder_transfer`, the env's `reach_distance`; "
@@ -306,7 +306,7 @@ def markdown(summary: dict, figure: str | None) -> str:
             "99.5 %; a draw beyond takes the end value)")
     text += (
         f"\n**Distribution: {off['distribution']}.** {off['why']}. The person draws an offset "
-        f"with `handover_env.data.reach_offset.REACH_OFFSET.draw(rng)`: {draw}. The offsets "
+        f"with `handover_env.person.reach_offset.REACH_OFFSET.draw(rng)`: {draw}. The offsets "
         "are pooled over ID and OOD walks (a person's liking for a reach does not depend on "
         "how they walk; the two SDs above agree).\n\n"
         "## How well the giver's part predicts (held-out half)\n\n"

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from handover_env.data import filtering
+from handover_env.data import detect, filtering
 from handover_env.data.dataset import stratified_fold_ids
 from handover_env.data.errors import DatasetError
 from handover_env.data.public import (
@@ -39,7 +39,7 @@ from handover_env.data.public import (
     safe_load_pickle,
     validate_record,
 )
-from handover_eval.calibration import decisions, detect
+from handover_eval.calibration import decisions, release
 from handover_eval.calibration.measures import (
     HAND_JUMP,
     MEASURES,
@@ -255,7 +255,10 @@ def rules() -> dict[str, float | int | str]:
         "MIN_BASELINE_FRAMES ONSET_RISE ONSET_BACKTRACK RELEASE_BASELINE_TIME RELEASE_MARGIN "
         "RELEASE_HOLD_TIME RELEASE_SPEED ARM_BACK_MARGIN"
     ).split()
-    out: dict[str, float | int | str] = {f"transfer.{n}": getattr(detect, n) for n in names}
+    out: dict[str, float | int | str] = {
+        f"transfer.{n}": getattr(release if n.startswith(("RELEASE", "ARM_BACK")) else detect, n)
+        for n in names
+    }
     for n in ("CUTOFF_HZ", "ORDER", "HAMPEL_HALF_WINDOW", "HAMPEL_SIGMAS", "HAMPEL_MIN_DEVIATION"):
         out[f"filtering.{n}"] = getattr(filtering, n)
     out["hand joints"] = "nearest of " + ", ".join(map(str, detect.HAND_JOINTS))

@@ -18,7 +18,7 @@ module measures, at run time and from statistics only (nothing per recording is 
   only its total above 2 Hz is matched. The ZED SDK says its tracking filters the detections but
   not how, so no SDK smoothing is modelled on top: the recordings already are its output.
 * **Hand error** (:func:`carry_residual`): while the receiver carries the object away (from the
-  transfer, :func:`handover_eval.calibration.detect_transfer`, to the end), the ZED right hand
+  transfer, :func:`handover_env.data.detect_transfer`, to the end), the ZED right hand
   (joint 15) and the OptiTrack object move together; the hand-minus-object vector less its mean
   over that stretch (the grip offset) is the hand keypoint's error: its RMS and lag-1
   autocorrelation give the hand's AR(1) sigma and rho directly.
@@ -113,7 +113,7 @@ def carry_residual(receiver: np.ndarray, obj: np.ndarray, rate_hz: float = RATE_
 
     None when no transfer is detected or fewer than :data:`MIN_CARRY_FRAMES` frames follow it.
     """
-    from handover_eval.calibration.detect import detect_transfer
+    from handover_env.data.detect import detect_transfer
 
     det = detect_transfer(smooth_track(receiver, rate_hz), smooth_track(obj, rate_hz), rate_hz)
     if det.frame is None or receiver.shape[0] - det.frame < MIN_CARRY_FRAMES:

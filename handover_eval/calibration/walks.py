@@ -50,7 +50,7 @@ from handover_env.data.filtering import lowpass, smooth_track
 RATE_HZ = 30.0
 PELVIS = 0
 #: Speed low-pass, Hz: below the step frequency (~1.6 Hz; handover_env/data/filtering.py), as the
-#: transfer detector's walking speed (:data:`.detect.SPEED_CUTOFF_HZ`).
+#: transfer detector's walking speed (:data:`handover_env.data.detect.SPEED_CUTOFF_HZ`).
 SPEED_CUTOFF_HZ = 1.0
 #: Heading low-pass, Hz: below the stride frequency (~0.8 Hz), as the detector's walking frame.
 HEADING_CUTOFF_HZ = 0.5

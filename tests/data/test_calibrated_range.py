@@ -1,5 +1,5 @@
 """The range of walks the person was calibrated on: the fields of a walk
-(:mod:`handover_env.data.calibrated_range`), the check, the committed constants, and
+(:mod:`handover_env.person.calibrated_range`), the check, the committed constants, and
 ``handover-data calibrated-range`` on recordings built from the synthetic generator and on the
 development copy (skipped when it is absent)."""
 
@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 from synthetic_skeletons import write_folder
 
-from handover_env.data import calibrated_range as cr
-from handover_env.data.calibrated_range import (
+from handover_env.person import calibrated_range as cr
+from handover_env.person import motion
+from handover_env.person.calibrated_range import (
     CALIBRATED_RANGE,
     CalibratedRange,
     check,
@@ -22,7 +23,6 @@ from handover_env.data.calibrated_range import (
     walk_fields,
     warning_text,
 )
-from handover_env.person import motion
 from handover_env.person.trajectory import base_trajectory
 from handover_eval.calibration import walks
 from handover_eval.cli.data import main

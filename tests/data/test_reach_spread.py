@@ -1,5 +1,5 @@
 """The reach's giver-dependent line and per-person offsets: one recording's offset
-(:mod:`handover_env.data.reach_offset`), the offsets' distribution, and ``handover-data
+(:mod:`handover_env.person.reach_offset`), the offsets' distribution, and ``handover-data
 reach-spread`` on recordings built from the synthetic generator and on the development copy
 (skipped when it is absent)."""
 
@@ -14,7 +14,7 @@ import pytest
 from synthetic_skeletons import write_folder
 
 from handover_env.data.filtering import smooth_track
-from handover_env.data.reach_offset import (
+from handover_env.person.reach_offset import (
     REACH_OFFSET,
     ReachOffsetDistribution,
     reach_offset,

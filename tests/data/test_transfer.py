@@ -16,17 +16,17 @@ import numpy as np
 import pytest
 
 from handover_env.data.dataset import HandoverDataset, stratified_fold_ids
-from handover_env.data.filtering import hampel, lowpass, smooth_track
-from handover_env.person.synthetic import generate_synthetic
-from handover_eval.calibration.detect import (
+from handover_env.data.detect import (
     check_recording,
     detect_reach_onset,
-    detect_release,
     detect_transfer,
     to_body_frame,
     walking_frame,
 )
+from handover_env.data.filtering import hampel, lowpass, smooth_track
+from handover_env.person.synthetic import generate_synthetic
 from handover_eval.calibration.measures import analyse_recording
+from handover_eval.calibration.release import detect_release
 from handover_eval.calibration.report import analyse_file, assign_halves
 from handover_eval.cli.data import build_parser, main
 

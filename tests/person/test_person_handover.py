@@ -235,10 +235,10 @@ def test_giver_replay_hands_over_with_the_papers_sensors_and_speed_limit_too():
 
 def _giver_replay_on_held_out(env) -> None:
     from handover_env.data.dataset import stratified_fold_ids
+    from handover_env.data.detect import detect_transfer
     from handover_env.data.filtering import smooth_track
     from handover_env.data.public import list_public_files
     from handover_env.person.recording import load_recording
-    from handover_eval.calibration.detect import detect_transfer
 
     files = list_public_files(DATA)
     folds = stratified_fold_ids(

@@ -16,10 +16,10 @@ statistic the env reports as ``reach_distance``) is modelled as two parts:
   reach. Its distribution over people is that of the line's residuals on the calibration half
   (:data:`REACH_OFFSET`); a recorded person's own offset is :func:`recording_reach_offset`.
 
-This module sits below the person (it imports nothing of it), so the line's coefficients are
-arguments. The recorded events (the transfer and the reach onset frames) come from the
-recordings' detectors (``handover_eval.calibration.detect``); the tracks must be smoothed as
-they are there (:func:`handover_env.data.filtering.smooth_track`).
+This module imports nothing else of the person (the calibration reads it too), so the line's
+coefficients are arguments. The recorded events (the transfer and the reach onset frames) come from
+the recordings' detectors (``handover_env.data.detect``); the tracks must be smoothed as they are
+there (:func:`handover_env.data.filtering.smooth_track`).
 """
 
 from __future__ import annotations

@@ -3,10 +3,12 @@
 Pure numpy detectors over one recording of the public Dynamic Handover Dataset (paper Sec. IV-A,
 "Data Collection"): the receiver's ZED BODY_34 skeleton ``(T, 34, 3)``, the object (OptiTrack)
 ``(T, 3)`` and, optionally, the giver's skeleton, at 30 Hz. They feed the calibration of the
-simulated receiver (issue 12, section 2; DESIGN.md "The simulated person"). Every threshold is a
-module constant, chosen from the 875-recording development copy as noted beside it. The inputs
-should already be smoothed (:func:`handover_env.data.filtering.smooth_track`);
-:func:`handover_eval.calibration.measures.analyse_recording` does that.
+simulated receiver (issue 12, section 2; DESIGN.md "The simulated person") and give a replayed
+person their own reach (:mod:`handover_env.person.take`). Every threshold is a module constant,
+chosen from the 875-recording development copy as noted beside it. The inputs should already be
+smoothed (:func:`handover_env.data.filtering.smooth_track`; the calibration's
+``analyse_recording`` does that). The giver's release and the arm drawn back, which only the
+calibration reads, are :mod:`handover_eval.calibration.release`'s.
 
 What the recordings show, and so what is detected (aligned medians over the development copy):
 the giver offers the object, the receiver's right hand rises about 0.37 m within about 0.4 s and
@@ -27,11 +29,11 @@ giver lets go and the receiver carries the object on. Hence three events:
   offset at contact varies between recordings (0.05 .. 0.3 m); the end of the approach does not.
   The object's own motion corroborates it: it starts to follow the receiver 1 frame before the
   detected arrival (median; 25-75 %: 5 frames before .. 3 after).
-* **release** (:func:`detect_release`): the giver lets go: the giver's nearest hand joint leaves
-  its holding distance to the object for good.
+* **release** (``handover_eval.calibration.release.detect_release``): the giver lets go: the
+  giver's nearest hand joint leaves its holding distance to the object for good.
 * **reach onset** (:func:`detect_reach_onset`): the start of the final rise of the right hand
-  (joint 15) above its walking height; **arm back** (:func:`detect_arm_back`): after the release,
-  the hand is drawn back to its walking distance from the body.
+  (joint 15) above its walking height; **arm back** (``release.detect_arm_back``): after the
+  release, the hand is drawn back to its walking distance from the body.
 
 Body frame (:func:`walking_frame`, :func:`to_body_frame`): origin at the pelvis, x forward along
 the walking direction (from the pelvis velocity low-passed below the stride frequency), y to the
@@ -87,16 +89,6 @@ ONSET_RISE = 0.05  # m above the walking median
 # the hand height), at most this far: a bell-shaped reach has risen 5 cm ~2-3 frames in.
 ONSET_BACKTRACK = 0.3  # s
 
-# Release. The giver's hand holds the object at 0.22 m (median; ZED-OptiTrack offset). During the
-# shared hold that distance drifts at ~0.05 m/s (the giver's arm turns with the receiver); letting
-# go, the hand pulls away at 0.3 .. 1.2 m/s and ends 0.9 m (median) from the object.
-RELEASE_BASELINE_TIME = 0.5  # s before the transfer: the giver still holds
-RELEASE_MARGIN = 0.10  # m: gone for good once this far beyond the holding distance ...
-RELEASE_HOLD_TIME = 0.3  # s: ... for this long (or to the end of the recording)
-RELEASE_SPEED = 0.15  # m/s: the release is the last frame before that moving away slower than this
-# Arm back: the hand's horizontal distance from the pelvis within this of its walking median
-# (0.29 m while walking, 0.46 m at the transfer: medians).
-ARM_BACK_MARGIN = 0.08  # m
 
 
 @dataclass(frozen=True)
@@ -333,49 +325,6 @@ def detect_reach_onset(receiver: np.ndarray, transfer: int, rate_hz: float = RAT
     while onset > stop and height[onset - 1] < height[onset]:
         onset -= 1
     return ReachOnset(onset, rise, "")
-
-
-def detect_release(
-    giver: np.ndarray, obj: np.ndarray, transfer: int, rate_hz: float = RATE_HZ
-) -> tuple[int | None, str]:
-    """The frame at which the giver lets go of the object (the end of the shared hold).
-
-    The holding distance is the median distance from the object to the giver's nearest hand
-    joint over the :data:`RELEASE_BASELINE_TIME` before the transfer. The hand is gone once it is
-    :data:`RELEASE_MARGIN` beyond that and stays so for :data:`RELEASE_HOLD_TIME` (or to the end);
-    the release is the last frame before that at which the hand moved away from the object slower
-    than :data:`RELEASE_SPEED` (the start of the fast separation; the slow drift of the shared
-    hold does not count).
-    """
-    distance = nearest_distance(giver[:, list(GIVER_HAND_JOINTS)], obj)
-    start = max(0, transfer - int(round(RELEASE_BASELINE_TIME * rate_hz)))
-    holding = float(np.median(distance[start : transfer + 1]))
-    away = distance > holding + RELEASE_MARGIN
-    stay = max(1, int(round(RELEASE_HOLD_TIME * rate_hz)))
-    for j in np.flatnonzero(away[transfer:]) + transfer:
-        if away[j : j + stay].all():
-            opening = np.gradient(distance)[transfer:j] * rate_hz
-            slow = np.flatnonzero(opening <= RELEASE_SPEED)
-            return (int(transfer + slow[-1]) if slow.size else int(transfer)), ""
-    return None, "the giver's hand stays at the object to the end of the recording"
-
-
-def detect_arm_back(
-    receiver: np.ndarray, transfer: int, start: int, rate_hz: float = RATE_HZ
-) -> int | None:
-    """First frame from ``start`` at which the hand is drawn back to the body (the arm-extended
-    end).
-
-    Back means: the horizontal distance of joint 15 from the pelvis is within
-    :data:`ARM_BACK_MARGIN` of its walking median (over the onset baseline). The receiver may still
-    hold the object up in front; the arm is no longer stretched out. In the recordings this happens
-    0.2 s (median) before the giver lets go: the receiver draws the object in while the giver still
-    holds it, which is the pull that makes the giver release. None if not before the end.
-    """
-    horizontal = np.linalg.norm(receiver[:, R_HAND, :2] - receiver[:, PELVIS, :2], axis=1)
-    base = float(np.median(horizontal[baseline_slice(transfer, rate_hz)]))
-    back = np.flatnonzero(horizontal[start:] <= base + ARM_BACK_MARGIN)
-    return int(start + back[0]) if back.size else None
 
 
 def arm_length(receiver: np.ndarray) -> float:
