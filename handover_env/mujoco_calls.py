@@ -43,3 +43,5 @@ mj_apply_ft = types.ExternalFunction("mj_applyFT", types.void(_P, _P, _P, _P, _P
 mju_mat2quat = types.ExternalFunction("mju_mat2Quat", types.void(_P, _P))
 #: ``mj_solveM(m, d, x[n*nv], y[n*nv], n)``: x = M^-1 y for the n rows of y
 mj_solve_m = types.ExternalFunction("mj_solveM", types.void(_P, _P, _P, _P, _I))
+#: ``mju_cholSolve(res[n], mat[n*n], vec[n], n)``: solve with a Cholesky factor (mju_cholFactor)
+mju_chol_solve = types.ExternalFunction("mju_cholSolve", types.void(_P, _P, _P, _I))

@@ -33,7 +33,8 @@ We implement it as a torque controller, run every ``ticks`` physics steps on a g
   are precomputed in one matrix product per replan. With Λ frozen the whole law is affine in
   the measured TCP pose and twists, so each planned tick gets one (7, 26) matrix at the replan
   and a tick is J, three small products and the clip, one compiled call
-  (:mod:`handover_env.robot.impedance_tick`; the replan stays numpy's, about 30 Hz).
+  (:mod:`handover_env.robot.impedance_tick`, the replan's Λ, W_k and posture torque too; numpy
+  keeps the speed check's one LAPACK solve and the limiter's rare matrix inverse).
 
 This module is over 500 lines because the controller is one class whose per-tick law and the
 precomputation that makes it affine (gain maps, reference filter, frozen Λ) share the same
@@ -249,15 +250,17 @@ class ImpedanceController:
         # its offsets and the index lists: the compiled tick (impedance_tick) takes both.
         sizes = {tk.I_JAC: 12 * nv, tk.I_W: n * 7 * _Z_SIZE, tk.I_Z: _Z_SIZE, tk.I_OUT: 7,
                  tk.I_TAUF: nv, tk.I_TAU: 6, tk.I_POST: 6, tk.I_LIMITS: 6, tk.I_LAST: 6,
-                 tk.I_MINV: 36, tk.I_MINVR: 6 * nv, tk.I_ACC: 6, tk.I_CORR: 6, tk.I_SCAL: 5,
+                 tk.I_MINV: 36, tk.I_MINVR: 6 * nv, tk.I_ACC: 6, tk.I_CORR: 6, tk.I_SCAL: tk.S_SIZE,
                  tk.I_MINVJT: 6 * nv, tk.I_LAMINV: 36, tk.I_LAM: 36, tk.I_GAINS: 6 * _B_SIZE,
                  tk.I_PGAIN: 6 * _B_SIZE, tk.I_CGAIN: 6 * _B_SIZE, tk.I_TRAJ: n * 12,
                  tk.I_ROTMAPS: 36 * n, tk.I_PLAN: tk.P_SIZE, tk.I_POWERS: 9 * n, tk.I_CS: 3 * n,
-                 tk.I_ROTB: 108, tk.I_JACPLAN: 36, tk.I_TWIST: 6 * n, tk.I_ARMROWS: 6 * nv}
+                 tk.I_ROTB: 108, tk.I_JACPLAN: 36, tk.I_TWIST: 6 * n, tk.I_ARMROWS: 6 * nv,
+                 tk.I_REST: 6, tk.I_PTMP: 18}
         chain = sorted(_chain_dofs(model, int(model.site_bodyid[ids.tcp_site])))
-        self._iw = iw = np.zeros(tk.I_SIZE + len(chain) + 12, dtype=np.int64)
+        self._iw = iw = np.zeros(tk.I_SIZE + len(chain) + 18, dtype=np.int64)
         iw[tk.I_NV], iw[tk.I_NCHAIN], iw[tk.I_NPLAN] = nv, len(chain), n
-        iw[tk.I_SIZE:] = chain + np.asarray(ids.arm_dof).tolist() + np.asarray(ids.arm_act).tolist()
+        iw[tk.I_SIZE:] = chain + [int(i) for part in (ids.arm_dof, ids.arm_act, ids.arm_qpos)
+                                  for i in np.asarray(part)]
         self._fw = fw = np.zeros(sum(sizes.values()))
         views, at = {}, 0
         for slot, size in sizes.items():
@@ -285,11 +288,11 @@ class ImpedanceController:
         self._stale = True
         self._tau_posture = views[tk.I_POST]
         self._posture = self.config.posture_stiffness > 0.0 or self.config.posture_damping > 0.0
-        self._kn, self._dn = self.config.posture_stiffness, self.config.posture_damping
-        self._tau0 = np.zeros(6)
-        self._tmp6 = np.zeros(6)
-        self._tmp6b = np.zeros(6)
-        self._rest = np.zeros(6) if rest_qpos is None else np.asarray(rest_qpos, float).copy()
+        self._scal[tk.S_KN] = self.config.posture_stiffness
+        self._scal[tk.S_DN] = self.config.posture_damping
+        self._rest = views[tk.I_REST]
+        if rest_qpos is not None:
+            self._rest[:] = np.asarray(rest_qpos, float)
         self._lam = views[tk.I_LAM].reshape(6, 6)
         self._limits = views[tk.I_LIMITS]
         self._limits[:] = TORQUE_LIMITS
@@ -512,7 +515,7 @@ class ImpedanceController:
     def reset(self, data: mujoco.MjData, rest_qpos: np.ndarray | None = None) -> None:
         """Start the reference at the current TCP pose with zero velocity."""
         if rest_qpos is not None:
-            self._rest = np.asarray(rest_qpos, float).copy()
+            self._rest[:] = np.asarray(rest_qpos, float)
         self._bind(data)
         pos = data.site_xpos[self.ids.tcp_site]
         self.x_d = pos.copy()
@@ -587,21 +590,10 @@ class ImpedanceController:
         # (x_d, v_d, a_d, R_d from the plan; L_k the rotation error map of R_d,k):
         # compiled (impedance_refresh), in MuJoCo's and numpy's order of summation.
         tk.impedance_refresh(self._fw, self._iw)
-        j = self._j
-        x = self._x_minv
-        lam_inv = self._lam_inv
         self._minv_age = 2  # the limiter's M^-1 and M of the arm are refreshed when used
-        # Null-space posture term, N = I - Jᵀ J̄ᵀ with J̄ᵀ = Λ J M^-1.
+        # Null-space posture term, N = I - Jᵀ J̄ᵀ with J̄ᵀ = Λ J M^-1 (compiled too).
         if self._posture:
-            tau0, tmp = self._tau0, self._tmp6
-            np.subtract(self._rest, self._qpos_v, out=tau0)
-            tau0 *= self._kn
-            np.multiply(self._qvel_v, self._dn, out=tmp)
-            tau0 -= tmp  # k_n (q_rest - q) - d_n q̇
-            np.dot(x, tau0, out=tmp)
-            mujoco.mju_cholSolve(self._tmp6b, lam_inv, tmp)
-            np.dot(self._tmp6b, j, out=tmp)
-            np.subtract(tau0, tmp, out=self._tau_posture)  # N τ_0 = τ_0 - Jᵀ Λ J M^-1 τ_0
+            tk.impedance_posture(self._view.mem, self._fw, self._iw)
         self._stale = False
 
     def _bind(self, data: mujoco.MjData) -> None:
@@ -618,6 +610,7 @@ class ImpedanceController:
             if data.qvel.shape[0] != self.model.nv:
                 raise ValueError("data is not an MjData of this controller's model")
             iw[tk.I_MODEL], iw[tk.I_DATA] = self.model._address, data._address
+            iw[tk.I_QPOS] = view.offset("qpos")
         self._bound = data
         self._xpos_v = data.site_xpos[self._tcp]
         self._xmat_v = data.site_xmat[self._tcp]

@@ -30,7 +30,7 @@ import math
 
 from handover_env.compiled import kernel
 from handover_env.kernel_math import fma, mj_dot
-from handover_env.mujoco_calls import mj_solve_m
+from handover_env.mujoco_calls import mj_solve_m, mju_chol_solve
 
 JAC, WRENCH, TORQUE, CLIP, GATHER = 1, 2, 4, 8, 16
 ALL = JAC | WRENCH | TORQUE | CLIP
@@ -50,10 +50,14 @@ I_TRAJ, I_ROTMAPS, I_NPLAN = 31, 32, 33
 I_PLAN, I_POWERS, I_CS, I_ROTB, I_JACPLAN, I_TWIST = 34, 35, 36, 37, 38, 39
 # MuJoCo's model and data (addresses, for mj_solveM) and the unit rows e_arm (6, nv) in fw.
 I_MODEL, I_DATA, I_ARMROWS = 40, 41, 42
-I_SIZE = 43  # the fixed slots; then the chain dofs, the 6 arm dofs and the 6 arm actuators
+# The posture torque's (impedance_posture): qpos in MjData's array, q_rest (6), scratch (18).
+I_QPOS, I_REST, I_PTMP = 43, 44, 45
+I_SIZE = 46  # the fixed slots; then the chain dofs, the 6 arm dofs, the 6 arm actuators and the
+# 6 arm joints' qpos addresses
 # Scalars (float workspace at iw[I_SCAL]): payload weight factor 9.81 m, joint speed limit,
 # joint acceleration limit, 1 / tick.
-S_GM, S_VLIM, S_ALIM, S_INV_DT, S_DAMP = 0, 1, 2, 3, 4
+S_GM, S_VLIM, S_ALIM, S_INV_DT, S_DAMP, S_KN, S_DN = 0, 1, 2, 3, 4, 5, 6
+S_SIZE = 7
 Z_SIZE = 26
 B_SIZE = 31  # columns of the gain maps: 16 per-tick, 12 feed-forward, 3 rotation
 N_ARM = 6
@@ -387,3 +391,46 @@ def impedance_plan_scale(fw, iw, sol):  # type: ignore[no-untyped-def]
             scaled = 1
     _plan_finish(fw, iw)
     return scaled
+
+
+@kernel
+def impedance_posture(mem, fw, iw):  # type: ignore[no-untyped-def]
+    """The null-space posture torque ``N τ_0 = τ_0 - Jᵀ Λ J M^-1 τ_0``, τ_0 = k_n (q_rest - q) -
+    d_n q̇ (arm joints), after :func:`impedance_refresh` (J M^-1, Λ^-1's Cholesky factor).
+
+    ``J M^-1 τ_0`` and ``(Λ ·)ᵀ J`` over the arm columns are summed as numpy's ``dot`` sums a
+    (6, 6) strided matrix times a vector and a vector times one (OpenBLAS's dgemv_t and dgemv_n
+    kernels: products of four lanes added pairwise, the last two as one fused multiply-add; and
+    for the first four outputs ``fma(a2, x2, a0 x0) + fma(a3, x3, a1 x1) + (a4 x4 + a5 x5)``, the
+    last two a plain running sum); the solve is MuJoCo's ``mju_cholSolve``.
+    """
+    nv, nc = iw[I_NV], iw[I_NCHAIN]
+    s, post, mjt, jac = iw[I_SCAL], iw[I_POST], iw[I_MINVJT], iw[I_JAC]
+    kn, dn = fw[s + S_KN], fw[s + S_DN]
+    rest, t0, y, z = iw[I_REST], iw[I_PTMP], iw[I_PTMP] + 6, iw[I_PTMP] + 12
+    arm = I_SIZE + nc
+    for k in range(N_ARM):
+        q = mem[iw[I_QPOS] + iw[arm + 12 + k]]
+        fw[t0 + k] = (fw[rest + k] - q) * kn - mem[iw[I_QVEL] + iw[arm + k]] * dn
+    for r in range(N_ARM):  # y = (J M^-1)_arm τ_0
+        row = mjt + r * nv
+        a0, a1, a2 = fw[row + iw[arm]], fw[row + iw[arm + 1]], fw[row + iw[arm + 2]]
+        a3, a4, a5 = fw[row + iw[arm + 3]], fw[row + iw[arm + 4]], fw[row + iw[arm + 5]]
+        main = (a0 * fw[t0] + a2 * fw[t0 + 2]) + (a1 * fw[t0 + 1] + a3 * fw[t0 + 3])
+        fw[y + r] = (0.0 + main) + fma(a4, fw[t0 + 4], a5 * fw[t0 + 5])
+    base = fw.ctypes.data
+    mju_chol_solve(base + 8 * z, base + 8 * iw[I_LAMINV], base + 8 * y, N_ARM)  # Λ y
+    for c in range(N_ARM):  # (Λ y)ᵀ J_arm
+        dof = iw[arm + c]
+        p0 = fw[jac + dof] * fw[z]
+        p1 = fw[jac + nv + dof] * fw[z + 1]
+        p2 = fw[jac + 2 * nv + dof] * fw[z + 2]
+        p3 = fw[jac + 3 * nv + dof] * fw[z + 3]
+        p4 = fw[jac + 4 * nv + dof] * fw[z + 4]
+        p5 = fw[jac + 5 * nv + dof] * fw[z + 5]
+        if c < 4:
+            v = (fma(fw[jac + 2 * nv + dof], fw[z + 2], p0)
+                 + fma(fw[jac + 3 * nv + dof], fw[z + 3], p1)) + (p4 + p5)
+        else:
+            v = (((((0.0 + p0) + p1) + p2) + p3) + p4) + p5
+        fw[post + c] = fw[t0 + c] - v

@@ -82,3 +82,33 @@ def test_observation_is_mujocos_pose_and_twist_of_the_tcp() -> None:
         assert np.array_equal(layout.part(obs, "ee_pos"), d.site_xpos[tcp].astype(np.float32))
         assert np.array_equal(layout.part(obs, "wrist_torque"),
                               env.wrist.tau_ext.astype(np.float32))
+
+
+def test_posture_torque_and_solves_are_numpys_and_mujocos() -> None:
+    """impedance_posture against τ_0 - Jᵀ Λ J M^-1 τ_0 by numpy's dot and mju_cholSolve, and the
+    kernels' mj_solveM (J M^-1, the limiter's rows) against the binding's."""
+    env = gym.make("handover_env/DynamicHandover-v0").unwrapped
+    env.reset(seed=0)
+    m, d, c = env.model, env.data, env.controller
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        d.qpos[c._qpos_adr] += rng.normal(scale=0.05, size=6)
+        d.qvel[:] = rng.normal(scale=0.3, size=m.nv)
+        mujoco.mj_forward(m, d)
+        c._stale = True
+        c.compute(d)
+        minv_jt, rows = np.zeros((6, m.nv)), np.zeros((6, m.nv))
+        mujoco.mj_solveM(m, d, minv_jt, c._jac12[:6])
+        assert np.array_equal(c._minv_jt, minv_jt)
+        mujoco.mj_solveM(m, d, rows, c._arm_rows)
+        assert np.array_equal(c._minv_rows, rows)
+        tau0, tmp, sol = np.empty(6), np.empty(6), np.empty(6)
+        np.subtract(c._rest, d.qpos[c._qpos_adr], out=tau0)
+        tau0 *= c.config.posture_stiffness
+        np.multiply(d.qvel[c._dof], c.config.posture_damping, out=tmp)
+        tau0 -= tmp
+        np.dot(c._minv_jt[:, c._dof], tau0, out=tmp)
+        mujoco.mju_cholSolve(sol, c._lam_inv, tmp)
+        np.dot(sol, c._jac12[0:6, c._dof], out=tmp)
+        assert np.array_equal(c._tau_posture, tau0 - tmp)
+        assert np.abs(c._tau_posture).max() > 0.0
