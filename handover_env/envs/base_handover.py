@@ -340,6 +340,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         m, d, ids = self.model, self.data, self.ids
         # The person is chosen (and every option validated) before any state changes.
         self.task.configure_receiver(self, kind, options)
+        self.receiver.warn_outside(seed)  # once per env: a walk outside the calibrated range
         mujoco.mj_resetData(m, d)
         mujoco.mj_setConst(m, d)  # the person's masses and sizes changed (uses d as scratch)
         mujoco.mj_setState(m, d, self._init_state, mujoco.mjtState.mjSTATE_INTEGRATION)
@@ -580,6 +581,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
         contacts.count_object = self._gripper_holds or not grip.active
         if contacts.active or d.ncon:
             contacts.scan(d)
+            rec.feel(contacts.robot_now, float(d.time))
+        elif rec.targets.arm.touching:
+            rec.feel(None, float(d.time))
         if self._gripper_holds or grip.active:
             self._last_held_z = float(self._object_pos_v[2])
         self.controller.compute(d)  # writes the arm's torques to d.ctrl
@@ -635,7 +639,9 @@ class HandoverEnvBase(gym.Env, EzPickle):
         Besides the outcome and the paper's handover time: when and where the object changed
         hands (``transfer_time``: the person's grasp; ``transfer_pelvis_xy``,
         ``transfer_object_pos``),
-        the person's effort (``reach_distance``, ``arm_extended_time``, ``time_lost``,
+        whether the person walks within the calibrated range (``within_calibration``) and their
+        own reach offset (``reach_offset``, m; 0 unless the person setting is on), the person's
+        effort (``reach_distance``, ``arm_extended_time``, ``time_lost``,
         ``min_speed_factor``, ``path_deviation``, ``pull_force``) and contact with the body
         (``contact_force_<segment>``, ``body_contact_force``, ``penetration``,
         ``body_contact_robot``, ``body_contact_object``).
@@ -674,6 +680,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 else tuple(self.transfer_object_pos.tolist())
             ),
             "departure_time": t_depart,
+            "within_calibration": rec.calibration.within,
+            "reach_offset": rec.reach_offset.value,
             "pull_force": self.pull_force,
             "robot_jerk_rms": math.sqrt(self._jerk_sq / self._jerk_n) if self._jerk_n else 0.0,
             "robot_jerk_peak": math.sqrt(self._jerk_peak_sq),

@@ -72,6 +72,9 @@ class ContactMonitor:
         self.raw_peak = 0.0
         self._force = np.zeros(len(SEGMENTS))  # filtered force per segment
         self._now = np.zeros(len(SEGMENTS))
+        #: (S,) the robot's normal force on each segment at the last scanned tick, N (unfiltered:
+        #: what the person feels, :meth:`handover_env.person.receiver.Receiver.feel`).
+        self.robot_now = np.zeros(len(SEGMENTS))
         self._over_since = np.full(len(SEGMENTS), np.nan)  # when the force went over the limit
         #: True while some segment's filtered force has not decayed (keep scanning every tick).
         self.active = False
@@ -86,8 +89,9 @@ class ContactMonitor:
         """Look at this tick's contacts (call at every tick with contacts, and while
         :attr:`active`, so that the filtered forces decay and quasi-static timing restarts)."""
         cls, seg = self._cls, self._segment
-        now = self._now
+        now, robot_now = self._now, self.robot_now
         now[:] = 0.0
+        robot_now[:] = 0.0
         for i in range(data.ncon):
             c = data.contact[i]
             g1, g2 = c.geom1, c.geom2
@@ -101,6 +105,7 @@ class ContactMonitor:
                 self.penetration = -float(c.dist)
             if pair == ROBOT | PERSON:
                 self.touched_robot = True
+                robot_now[s] += abs(float(self._force6[0]))
             else:
                 self.touched_object = True
         self.raw_peak = max(self.raw_peak, float(now.max()))

@@ -24,7 +24,8 @@ from handover_env.person.receiver_rules import left_behind_rows, meet_rows
 TAU, RHO, MIN_SPEED, OBJ, OBJ_VEL, BEHIND, WITHIN, REACH, LEAD, COMFORT, CLOSEST, TAKE = (
     0, 1, 2, 3, 6, 9, 10, 11, 12, 13, 14, 15)
 LEFT, MEETING = 16, 17  # outputs: left behind (0 / 1); the meeting's five values
-IO_SIZE = 22
+OFFSET = 22  # in: the person's own reach offset (receiver_rules.take_distance)
+IO_SIZE = 23
 
 
 def track_rows(shoulder: np.ndarray, forward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -43,7 +44,8 @@ def judge_kernel(track: np.ndarray, path: np.ndarray, io: np.ndarray) -> None:
         path: (T + 1, 7) scratch: the path's rows (time from now, shoulder, forward).
         io: in: the playback position and speed factor, the slowest speed factor (the path's
             timing never assumes a slower walk), the object and its velocity, the rules'
-            settings, the reaching person's kept closest approach and take distance (< 0: none);
+            settings, the reaching person's kept closest approach and take distance (< 0: none)
+            and their own reach offset;
             out: ``io[LEFT]`` left behind (0 / 1) and ``io[MEETING:MEETING + 5]`` the meeting.
     """
     n_frames = track.shape[0]
@@ -66,4 +68,4 @@ def judge_kernel(track: np.ndarray, path: np.ndarray, io: np.ndarray) -> None:
     left = left_behind_rows(obj, rows[:, 1:4], rows[:, 4:7], io[BEHIND], io[WITHIN])
     io[LEFT] = 1.0 if left else 0.0
     meet_rows(obj, io[OBJ_VEL:OBJ_VEL + 3], rows[:, 0], rows[:, 1:4], rows[:, 4:7], io[REACH],
-              io[LEAD], io[COMFORT], io[CLOSEST], io[TAKE], io[MEETING:MEETING + 5])
+              io[LEAD], io[COMFORT], io[CLOSEST], io[TAKE], io[OFFSET], io[MEETING:MEETING + 5])

@@ -15,12 +15,22 @@ it by :mod:`~handover_env.person.pose` and moved by :mod:`~handover_env.person.t
   ``reach_lead_time``: when its grasp point (moving on at its velocity) comes within their take
   distance of the right shoulder, not behind it. The take distance grows with how far the object
   is held from their path (its closest approach; fitted to the recordings), so a person reaches
-  as far as they need to, not always to full extension; it is fixed at the reach onset. The hand
+  as far as they need to, not always to full extension, plus, with the opt-in person setting
+  ``reach_offset``, the person's own reach offset (:mod:`handover_env.person.take`: drawn for a
+  scripted walker, the recorded person's own for a replayed recording); it is fixed at the reach
+  onset. The hand
   then moves on a minimum-jerk path re-planned every step toward the moving grasp point (Hoff &
   Arbib 1993), planned to arrive at the meeting (at most ``reach_duration`` after the onset; put
   off only when the meeting comes over ``REPLAN_SLACK`` later, brought forward whenever it comes
   earlier). The arm follows by two-link inverse kinematics
-  (:func:`handover_env.person.gait.arm_pose`).
+  (:func:`handover_env.person.gait.arm_pose`). With the opt-in person setting ``arm_yield`` it
+  yields to the robot (:mod:`handover_env.person.arm_yield`): touched, it pushes at most as hard
+  as a human arm and stops pushing after the tactile latency, and the reach starts again from
+  where the hand is.
+* **Calibrated range**: at reset the person's walk is measured against the walks the person was
+  calibrated on (:mod:`handover_env.person.walk_range`); :meth:`Receiver.warn_outside` warns
+  once per receiver (so once per env) and ``calibration.within`` is the env's
+  ``info["within_calibration"]``. Nothing is refused.
 * **Left behind** (``passed``, the env's ``missed``): the unheld object is ``give_up_behind``
   behind the shoulder within ``PASS_DISTANCE``, and at no later point of the remaining walk is it
   ahead of them again (:func:`~handover_env.person.receiver_rules.left_behind`); run on the
@@ -52,6 +62,7 @@ themselves are the pure functions of :mod:`handover_env.person.receiver_rules`.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -62,6 +73,7 @@ from handover_env.person import hand_path as hp
 from handover_env.person import motion as rm
 from handover_env.person import path_ahead as pa
 from handover_env.person.body_model import BodyIds, apply_dims
+from handover_env.person.calibrated_range import warning_text
 from handover_env.person.effort import Effort
 from handover_env.person.grip import ArmGrip
 from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
@@ -75,7 +87,9 @@ from handover_env.person.settings import (
     check_option,
 )
 from handover_env.person.skeleton import SEG, J
+from handover_env.person.take import PersonOffset, person_offset
 from handover_env.person.targets import BodyTargets
+from handover_env.person.walk_range import WalkCheck, walk_check
 
 CAMERA_RATE = RATE
 STATES = ("walking", "reaching", "holding", "presenting", "presented", "passed")
@@ -135,10 +149,15 @@ class Receiver:
         self.motion: PersonMotion | None = None
         self.kind, self.source_id, self.hand_mode = "id", "", "reach"
         self.present_after_walk = False
-        self.targets = BodyTargets(model, ids.body)
+        self.targets = BodyTargets(model, ids.body, arm_yield=self.config.arm_yield)
         self._pelvis_target = self.targets.key1[0][0]  # a view: the nominal pelvis at step end
         self.measured = Effort(ids.body)
         self.pose: MotionPose | None = None
+        #: This person's own reach offset (origin ``"off"`` unless ``config.reach_offset``).
+        self.reach_offset = PersonOffset(0.0, "off")
+        #: This person's walk against the calibrated range.
+        self.calibration = WalkCheck({}, [])
+        self._warned_calibration = False
         self._reset_state()
 
     # ------------------------------------------------------------------ setup
@@ -179,10 +198,15 @@ class Receiver:
             if hand_mode == "recorded":
                 raise ValueError("hand_mode='recorded' is for replayed receivers")
             motion = scripted_motion(rng, kind, height, speed, walker_overrides)
+        offset = (person_offset(rng, kind, episode) if self.config.reach_offset
+                  else PersonOffset(0.0, "off"))
+        calibrated = walk_check(motion, kind, episode, height)
         self.t_depart = motion.t_depart
         if stop_x is not None:
             motion = stopped(motion, stop_x)
         self.motion = motion
+        self.reach_offset = offset
+        self.calibration = calibrated
         self.kind, self.hand_mode, self.source_id = kind, hand_mode, motion.source_id
         self.walker = motion.walker
         self.height = motion.dims.height
@@ -211,6 +235,7 @@ class Receiver:
             self.config.min_speed_factor, self.config.give_up_behind, PASS_DISTANCE)
         io[pa.REACH], io[pa.LEAD], io[pa.COMFORT] = (
             self._max_reach, self.config.reach_lead_time, self._comfort)
+        io[pa.OFFSET] = offset.value
         hp.hand_settings(self._hand_io, self.config, self._max_reach, self.pose.arm_reach, RATE,
                          HOLD_TRACKING, CARRY_CLEARANCE, PRESENT_OFFSET)
         self._reset_state()
@@ -297,6 +322,9 @@ class Receiver:
         dt = t1 - t0
         self._t = t0
         self._released = released
+        if self.targets.arm.end_step() and self.state == "reaching" and self._hand is not None:
+            # The robot stopped the arm: the reach starts again from where the hand is.
+            self._hand = (data.site_xpos[self.body.grip_site].copy(), np.zeros(3), np.zeros(3))
         self._gripper = None if gripper_pos is None else np.asarray(gripper_pos, dtype=np.float64)
         if self._gripper is not None and self.state == "holding" and released and not self._clear:
             self._clear = length(object_pos - self._gripper) > CLEAR_OF_GRIPPER
@@ -453,6 +481,23 @@ class Receiver:
         hand advanced by one env step (written into ``out`` (S, 7) when given)."""
         hand = self._hand_target(tau, grasp)
         return self.pose.at(tau, hand, swing_arm=self.hand_mode == "reach", out=out)
+
+    def warn_outside(self, seed: int | None) -> None:
+        """Warn once per receiver (so once per env) when this episode's person walks outside the
+        calibrated range (:mod:`handover_env.person.walk_range`); nothing is refused."""
+        outside = self.calibration.outside
+        if not outside or self._warned_calibration:
+            return
+        self._warned_calibration = True
+        what = (f"the replayed receiver {self.source_id!r}" if self.kind == "replay"
+                else f"the scripted {self.kind} walker (seed {seed})")
+        warnings.warn(warning_text(outside, what), UserWarning, stacklevel=3)
+
+    def feel(self, robot_force: np.ndarray | None, t: float) -> None:
+        """This controller tick's robot force on each body segment (S,), N, or None without
+        contact: the arm yields to it when ``config.arm_yield``
+        (:class:`handover_env.person.arm_yield.ArmYield`)."""
+        self.targets.arm.feel(robot_force, t)
 
     def end_step(self, data: mujoco.MjData) -> None:
         """The env step's physics is done: record the person's effort over it."""

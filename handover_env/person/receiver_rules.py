@@ -18,11 +18,14 @@ come (``docs/calibration/receiver_calibration.md``, section "Walks that are not 
   take distance and not behind the shoulder; if it never comes that close, the frame of its
   closest approach, if that is within reach.
 * **Take distance** (:func:`take_distance`): how far from the shoulder a person takes the
-  object, ``TAKE_INTERCEPT + TAKE_CLOSEST * closest`` (between :data:`MIN_TAKE` and the
+  object, ``TAKE_INTERCEPT + TAKE_CLOSEST * closest + offset`` (between :data:`MIN_TAKE` and the
   person's comfortable reach), where ``closest`` is the nearest the remaining path comes to the
   object where it is at the reach onset: a person reaches as far as the object is held from
-  their path, not always to full extension. The line is the least-squares fit on the
-  calibration half of the recordings (:func:`handover_eval.calibration.decisions.reach_summary`).
+  their path, not always to full extension. The line (the part that answers the giver) is the
+  least-squares fit on the calibration half of the recordings
+  (:func:`handover_eval.calibration.decisions.reach_summary`); ``offset`` is the person's own
+  (:mod:`handover_env.person.take`: drawn for a scripted walker, a recorded person's own for a
+  replay).
   The object's speed toward the receiver before the transfer correlates with the recorded reach
   too (r = +0.51), but it is mostly the object already moving *with* the receiver (median
   -0.21 m/s, i.e. along the walk) around a transfer that the detector dates late, not something a
@@ -133,13 +136,13 @@ def closest_rows(obj: np.ndarray, shoulder: np.ndarray) -> float:
 @kernel
 def meet_rows(obj: np.ndarray, obj_vel: np.ndarray, time: np.ndarray, shoulder: np.ndarray,
               forward: np.ndarray, reach: float, extrapolate: float, comfort: float,
-              closest: float, take: float, out: np.ndarray) -> None:
+              closest: float, take: float, offset: float, out: np.ndarray) -> None:
     """:func:`meet` on a path's rows: ``closest`` / ``take`` < 0 stand for None; writes the
     meeting's (time, distance, closest, take, reachable as 0 / 1) into ``out[:5]``."""
     if closest < 0.0:
         closest = closest_rows(obj, shoulder)
     if take < 0.0:
-        take = min(max(TAKE_INTERCEPT + TAKE_CLOSEST * closest, MIN_TAKE), comfort)
+        take = min(max((TAKE_INTERCEPT + TAKE_CLOSEST * closest) + offset, MIN_TAKE), comfort)
     first = -1
     best, best_j = math.inf, -1
     for j in range(time.shape[0]):
@@ -176,10 +179,11 @@ def closest_approach(obj: np.ndarray, path: PathAhead) -> float:
     return float(closest_rows(np.asarray(obj, dtype=np.float64), path.shoulder))
 
 
-def take_distance(closest: float, comfort: float) -> float:
+def take_distance(closest: float, comfort: float, offset: float = 0.0) -> float:
     """How far from the shoulder the person takes an object whose closest approach to their path
-    is ``closest``, m, at most ``comfort`` (see the module docstring)."""
-    return float(min(max(TAKE_INTERCEPT + TAKE_CLOSEST * closest, MIN_TAKE), comfort))
+    is ``closest``, m, with their own ``offset`` (m), at most ``comfort`` (see the module
+    docstring)."""
+    return float(min(max((TAKE_INTERCEPT + TAKE_CLOSEST * closest) + offset, MIN_TAKE), comfort))
 
 
 def meeting_of(out: np.ndarray) -> Meeting:
@@ -197,6 +201,7 @@ def meet(
     comfort: float,
     closest: float | None = None,
     take: float | None = None,
+    offset: float = 0.0,
 ) -> Meeting:
     """When and how far from the shoulder the person will meet the object (module docstring).
 
@@ -210,12 +215,13 @@ def meet(
         take: the take distance (default: :func:`take_distance` of ``closest``; a reaching
             person keeps the one of their reach onset, so that an object brought toward their
             path is not put off to later and later).
+        offset: the person's own reach offset, m (:func:`take_distance`).
     """
     out = np.empty(5)
     meet_rows(np.asarray(obj, dtype=np.float64), np.asarray(obj_vel, dtype=np.float64),
               np.asarray(path.time, dtype=np.float64), path.shoulder, path.forward, float(reach),
               float(extrapolate), float(comfort), -1.0 if closest is None else float(closest),
-              -1.0 if take is None else float(take), out)
+              -1.0 if take is None else float(take), float(offset), out)
     return meeting_of(out)
 
 

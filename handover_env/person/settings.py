@@ -1,14 +1,17 @@
 """How the simulated person reaches, grasps, holds, slows down and pulls: :class:`ReceiverConfig`.
 
 The settings of :class:`handover_env.person.receiver.Receiver` (the envs' ``person=`` overrides),
-each a real number within a stated range (:data:`SETTING_RANGES`), and the checks of the numeric
-reset options (``height``, ``speed``).
+each a real number within a stated range (:data:`SETTING_RANGES`) or an opt-in switch
+(:data:`SWITCHES`, True or False), and the checks of the numeric reset options (``height``,
+``speed``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+
+import numpy as np
 
 from handover_env.numbers import checked_number
 from handover_env.person.person import RATE
@@ -56,6 +59,10 @@ SETTING_RANGES: dict[str, tuple[float, float, str, str]] = {
     "present_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
     "present_reach": (0.005, LONGEST_REACH, "m", "5 mm .. the longest reach"),
 }
+#: The person's opt-in behaviours (True or False; off by default, docs/simulator.md "Opt-in
+#: person"): ``reach_offset`` (a person's own reach, :mod:`handover_env.person.take`) and
+#: ``arm_yield`` (the reaching arm yields to the robot, :mod:`handover_env.person.arm_yield`).
+SWITCHES = ("reach_offset", "arm_yield")
 
 
 @dataclass(frozen=True)
@@ -111,6 +118,13 @@ class ReceiverConfig:
         carry_forward: the carry pose is this far forward of the hand's walking swing, m.
         present_time: static handover: time to raise the hand, s.
         present_reach: static handover: the raised hand takes the object once it is this close, m.
+        reach_offset: opt-in: the take distance adds the person's own reach offset (drawn with
+            the seed for a scripted walker, the recorded person's own for a replayed recording;
+            :mod:`handover_env.person.take`). Off: every person reaches by the giver-dependent
+            line alone.
+        arm_yield: opt-in: touched by the robot, the reaching arm pushes at most as hard as a
+            human arm and stops pushing after the tactile latency
+            (:mod:`handover_env.person.arm_yield`). Off: the arm's welds drive it to its targets.
     """
 
     reach_duration: float = 0.63
@@ -132,10 +146,23 @@ class ReceiverConfig:
     carry_forward: float = 0.15
     present_time: float = 0.8
     present_reach: float = 0.15
+    reach_offset: bool = False
+    arm_yield: bool = False
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
-            object.__setattr__(self, name, check_setting(name, getattr(self, name)))
+            value = getattr(self, name)
+            if name in SWITCHES:
+                object.__setattr__(self, name, check_switch(name, value))
+            else:
+                object.__setattr__(self, name, check_setting(name, value))
+
+
+def check_switch(name: str, value: object) -> bool:
+    """``value`` if it is True or False (an opt-in person setting, :data:`SWITCHES`)."""
+    if not isinstance(value, bool | np.bool_):
+        raise ValueError(f"person setting {name} must be True or False, got {value!r}")
+    return bool(value)
 
 
 def check_setting(name: str, value: object) -> float:

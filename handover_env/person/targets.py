@@ -4,7 +4,9 @@ Each body segment follows a mocap target through a soft weld
 (:mod:`handover_env.person.body_model`). :class:`BodyTargets` holds the pose decided for the
 start and the end of an env step (two keyframes, 30 Hz) and moves the targets between them at
 every 200 Hz controller tick, with a velocity and acceleration feed-forward that makes up for the
-welds' lag (:func:`handover_env.person.body_model.weld_lag_times`).
+welds' lag (:func:`handover_env.person.body_model.weld_lag_times`). With the opt-in person
+setting ``arm_yield``, the right arm's targets are limited while the robot touches it
+(:class:`handover_env.person.arm_yield.ArmYield`).
 
 The per-step interpolation (:func:`plan_kernel`) and the per-tick targets (:func:`tick_kernel`)
 are compiled (:func:`handover_env.compiled.kernel`): plain IEEE arithmetic in the order the
@@ -19,6 +21,7 @@ import mujoco
 import numpy as np
 
 from handover_env.compiled import kernel
+from handover_env.person.arm_yield import ArmYield
 from handover_env.person.body_model import BodyIds, weld_lag_times
 from handover_env.person.person import RATE
 from handover_env.person.pose import quat_mul
@@ -127,13 +130,16 @@ class BodyTargets:
     Args:
         model: the compiled scene.
         body: the person's indices in it.
+        arm_yield: the opt-in person setting ``arm_yield`` (the right arm yields to the robot).
     """
 
-    def __init__(self, model: mujoco.MjModel, body: BodyIds) -> None:
+    def __init__(self, model: mujoco.MjModel, body: BodyIds, arm_yield: bool = False) -> None:
         self.model, self.body = model, body
         self._bound: mujoco.MjData | None = None
         self._keys = np.zeros((2, len(SEGMENTS), 7))
         self._tick_rows: dict[tuple[float, ...], np.ndarray] = {}
+        #: The right arm's yield to the robot's touch (limits its targets while touched).
+        self.arm = ArmYield(body, enabled=arm_yield)
         self.reset()
 
     @property
@@ -150,6 +156,7 @@ class BodyTargets:
         """Forget the keyframes (a new episode)."""
         self._keys[:] = 0.0
         self._ticks = np.zeros(2)  # before any plan: the step's start
+        self.arm.reset()
 
     def resize(self) -> None:
         """Read the welds' lag times again (after the body was resized for a new person)."""
@@ -211,9 +218,13 @@ class BodyTargets:
         if data is not self._bound:
             self._mocap(data)
         tick_kernel(self._plan, self._ticks, self._mocap_pos, self._mocap_quat)
+        if self.arm.blocked:
+            self.arm.limit(data, self._mocap_pos, self._mocap_quat)
 
     def apply(self, data: mujoco.MjData, a: float) -> None:
         """Targets at the fraction ``a`` of the step (MuJoCo normalises mocap quaternions)."""
         if data is not self._bound:
             self._mocap(data)
         targets_kernel(self._plan, a, self._mocap_pos, self._mocap_quat)
+        if self.arm.blocked:
+            self.arm.limit(data, self._mocap_pos, self._mocap_quat)
