@@ -39,11 +39,11 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval import roster
 from handover_eval.benchmark.outcomes import events, first_failure
 from handover_eval.closedloop.models import model_for
-from handover_eval.receivers import FIT_ALL, ReceiverSpec
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, plan_jobs
 from handover_eval.closedloop.worker import EpisodeJob
 from handover_eval.episodes import make_env, run_receiver
 from handover_eval.methods import MethodOptions
+from handover_eval.receivers import FIT_ALL, ReceiverSpec
 from handover_eval.reporting import atomic_write_bytes
 
 APPLICATION = "handover_env"

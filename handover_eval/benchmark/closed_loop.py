@@ -41,9 +41,9 @@ from handover_eval.benchmark.outcomes import EVENTS, events, first_failure
 from handover_eval.benchmark.plugin import AgentSource, fit_plugin
 from handover_eval.benchmark.protocol import ENV_ID, SENSING, BenchReceiver
 from handover_eval.closedloop.models import fold_model, prepare_models
-from handover_eval.receivers import FIT_ALL
 from handover_eval.episodes import ENV_IDS, Setting, clear_envs, env_for, run_receiver
 from handover_eval.methods import MethodOptions
+from handover_eval.receivers import FIT_ALL
 
 FLOATS = (
     "handover_time", "transfer_time", "reach_onset_time", "release_time", "release_force",

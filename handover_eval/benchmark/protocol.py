@@ -29,8 +29,8 @@ import numpy as np
 
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
-from handover_eval.receivers import ReceiverSpec
 from handover_eval.openloop.protocol import OpenLoopProtocol
+from handover_eval.receivers import ReceiverSpec
 
 PROTOCOL_VERSION = 1
 #: Every version this code can read (leaderboard, rescore); only this one is written.

@@ -35,6 +35,7 @@ from handover_eval.benchmark.protocol import (
     replay_receivers,
     walker_receivers,
 )
+from handover_eval.methods import MethodOptions, build_agent, with_test_data
 from handover_eval.receivers import (
     FIT_ALL,
     fold_of,
@@ -42,7 +43,6 @@ from handover_eval.receivers import (
     recording_paths,
     replays,
 )
-from handover_eval.methods import MethodOptions, build_agent, with_test_data
 
 REFERENCE = AgentSource(REFERENCE_AGENT, "roster", REFERENCE_AGENT, spec=REFERENCE_AGENT)
 

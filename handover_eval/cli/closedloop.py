@@ -40,11 +40,11 @@ from handover_eval.cli.args import (
 )
 from handover_eval.closedloop.models import rl_forms
 from handover_eval.closedloop.output import write_closed_loop, write_theta_sweep
-from handover_eval.receivers import SETS
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, ClosedLoopRun, run_closed_loop
 from handover_eval.closedloop.stats import N_BOOTSTRAP
 from handover_eval.methods import MethodOptions, default_workers, with_test_data
 from handover_eval.output_lock import OutputLock
+from handover_eval.receivers import SETS
 
 COMMANDS = ("closed-loop", "theta-sweep", "sensing-sweep")
 QUICK_WALKERS = 2

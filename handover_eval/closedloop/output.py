@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from handover_eval.closedloop.models import ModelRecord
-from handover_eval.receivers import SETS
 from handover_eval.closedloop.run import ClosedLoopEvalConfig, ClosedLoopRun
+from handover_eval.receivers import SETS
 from handover_eval.reporting import markdown_table, write_csv, write_png, write_text
 from handover_eval.roster import label
 

@@ -23,7 +23,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from handover_eval import roster
-from handover_eval.receivers import SETS
 from handover_eval.closedloop.stats import (
     N_BOOTSTRAP,
     median_iqr,
@@ -33,6 +32,7 @@ from handover_eval.closedloop.stats import (
     stable_seed,
     wilson_interval,
 )
+from handover_eval.receivers import SETS
 
 #: Every outcome a row can have: the env's ("unstable": MuJoCo reset a diverging simulation), and
 #: "timeout" for a TimeLimit truncation.

@@ -44,6 +44,8 @@ from handover_env.sensors.profiles import PROFILES
 from handover_eval import roster
 from handover_eval.backend import map_folds
 from handover_eval.closedloop.models import ModelRecord, check_rl_receivers, prepare_models
+from handover_eval.closedloop.worker import EpisodeJob, clear_worker_state, run_job
+from handover_eval.methods import MethodOptions, with_test_data
 from handover_eval.receivers import (
     FIT_ALL,
     SETS,
@@ -55,8 +57,6 @@ from handover_eval.receivers import (
     replays,
     walkers,
 )
-from handover_eval.closedloop.worker import EpisodeJob, clear_worker_state, run_job
-from handover_eval.methods import MethodOptions, with_test_data
 
 
 @dataclass(frozen=True)

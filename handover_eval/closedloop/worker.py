@@ -19,9 +19,9 @@ from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
 from handover_eval import roster
 from handover_eval.closedloop.models import ModelRecord, clear_models, model_for
-from handover_eval.receivers import ReceiverSpec
 from handover_eval.episodes import clear_envs, run_receiver
 from handover_eval.methods import MethodOptions
+from handover_eval.receivers import ReceiverSpec
 
 
 @dataclass(frozen=True)

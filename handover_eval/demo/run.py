@@ -45,10 +45,10 @@ from handover_env.config import HandoverParams
 from handover_env.envs.observation import ObsLayout
 from handover_env.person.demos import load_any
 from handover_eval.benchmark.outcomes import events, first_failure
-from handover_eval.receivers import ReceiverSpec
 from handover_eval.demo.view import FramedView, ViewSize
 from handover_eval.episodes import Played, episode_row
 from handover_eval.episodes import play as play_episode
+from handover_eval.receivers import ReceiverSpec
 
 #: The six walkers of the summary, fixed before any of their episodes was run (issue 37).
 DEMO_SEEDS: tuple[int, ...] = (37_000, 37_001, 37_002, 37_003, 37_004, 37_005)

@@ -16,6 +16,11 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 import evaluate
 from handover_env.config import HandoverParams
 from handover_env.person.synthetic import generate_synthetic
+from handover_eval.closedloop.report import GROUPS, groups_of
+from handover_eval.closedloop.run import ClosedLoopEvalConfig, plan_jobs
+from handover_eval.closedloop.worker import EpisodeJob
+from handover_eval.episodes import episode_row
+from handover_eval.methods import MethodOptions
 from handover_eval.receivers import (
     ReceiverSpec,
     fold_of,
@@ -23,11 +28,6 @@ from handover_eval.receivers import (
     replays,
     walkers,
 )
-from handover_eval.closedloop.report import GROUPS, groups_of
-from handover_eval.closedloop.run import ClosedLoopEvalConfig, plan_jobs
-from handover_eval.closedloop.worker import EpisodeJob
-from handover_eval.episodes import episode_row
-from handover_eval.methods import MethodOptions
 from handover_eval.roster import compared_agents
 
 DATA = (

@@ -16,8 +16,8 @@ from agents.base import Agent, Policy
 from handover_env.config import HandoverParams
 from handover_eval import episodes, roster
 from handover_eval.benchmark import plugin
-from handover_eval.receivers import ReceiverSpec
 from handover_eval.methods import METHODS, MethodOptions, check_methods
+from handover_eval.receivers import ReceiverSpec
 from handover_eval.reporting import PAPER_TABLE1
 
 
