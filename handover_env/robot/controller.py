@@ -49,15 +49,11 @@ from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
-from numpy.linalg import _umath_linalg
 
 from handover_env.config import HandoverParams
 from handover_env.mjdata_view import MjDataView
 from handover_env.robot import impedance_tick as tk
 from handover_env.robot.scene import TORQUE_LIMITS, SceneIds
-
-#: LAPACK's dgesv as numpy.linalg.solve calls it (the same gufunc, without the wrapper)
-_lapack_solve = _umath_linalg.solve
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
@@ -271,7 +267,6 @@ class ImpedanceController:
         self._p_gain = views[tk.I_PGAIN].reshape(6, _B_SIZE)
         self._c_gain = views[tk.I_CGAIN].reshape(6, _B_SIZE)
         self._scal[tk.S_DAMP] = self.config.singular_damping
-        self._jjt_regular = self.config.singular_damping > 0.0
         self.set_params(params)
         # Jacobians: rows 0:6 this tick's (translation, rotation), rows 6:12 the previous tick's.
         self._jac12 = views[tk.I_JAC].reshape(12, nv)
@@ -565,14 +560,10 @@ class ImpedanceController:
         check = self._scale_speed and self._bound is not None
         mem = self._view.mem if self._bound is not None else self._fw
         if tk.impedance_plan(mem, self._fw, self._iw, self._plan_i - 1, check):
-            # (6, n) damped least squares: LAPACK's dgesv through numpy's gufunc, as
-            # np.linalg.solve calls it; with damping J Jᵀ + d I is positive definite, so the
-            # wrapper's singular-matrix check (an errstate context per call) is only needed
-            # without it
-            if self._jjt_regular:
-                sol = _lapack_solve(self._jjt, self._plan_twist.T, signature="dd->d")
-            else:
-                sol = np.linalg.solve(self._jjt, self._plan_twist.T)
+            # (6, n) damped least squares: LAPACK's dgesv through numpy's public solve (its
+            # private gufunc would save ~30 us per replan, not worth depending on numpy
+            # internals)
+            sol = np.linalg.solve(self._jjt, self._plan_twist.T)
             self.scaled_plans += tk.impedance_plan_scale(self._fw, self._iw, sol)
         self._plan_i = 0
         self._stale = True
