@@ -435,21 +435,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
     p.add_argument("--out", required=True, help="output folder (e.g. docs/calibration)")
-    p.add_argument(
-        "--folds", type=FOLDS, default=10, help="number of Table I folds (default 10)"
-    )
-    p.add_argument(
-        "--seed", type=SEEDS, default=0, help="seed of the fold split (default 0, as Table I)"
-    )
-    p.add_argument(
-        "--calibration-folds",
-        type=CALIBRATION_FOLDS,
-        default=5,
-        help="folds 0 .. N-1 form the calibration half, the rest are held out (default 5)",
-    )
-    p.add_argument(
-        "--skip-bad", action="store_true", help="skip files that fail to load and list them"
-    )
+    _split_arguments(p)
     p.add_argument("--no-figures", action="store_true", help="write only the .md and .json")
     p.add_argument(
         "--limit",
