@@ -26,7 +26,6 @@ Nothing per recording is written but the range's two ends, which are bounds over
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Sequence
@@ -35,7 +34,6 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from handover_env.data.dataset import stratified_fold_ids
 from handover_env.data.errors import DatasetError
 from handover_env.data.public import (
     OOD_PREFIX,
@@ -51,11 +49,17 @@ from handover_env.person.calibrated_range import (
     check,
     recording_fields,
 )
+from handover_eval.calibration.report import (
+    DEFAULT_CALIBRATION_FOLDS,
+    DEFAULT_FOLDS,
+    DEFAULT_SEED,
+    table1_folds,
+    write_json,
+)
 from handover_eval.reporting import markdown_table, write_text
 
 JSON_NAME, MD_NAME = "calibrated_range.json", "calibrated_range.md"
 COMMAND = "handover-data calibrated-range PATH/whole_motions --out docs/calibration"
-DEFAULT_FOLDS, DEFAULT_SEED, DEFAULT_CALIBRATION_FOLDS = 10, 0, 5
 #: Quantiles reported per group, for groups of at least MIN_N recordings (in a smaller group a
 #: quantile is close to one recording's own value).
 PROBABILITIES = (0.01, 0.025, 0.05, 0.25, 0.50, 0.75, 0.95, 0.975, 0.99)
@@ -91,9 +95,7 @@ def assign_halves(
     rows: list[dict], folds: int, seed: int, calibration_folds: int
 ) -> None:
     """Set each row's ``calibration`` flag: Table I folds ``0 .. calibration_folds - 1``."""
-    if not 1 <= calibration_folds < folds:
-        raise ValueError(f"calibration_folds must be in [1, {folds - 1}], got {calibration_folds}")
-    fold_of = stratified_fold_ids(np.array([r["is_ood"] for r in rows]), folds, seed)
+    fold_of = table1_folds([r["is_ood"] for r in rows], folds, seed, calibration_folds)
     for row, fold in zip(rows, fold_of, strict=True):
         row["calibration"] = bool(fold < calibration_folds)
 
@@ -176,11 +178,6 @@ def summarise(
         },
         "within": within,
     }
-
-
-def write_json(summary: dict, path: str | os.PathLike) -> Path:
-    """The summary as indented JSON."""
-    return write_text(json.dumps(summary, indent=1) + "\n", path)
 
 
 def _f(v: float | None, digits: int) -> str:

@@ -33,7 +33,6 @@ recordings, the extremes are not written); no per-recording value is stored.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -51,6 +50,7 @@ from handover_eval.calibration.report import (
     RecordingResult,
     analyse_folder,
     assign_halves,
+    write_json,
 )
 from handover_eval.reporting import markdown_table, write_png, write_text
 
@@ -229,11 +229,6 @@ def summarise(
         "calibration": calib,
         "held_out": held,
     }
-
-
-def write_json(summary: dict, path: str | os.PathLike) -> Path:
-    """The summary as indented JSON."""
-    return write_text(json.dumps(summary, indent=1) + "\n", path)
 
 
 def _f(v: float | None, digits: int = 3) -> str:

@@ -162,11 +162,19 @@ def assign_halves(
     The fold assignment is :func:`stratified_fold_ids` over the results in their order (that of
     :func:`list_public_files`, i.e. of Table I's dataset), so it is Table I's own split.
     """
-    if not 1 <= calibration_folds < folds:
-        raise ValueError(f"calibration_folds must be in [1, {folds - 1}], got {calibration_folds}")
-    fold_of = stratified_fold_ids(np.array([r.is_ood for r in results]), folds, seed)
+    fold_of = table1_folds([r.is_ood for r in results], folds, seed, calibration_folds)
     for result, fold in zip(results, fold_of):
         result.fold, result.calibration = int(fold), bool(fold < calibration_folds)
+
+
+def table1_folds(
+    is_ood: list[bool], folds: int, seed: int, calibration_folds: int
+) -> np.ndarray:
+    """Table I's fold of each recording (:func:`stratified_fold_ids` in the given order), after
+    checking that folds ``0 .. calibration_folds - 1`` leave a held-out half."""
+    if not 1 <= calibration_folds < folds:
+        raise ValueError(f"calibration_folds must be in [1, {folds - 1}], got {calibration_folds}")
+    return stratified_fold_ids(np.array(is_ood), folds, seed)
 
 
 def _groups(results: list[RecordingResult]) -> dict[str, list[RecordingResult]]:
