@@ -159,6 +159,24 @@ def add_sensing_argument(parser: argparse.ArgumentParser, default: str = "paper"
     )
 
 
+def add_person_argument(parser: argparse.ArgumentParser) -> None:
+    """``--person``: the opt-in person settings (docs/simulator.md; default: the default person)."""
+    from handover_env.person.settings import SWITCHES
+
+    parser.add_argument(
+        "--person",
+        nargs="+",
+        choices=SWITCHES,
+        default=[],
+        metavar="SETTING",
+        help="switch on opt-in person settings, any of "
+        f"{list(SWITCHES)} (docs/simulator.md): reach_offset, the person's own reach offset "
+        "(scripted walkers draw it with their seed, a replay carries its recorded one); "
+        "arm_yield, a reaching arm that pushes at most as hard as a human arm and stops on "
+        "contact with the robot (default: none, the default person)",
+    )
+
+
 def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
     """``--backend process|ray`` and ``--ray-address`` (shared by every command that fans out)."""
     parser.add_argument(

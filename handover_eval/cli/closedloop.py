@@ -32,6 +32,7 @@ from handover_eval.cli.args import (
     STEPS,
     WORKERS,
     add_backend_arguments,
+    add_person_argument,
     add_sensing_argument,
     backend_from_args,
     check_counts,
@@ -319,6 +320,7 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     if p.prog.split()[-1] != "sensing-sweep":  # the sensing sweep varies the paper profile
         add_sensing_argument(p)
+    add_person_argument(p)
     add_backend_arguments(p)
 
 
@@ -375,6 +377,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             seed=args.seed,
             workers=workers,
             sensing=getattr(args, "sensing", "paper"),
+            person=tuple(args.person),
         )
         sweep = None
         if args.command == "sensing-sweep":

@@ -62,6 +62,13 @@ def _models_text(models: list[ModelRecord]) -> str:
     return markdown_table(["agent", "model", "count", "folds", "seconds (sum)"], body)
 
 
+def _person(settings: tuple[str, ...]) -> str:
+    """The person of a run, as its header names it."""
+    if not settings:
+        return "the default person"
+    return "opt-in settings " + ", ".join(f"`{s}`" for s in settings) + " (docs/simulator.md)"
+
+
 def _header(title: str, dataset, receivers: ClosedLoopEvalConfig, quick: bool, n_rec: str) -> str:
     th = receivers.params
     return (
@@ -70,7 +77,8 @@ def _header(title: str, dataset, receivers: ClosedLoopEvalConfig, quick: bool, n
         f"{th.release_force:g} N. Learning agents: Table I's {receivers.folds}-fold split (seed "
         f"{receivers.seed}); a replay of fold f meets the model trained on the other folds, the "
         f"scripted walkers meet the fold-{receivers.walker_fold} model. Replays: hand mode "
-        f"`{receivers.hand_mode}`. Sensing profile `{receivers.sensing}` (docs/sensing.md)."
+        f"`{receivers.hand_mode}`. Sensing profile `{receivers.sensing}` (docs/sensing.md). "
+        f"Person: {_person(receivers.person)}."
         f"{' **Quick run: tiny models, never for reported numbers.**' if quick else ''}\n"
     )
 

@@ -22,7 +22,6 @@ CSVs).
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 import time
@@ -146,7 +145,7 @@ def run_sensing_sweep(
     runs: dict[str, list] = {}  # env kwargs -> its jobs (a shared paper run)
     tags: dict[str, list[tuple[str, float]]] = {}
     for factor, value, ov in points(config.factors):
-        kwargs = json.dumps({"sensing": "paper", "sensors": ov}, sort_keys=True)
+        kwargs = dataclasses.replace(base, sensing="paper").env_kwargs(sensors=ov)
         tags.setdefault(kwargs, []).append((factor, value))
         if kwargs not in runs:
             runs[kwargs] = [dataclasses.replace(j, env_kwargs=kwargs) for j in planned]
