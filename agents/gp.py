@@ -403,33 +403,36 @@ class FlowBank:
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update({**state, "_single": None, "_segs": None})
 
-    def _segments(self) -> tuple:
-        """Per demo (the caller's order): its mean rows in ``top``, its ``[start, stop)`` rows of
-        ``T k`` in ``top`` and in ``bottom``; and log s2 (built once)."""
+    def _segments(self) -> tuple[np.ndarray, float]:
+        """Per demo (the caller's order), as :func:`agents.flow_kernels.flow_kernel` takes them:
+        its ``[start, stop)`` rows of ``T k`` in ``top`` and in ``bottom``, then its mean rows in
+        ``top`` ((N, 4 + D) int64); and log s2 (built once)."""
         if self._segs is None:
             stops = (np.append(self._seg_top[1:], self._top_off[-1])[1::2],
                      np.append(self._seg_bot[1:], self._bot_off[-1]))
-            segs = [np.column_stack([lo, hi])[self._unsort].astype(np.int64)
+            segs = [np.column_stack([lo, hi])[self._unsort]
                     for lo, hi in zip((self._seg_top[1::2], self._seg_bot), stops)]
-            self._segs = (self._mean_idx.astype(np.int64), *segs, np.log(self.hyp.signal_var))
+            seg = np.ascontiguousarray(np.hstack([*segs, self._mean_idx]), dtype=np.int64)
+            self._segs = (seg, float(np.log(self.hyp.signal_var)))
         return self._segs
 
     def _bucket_views(self, kt: np.ndarray, top: np.ndarray, bot: np.ndarray) -> list:
-        """Per bucket: its two stored blocks, the kernel columns (of ``kt`` (P, Q)) they multiply
-        and the rows of ``top`` / ``bot`` (rows, Q) the products go to."""
+        """Per stored block: the block, the kernel columns (of ``kt`` (P, Q)) it multiplies and
+        the rows of ``top`` / ``bot`` (rows, Q) the product goes to (two per bucket, the second
+        left out when it is empty)."""
         q, views = kt.shape[1], []
         for b, t0, t1, b0, b1 in zip(
             self.buckets, self._top_off, self._top_off[1:], self._bot_off, self._bot_off[1:]
         ):
             kb = kt[b.start : b.start + b.n_demos * b.m].reshape(b.n_demos, b.m, q)
-            views.append((b.top, kb, top[t0:t1].reshape(b.n_demos, -1, q),
-                          (b.bottom, kb[:, b.h :], bot[b0:b1].reshape(b.n_demos, -1, q))
-                          if b1 > b0 else None))
+            views.append((b.top, kb, top[t0:t1].reshape(b.n_demos, -1, q)))
+            if b1 > b0:
+                views.append((b.bottom, kb[:, b.h :], bot[b0:b1].reshape(b.n_demos, -1, q)))
         return views
 
     def _single_query(self) -> tuple:
         """Buffers of a one-point query (the streaming frame), built once: the query, the
-        exponent and kernel rows, the product outputs, their per-bucket views and the flows."""
+        exponent and kernel rows, the product outputs, their per-block views and the flows."""
         if self._single is None:
             p, n = self.z_all.shape[0], self.n_demos
             e, k = np.empty((1, p), dtype=self.dtype), np.empty((1, p), dtype=self.dtype)
@@ -439,28 +442,37 @@ class FlowBank:
                             np.empty((1, n, self.out_dim)), np.empty((1, n)))
         return self._single
 
-    def _flows(self, xq: np.ndarray, e: np.ndarray, k: np.ndarray, top: np.ndarray,
-               bot: np.ndarray, views: list | None, mean: np.ndarray,
-               var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The flows at queries ``xq`` (Q, 2) into ``mean``, ``var``: the kernel's exponent
-        (``e`` (Q, P)), ``k = exp(e)`` (numpy's own exp), the products of every bucket (``views``,
-        or built on ``k`` now), then every demo's mean and variance from them."""
-        mean_rows, top_seg, bot_seg, log_s2 = self._segments()
-        exponent_kernel(xq, self._c, self._z_t, self._log_base, log_s2, e)
+    def _products(self, xq: np.ndarray, e: np.ndarray, k: np.ndarray,
+                  views: list) -> None:
+        """The products at queries ``xq`` (Q, 2): the kernel's exponent (``e`` (Q, P)), ``k =
+        exp(e)`` (numpy's own exp), then every stored block times its kernel columns (``views``,
+        built on ``k``)."""
+        exponent_kernel(xq, self._c, self._z_t, self._log_base, self._segments()[1], e)
         np.exp(e, out=k)
-        for t, kb, out, rest in self._bucket_views(k.T, top, bot) if views is None else views:
-            np.matmul(t, kb, out=out)
-            if rest is not None:
-                np.matmul(*rest[:2], out=rest[2])
-        flow_kernel(top, bot, mean_rows, top_seg, bot_seg, self.hyp.signal_var, mean, var)
-        return mean, var
+        for block, kb, out in views:
+            np.matmul(block, kb, out=out)
+
+    def point_products(self, x0: float, x1: float) -> tuple[np.ndarray, np.ndarray]:
+        """The products ``[alpha^T; T[:h]] k`` and ``T[h:, h:] k[h:]`` of every demo at one
+        query point, (rows, 1) each, in buffers the next call overwrites; their rows per demo are
+        :meth:`segments` (``flow_kernel`` turns them into the flows)."""
+        xq, e, k, top, bot, views, _, _ = self._single_query()
+        xq[0, 0], xq[0, 1] = x0, x1
+        self._products(xq, e, k, views)
+        return top, bot
+
+    def segments(self) -> np.ndarray:
+        """(N, 4 + D) int64: each demo's rows in :meth:`point_products`' outputs (see
+        :func:`agents.flow_kernels.flow_kernel`)."""
+        return self._segments()[0]
 
     def predict_point(self, x0: float, x1: float) -> tuple[np.ndarray, np.ndarray]:
         """Every demo's flow at one query point (the streaming frame): mean (1, N, D) and latent
         variance (1, N), as :meth:`predict` gives them, in buffers the next call overwrites."""
-        xq, e, k, top, bot, views, mean, var = self._single_query()
-        xq[0, 0], xq[0, 1] = x0, x1
-        return self._flows(xq, e, k, top, bot, views, mean, var)
+        top, bot = self.point_products(x0, x1)
+        mean, var = self._single_query()[6:]
+        flow_kernel(top, bot, self._segments()[0], self.hyp.signal_var, mean, var)
+        return mean, var
 
     @property
     def n_stored(self) -> int:
@@ -482,8 +494,10 @@ class FlowBank:
         top = np.empty((self._top_off[-1], q), dtype=self.dtype)
         bot = np.empty((max(self._bot_off[-1], 1), q), dtype=self.dtype)
         e = np.empty((q, self.z_all.shape[0]), dtype=self.dtype)
-        return self._flows(np.ascontiguousarray(xq), e, e, top, bot, None,
-                           np.empty((q, self.n_demos, self.out_dim)), np.empty((q, self.n_demos)))
+        self._products(np.ascontiguousarray(xq), e, e, self._bucket_views(e.T, top, bot))
+        mean, var = np.empty((q, self.n_demos, self.out_dim)), np.empty((q, self.n_demos))
+        flow_kernel(top, bot, self._segments()[0], self.hyp.signal_var, mean, var)
+        return mean, var
 
 
 def build_bank(

@@ -64,12 +64,18 @@ test tracks shifted 0.25 / 0.5 / 1 / 2 m away: 3D RMS 106 -> 142 / 200 / 352 / 4
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from agents.base import validate_history
-from agents.flow_kernels import blend_rows_kernel, cosine_rows_kernel, terms_kernel
+from agents.flow_kernels import (
+    STATE_HEAD,
+    blend_kernel,
+    cosine_rows_kernel,
+    stream_frame_kernel,
+    terms_kernel,
+)
 from agents.gp import DEFAULT_RCOND, FlowBank, GPHyperparameters, build_bank
 from agents.predictive import ClosedLoopConfig, PredictiveAgent
 from handover_env.config import HandoverParams
@@ -149,15 +155,25 @@ def cosine_distance(a: np.ndarray, b: np.ndarray, min_speed: float) -> np.ndarra
     return out
 
 
-@dataclass
 class _Stream:
-    """Running state of one observed receiver trajectory."""
+    """Running state of one observed receiver trajectory, in the one array the compiled frame
+    (:func:`agents.flow_kernels.stream_frame_kernel`) updates: frames seen, whether there is a
+    last frame and its xy, the running sums of kappa * d_cos + sigma2 (N) and ``d = sums /
+    count`` (N)."""
 
-    sums: np.ndarray  # (N,) sum over observed frames of kappa * d_cos + sigma2
-    count: int = 0
-    last: np.ndarray | None = None  # newest receiver xy (m, dataset frame)
-    history_len: int = 0
-    extra: dict = field(default_factory=dict)
+    def __init__(self, n_demos: int) -> None:
+        self.state = np.zeros(STATE_HEAD + 2 * n_demos)
+        self.sums = self.state[STATE_HEAD : STATE_HEAD + n_demos]
+        self.d = self.state[STATE_HEAD + n_demos :]
+
+    @property
+    def count(self) -> int:
+        return int(self.state[0])
+
+    @property
+    def last(self) -> np.ndarray | None:
+        """The newest receiver xy (m, dataset frame), or None before the first frame."""
+        return self.state[2:4].copy() if self.state[1] else None
 
 
 class NonparametricAgent(PredictiveAgent):
@@ -202,6 +218,7 @@ class NonparametricAgent(PredictiveAgent):
         self.hyp = GPHyperparameters.from_velocities(vels, c.lengthscale, self.output_scale)
         # Centre positions (translation-invariant kernel; better float32 round-off).
         self.origin = np.concatenate(xs).mean(axis=0)
+        self._origin = tuple(self.origin.tolist())
         self.bank = build_bank(
             [x - self.origin for x in xs],
             [v / self.output_scale for v in vels],
@@ -220,11 +237,18 @@ class NonparametricAgent(PredictiveAgent):
             self.receivers[k, : ep.length] = ep.receiver_xy
             self.givers[k, : ep.length] = ep.giver_xyz
             self.givers[k, ep.length :] = ep.giver_xyz[-1]  # hold the last row (see module doc)
-        self._rr = np.sum(
-            self.receivers**2, axis=2
-        )  # (N, Lmax): |r|^2 for the closest-frame search
+        # (N, Lmax, 3) (|r|^2, r) of every frame: the closest-frame search's one array
+        self._search = np.ascontiguousarray(
+            np.concatenate([np.sum(self.receivers**2, axis=2)[..., None], self.receivers], axis=2)
+        )
         self.n_demos = n
         self._top_k = min(c.top_k, n)
+        self._all = np.arange(n, dtype=np.int64)
+        self._w = np.empty(self._top_k)
+        self._rows = np.empty((self._top_k, 3 * c.horizon))
+        self._seg = self.bank.segments()
+        self._par = np.array([self.hyp.signal_var, c.rate_hz, self.output_scale, c.min_speed,
+                              c.kappa], dtype=np.float64)  # flow_kernels.STREAM_PAR
         self.reset()
         return self
 
@@ -264,17 +288,15 @@ class NonparametricAgent(PredictiveAgent):
 
     # ------------------------------------------------------------------ prediction (Eq. xi_pred)
     def _blend(self, d: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """Eq. xi_pred at distances ``d`` (N,) and receiver position ``xy``: the K closest demos
+        (numpy's ``argpartition``), their weights and giver rows (flow_kernels.blend_kernel:
+        t_k = argmin_t |r_{k,t} - x|^2 = argmin_t (|r_{k,t}|^2 - 2 r_{k,t}.x) and the H rows
+        from t_k on), then ``w @ rows`` (numpy's BLAS product)."""
         k = self._top_k
-        sel = np.argpartition(d, k - 1)[:k] if k < d.size else np.arange(d.size)
-        ds = d[sel]
-        w = np.exp(-(ds - ds.min()))
-        w /= w.sum()
-        # t_k = argmin_t |r_{k,t} - x|^2 = argmin_t (|r_{k,t}|^2 - 2 r_{k,t}.x), and the H giver
-        # rows from t_k on (flow_kernels.blend_rows_kernel)
-        rows = np.empty((k, 3 * self.config.horizon))
-        x0, x1 = (float(v) for v in xy)
-        blend_rows_kernel(sel, self._rr, self.receivers, x0, x1, self.lengths, self.givers, rows)
-        return (w @ rows).reshape(-1, 3)
+        sel = np.argpartition(d, k - 1)[:k] if k < d.size else self._all
+        blend_kernel(sel, d, self._search, xy[0], xy[1], self.lengths, self.givers, self._w,
+                     self._rows)
+        return (self._w @ self._rows).reshape(-1, 3)
 
     def predict(self, receiver_history: np.ndarray) -> np.ndarray:
         """(H, 3) predicted giver trajectory; row 0 is the current frame (open-loop use)."""
@@ -302,7 +324,7 @@ class NonparametricAgent(PredictiveAgent):
     # ------------------------------------------------------------------ streaming hooks
     def stream_reset(self) -> None:
         """Start a new observed trajectory (O(N))."""
-        self._state = _Stream(sums=np.zeros(self.n_demos)) if self.bank is not None else None
+        self._state = _Stream(self.n_demos) if self.bank is not None else None
 
     def stream_update(self, receiver_xy: np.ndarray) -> None:
         """Add one new 30 Hz frame: only its own terms, for all demos at once."""
@@ -314,30 +336,21 @@ class NonparametricAgent(PredictiveAgent):
         x0, x1 = arr.reshape(-1).tolist()
         if not (math.isfinite(x0) and math.isfinite(x1)):
             raise ValueError("receiver_history contains NaN or inf")
-        s = self._state
-        if s.last is None:
-            v0 = v1 = 0.0
-        else:
-            l0, l1 = s.last.tolist()
-            v0, v1 = (x0 - l0) * self.config.rate_hz, (x1 - l1) * self.config.rate_hz
-        # frame_terms(xy, vel) of one frame, in the same float64 operations
-        o0, o1 = self.origin.tolist()
-        mean, var = self.bank.predict_point(x0 - o0, x1 - o1)
-        c = self.config
-        terms = np.empty((1, self.n_demos))
-        terms_kernel(np.array([[v0, v1]]), mean, var, self.output_scale, c.min_speed, c.kappa,
-                     terms)
-        s.sums += terms[0]
-        s.count += 1
-        s.last = np.array([x0, x1])
+        # frame_terms(xy, vel) of one frame, in the same float64 operations, added to the sums
+        o0, o1 = self._origin
+        top, bot = self.bank.point_products(x0 - o0, x1 - o1)
+        stream_frame_kernel(top, bot, self._seg, self._par, x0, x1, self._state.state)
 
     def stream_distances(self) -> np.ndarray:
         """Eq. d from the running sums: (N,)."""
         self._check_fitted()
         if self._state.count == 0:
             raise ValueError("no receiver frame streamed yet")
-        return self._state.sums / self._state.count
+        return self._state.d.copy()
 
     def stream_predict(self) -> np.ndarray:
         """(H, 3) chunk for the newest streamed frame."""
-        return self._blend(self.stream_distances(), self._state.last)
+        s = self._state
+        if s is None or s.state[0] == 0.0:
+            self.stream_distances()  # the clear error
+        return self._blend(s.d, s.state[2:4])

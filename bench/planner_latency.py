@@ -12,13 +12,14 @@ the prediction of that ratio from the stored per-query entries (sum over demos o
 (M_k + 2) M_k for FITC against (N_k + 2) N_k for the exact GP: the variance mat-vec dominates);
 then the cost at inducing ratios 0.1 ... 1.0.
 
-``--against REV`` also times the planner code of git revision REV (its ``agents/`` extracted with
-``git archive`` into a temporary folder and imported as ``agents_REV``, the current
-``handover_env`` underneath) interleaved with today's, on the same data, and reports their ratio
-and the largest difference of their chunks.
+``--against REV`` also times the planner code (ours and IAAL) of git revision REV (its ``agents/``
+extracted with ``git archive`` into a temporary folder and imported as ``agents_REV``, the current
+``handover_env`` underneath) interleaved with today's, on the same data, and reports both
+revisions' IAAL / ours ratios and the largest difference of their chunks. ``--busy`` keeps a
+second process spinning on the other core while it measures.
 
 Usage: ``python bench/planner_latency.py [--quick] [--data PATH] [--precision float32|float64]
-[--against REV]``
+[--against REV] [--busy]``
 """
 
 from __future__ import annotations
@@ -128,9 +129,34 @@ def main(argv: list[str] | None = None) -> int:
                         help="per-frame mat-vec precision (default: the planner's default)")
     parser.add_argument("--against", default=None, metavar="REV",
                         help="also time the planner code of this git revision, side by side")
+    parser.add_argument("--busy", action="store_true",
+                        help="keep a second process spinning on the other core meanwhile")
     args = parser.parse_args(argv)
 
     print(_pin_one_core(), flush=True)
+    spinner = _spin_other_core() if args.busy else None
+    try:
+        return _run(args)
+    finally:
+        if spinner is not None:
+            spinner.kill()
+            spinner.wait()
+
+
+def _spin_other_core() -> subprocess.Popen | None:
+    """A process that keeps the next core busy (a Python loop) until it is killed."""
+    cores = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
+    others = sorted(set(range(os.cpu_count() or 1)) - set(cores))
+    if not others:
+        print("--busy: no other core to keep busy", flush=True)
+        return None
+    code = f"import os; os.sched_setaffinity(0, {{{others[0]}}})\nwhile True: pass"
+    print(f"a second process keeps core {others[0]} busy", flush=True)
+    return subprocess.Popen([sys.executable, "-c", code])
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The measurements of :func:`main` (see the module docstring)."""
     path = args.data or (str(DEV_COPY) if DEV_COPY.is_dir() else None)
     dataset = load_any(path)
     print(
@@ -200,24 +226,29 @@ def main(argv: list[str] | None = None) -> int:
     if args.against:
         with tempfile.TemporaryDirectory() as tmp:
             old_mod = _planner_of_revision(args.against, Path(tmp))
-            old = old_mod.NonparametricAgent(
-                old_mod.NonparametricConfig(**vars(replace(base, inducing_ratio=0.4)))
-            ).fit(dataset)
-            (nw, nc), (pw, pc) = _frame_costs([ours, old], tracks)
+            old_cfg = old_mod.NonparametricConfig(**vars(replace(base, inducing_ratio=0.4)))
+            old = old_mod.NonparametricAgent(old_cfg).fit(dataset)
+            old_iaal = old_mod.NonparametricAgent(
+                replace(old_cfg, exact=True, inducing_ratio=1.0)).fit(dataset)
+            (nw, nc), (niw, nic), (pw, pc), (piw, pic) = _frame_costs(
+                [ours, iaal, old, old_iaal], tracks)
             diff = 0.0
             for track in tracks:
-                for a in (ours, old):
+                for a in (ours, old, iaal, old_iaal):
                     a.stream_reset()
                 for xy in track:
-                    ours.stream_update(xy)
-                    old.stream_update(xy)
-                    diff = max(diff, float(np.max(np.abs(ours.stream_predict()
-                                                         - old.stream_predict()))))
+                    for a, b in ((ours, old), (iaal, old_iaal)):
+                        a.stream_update(xy)
+                        b.stream_update(xy)
+                        diff = max(diff, float(np.max(np.abs(a.stream_predict()
+                                                             - b.stream_predict()))))
         print(f"\nthis code vs the planner of {args.against}, interleaved track by track:")
-        print(f"  this  cpu {_fmt(nc)}\n  {args.against:5s} cpu {_fmt(pc)}")
-        print(f"  ratio {args.against}/this: cpu {np.median(pc) / np.median(nc):.3f}x, wall "
-              f"{np.median(pw) / np.median(nw):.3f}x (medians); largest chunk difference "
-              f"{diff:.1e} m", flush=True)
+        print(f"  this  ours cpu {_fmt(nc)}   IAAL cpu {_fmt(nic)}")
+        print(f"  {args.against:5s} ours cpu {_fmt(pc)}   IAAL cpu {_fmt(pic)}")
+        print(f"  IAAL / ours (cpu medians): this {np.median(nic) / np.median(nc):.2f}x, "
+              f"{args.against} {np.median(pic) / np.median(pc):.2f}x; ours {args.against}/this "
+              f"{np.median(pc) / np.median(nc):.3f}x; largest chunk difference {diff:.1e} m",
+              flush=True)
 
     print("\ncost per frame against the inducing ratio (IAAL = exact GP for reference):")
     print(
