@@ -162,9 +162,18 @@ class _Stream:
     count`` (N)."""
 
     def __init__(self, n_demos: int) -> None:
+        self.n_demos = n_demos
         self.state = np.zeros(STATE_HEAD + 2 * n_demos)
-        self.sums = self.state[STATE_HEAD : STATE_HEAD + n_demos]
-        self.d = self.state[STATE_HEAD + n_demos :]
+
+    @property
+    def sums(self) -> np.ndarray:
+        """The running sums (a view of ``state``; views made on access survive a pickle)."""
+        return self.state[STATE_HEAD : STATE_HEAD + self.n_demos]
+
+    @property
+    def d(self) -> np.ndarray:
+        """The distances ``sums / count`` (a view of ``state``)."""
+        return self.state[STATE_HEAD + self.n_demos :]
 
     @property
     def count(self) -> int:

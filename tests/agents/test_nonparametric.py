@@ -82,6 +82,22 @@ def test_streaming_equals_batch_recomputation(agent, toy):
             )
 
 
+def test_a_pickled_stream_continues_as_the_original(agent, toy):
+    import pickle
+
+    noisy = toy[2].receiver_xy + np.random.default_rng(3).normal(0, 0.01, toy[2].receiver_xy.shape)
+    agent.stream_reset()
+    for xy in noisy[:10]:
+        agent.stream_update(xy)
+    copy = pickle.loads(pickle.dumps(agent))
+    for xy in noisy[10:20]:
+        agent.stream_update(xy)
+        copy.stream_update(xy)
+        assert np.array_equal(copy.stream_distances(), agent.stream_distances())
+        assert np.array_equal(copy.stream_predict(), agent.stream_predict())
+    assert copy._state.count == 20 and np.array_equal(copy._state.last, noisy[19])
+
+
 def test_float32_default_agrees_with_float64(toy):
     from dataclasses import replace
 
