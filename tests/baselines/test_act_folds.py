@@ -88,11 +88,11 @@ def test_episode_indices_of_subsets(data):
 
 def test_parallel_pretraining_equals_fit_agent_and_is_reused(data, folds, tmp_path):
     """2 spawned workers on one export give bitwise the models fit_agent trains from per-fold
-    exports."""
+    exports (two of the three folds: one job per worker)."""
     cache = tmp_path / "parallel"
-    sets = [train for train, _ in folds]
+    sets = [train for train, _ in folds[:2]]
     runs = pretrain_act(data, sets, OPTIONS, cache, workers=2, progress=False)
-    assert len(runs) == 3 and all(r.trained and r.fit_seconds > 0 for r in runs)
+    assert len(runs) == 2 and all(r.trained and r.fit_seconds > 0 for r in runs)
     assert len(list(cache.glob(f"{EXPORT_PREFIX}*"))) == 1  # one export for all folds
     for f, run in enumerate(runs):
         train = data.subset(sets[f])
