@@ -398,22 +398,21 @@ class HandoverEnvBase(gym.Env, EzPickle):
 
     def _record_camera_frame(self) -> None:
         """One 30 Hz camera frame of the person: pelvis xy and right hand (the grip site)."""
-        x, y = self.receiver.camera_xy().tolist()
-        (pel, hand), _, _ = self.camera_model.frame_fast(
-            float(self.data.time), [x, y], self._grip_v.tolist()
+        hx, hy, hz, px, py, _ = self.camera_model.capture(
+            float(self.data.time), self._grip_v, self.receiver.camera_xy()
         )
         self._n_captured += 1
         buf = self._frames_buf
         if self._n_captured <= self._camera_delay:  # nothing delivered yet: the first capture
-            buf[0, 0], buf[0, 1] = pel
+            k = 0
             self._n_hist = 1
         else:
             k = self._frames_seen
             if k >= buf.shape[0]:  # an env stepped past its TimeLimit (or without one)
                 buf = self._frames_buf = np.concatenate([buf, np.zeros_like(buf)])
-            buf[k, 0], buf[k, 1] = pel
             self._frames_seen = self._n_hist = k + 1
-        self._hand_obs = hand
+        buf[k, 0], buf[k, 1] = px, py
+        self._hand_obs = [hx, hy, hz]
 
     def step(self, action: np.ndarray):
         if not getattr(self, "_ready", False):

@@ -18,27 +18,28 @@ Call :meth:`Camera.reset` at an episode's start, then :meth:`Camera.frame` once 
 
 Every random number comes from the Generator given to :meth:`Camera.reset`, in capture order
 (normals and uniforms each drawn in blocks of 256), so an episode is reproducible from its seed;
-a keypoint with zero noise and a camera that never loses the body draw nothing. :meth:`Camera.frame`
-checks its input; :meth:`Camera.frame_fast` is the same model on plain floats for the env's
-30 Hz step. No smoothing is added: the ZED SDK documentation says
+a keypoint with zero noise and a camera that never loses the body draw nothing. A frame is one
+compiled call (:func:`handover_env.sensors.camera_frame.camera_frame`) on the camera's state
+array: :meth:`Camera.frame` checks its input and calls it, :meth:`Camera.capture` is the same call
+without the checks for the env's 30 Hz step. No smoothing is added: the ZED SDK documentation says
 its tracking filters detections but not how, and the noise figures are measured on its output.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from handover_env.sensors import camera_frame as cf
 from handover_env.sensors.profiles import CameraParams
 
 #: Keypoints the camera model knows, with their noise fields and dimensions (2: xy, 3: xyz).
 KEYPOINTS: dict[str, str] = {"pelvis": "pelvis", "hand": "hand"}
-_ENV_NAMES = ("hand", "pelvis")  # sorted, as frame() orders the keypoints
-_BLOCK = 256  # random numbers drawn from the Generator at a time (same stream, fewer calls)
+_ORDER = ("hand", "pelvis")  # the kernel's keypoints, in the order they are drawn
+_NONE = np.empty(0)  # a keypoint not given
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,8 @@ class Camera:
             raise ValueError(f"params must be CameraParams, got {type(params).__name__}")
         self.params = params or CameraParams()
         self._rng: np.random.Generator | None = None
+        #: the compiled frame's state (:mod:`handover_env.sensors.camera_frame`), set by reset
+        self.state = np.empty(0)
 
     @property
     def delay_frames(self) -> int:
@@ -77,93 +80,46 @@ class Camera:
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
         p = self.params
         self._rng = rng
-        # (sigma, rho, sqrt(1 - rho^2) sigma) per keypoint; sigma 0: no noise and no draws
-        self._noise_par = {
-            name: (getattr(p, f"{k}_sigma"), getattr(p, f"{k}_rho"),
-                   math.sqrt(1.0 - getattr(p, f"{k}_rho") ** 2) * getattr(p, f"{k}_sigma"))
-            for name, k in KEYPOINTS.items()
-        }
-        self._noise: dict[str, list[float]] = {}
-        self._z: list[float] = []  # standard normals drawn in blocks from rng, used in order
-        self._zi = 0
-        self._u: list[float] = []  # uniforms for the loss chain, likewise
-        self._ui = 0
-        self._lost = False
-        self._stay = 1.0 - 1.0 / p.lost_run  # P(lost -> lost)
-        self._start = (min(1.0, p.lost_fraction / (p.lost_run * (1.0 - p.lost_fraction)))
-                       if p.lost_fraction > 0 else 0.0)
-        self._delay = self.delay_frames
-        self._frames: deque[tuple[float, tuple[str, ...], list[list[float]], bool]] = deque(
-            maxlen=self._delay + 1
-        )
-        self._last_tracked: tuple[float, tuple[str, ...], list[list[float]]] | None = None
-        self._t_last = -math.inf
+        delay = self.delay_frames
+        cs = self.state = np.zeros(cf.size(delay))
+        cs[cf.T_LAST] = -math.inf
+        cs[cf.DELAY] = delay
+        cs[cf.STAY] = 1.0 - 1.0 / p.lost_run  # P(lost -> lost)
+        cs[cf.START] = (min(1.0, p.lost_fraction / (p.lost_run * (1.0 - p.lost_fraction)))
+                        if p.lost_fraction > 0 else 0.0)
+        for k, name in enumerate(_ORDER):  # sigma 0: no noise and no draws
+            field = KEYPOINTS[name]
+            sigma, rho = getattr(p, f"{field}_sigma"), getattr(p, f"{field}_rho")
+            cs[cf.PAR + 3 * k:cf.PAR + 3 * k + 3] = sigma, rho, math.sqrt(1.0 - rho**2) * sigma
         return self
 
-    def _normal(self) -> float:
-        i = self._zi
-        if i >= len(self._z):
-            self._z = self._rng.standard_normal(_BLOCK).tolist()  # type: ignore[union-attr]
-            i = 0
-        self._zi = i + 1
-        return self._z[i]
+    def _draw(self, need: int) -> None:
+        """Refill the pool the kernel asked for (:data:`~handover_env.sensors.camera_frame.
+        NEED_NORMALS` or ``NEED_UNIFORMS``) from the episode's Generator."""
+        cs, rng, z = self.state, self._rng, cf.Z
+        if need == cf.NEED_NORMALS:  # the normals left, then a new block
+            i, n = int(cs[cf.ZI]), int(cs[cf.ZN])
+            left = n - i
+            cs[z:z + left] = cs[z + i:z + n].copy()
+            cs[z + left:z + left + cf.BLOCK] = rng.standard_normal(cf.BLOCK)  # type: ignore[union-attr]
+            cs[cf.ZI], cs[cf.ZN] = 0, left + cf.BLOCK
+        else:
+            cs[cf.U:cf.U + cf.BLOCK] = rng.random(cf.BLOCK)  # type: ignore[union-attr]
+            cs[cf.UI], cs[cf.UN] = 0, cf.BLOCK
 
-    def _draw_lost(self) -> bool:
-        if self._start <= 0.0:
-            return False
-        i = self._ui
-        if i >= len(self._u):
-            self._u = self._rng.random(_BLOCK).tolist()  # type: ignore[union-attr]
-            i = 0
-        self._ui = i + 1
-        self._lost = self._u[i] < (self._stay if self._lost else self._start)
-        return self._lost
-
-    def _capture(self, t: float, names: tuple[str, ...],
-                 values: list[list[float]]
-                 ) -> tuple[tuple[str, ...], list[list[float]], bool, float]:
-        """The core of :meth:`frame` on plain floats (no checks): the delivered frame's
-        (keypoint names, points, tracked, t_capture).
-
-        The returned lists belong to the camera: copy them to keep them past the next call.
+    def capture(self, t: float, hand: np.ndarray, pelvis: np.ndarray) -> list[float]:
+        """:meth:`frame` without its checks, for the env's hot path: ``hand`` and ``pelvis`` are
+        contiguous float64 arrays (3 and 2 or 3 numbers; an empty array: not given), ``t`` a
+        float not before the last call's. Returns the delivered frame's ``[hand (3), pelvis
+        (3)]`` (a 2-D pelvis fills the first two); its time and tracking state are in
+        :attr:`state` (``OUT``).
         """
-        captured = []
-        for name, x in zip(names, values):
-            sigma, rho, c = self._noise_par[name]
-            if sigma > 0.0:
-                prev = self._noise.get(name)
-                if prev is None or len(prev) != len(x):
-                    n = [sigma * self._normal() for _ in x]
-                else:
-                    n = [rho * q + c * self._normal() for q in prev]
-                self._noise[name] = n
-                x = [a + b for a, b in zip(x, n)]
-            captured.append(x)
-        lost = self._draw_lost()
-        frames = self._frames
-        frames.append((t, names, captured, not lost))
-        t_cap, f_names, points, tracked = frames[0]
-        if len(frames) <= self._delay:  # nothing delivered yet
-            return f_names, points, False, t_cap
-        if tracked:
-            self._last_tracked = (t_cap, f_names, points)
-            return f_names, points, True, t_cap
-        held = self._last_tracked
-        if held is None:
-            return f_names, points, False, t_cap
-        return held[1], held[2], False, held[0]
-
-    def frame_fast(self, t: float, pelvis: list[float],
-                   hand: list[float]) -> tuple[list[list[float]], bool, float]:
-        """:meth:`frame` for the env's hot path: plain floats in, ``([pelvis, hand], tracked,
-        t_capture)`` out, no checks (the env's times and positions are valid by construction).
-
-        Same random draws, in the same order, as ``frame(t, {"hand": ..., "pelvis": ...})``.
-        The returned lists belong to the camera (read them before the next call).
-        """
-        self._t_last = t
-        _, points, tracked, t_cap = self._capture(t, _ENV_NAMES, [hand, pelvis])
-        return [points[1], points[0]], tracked, t_cap
+        cs = self.state
+        need = cf.camera_frame(cs, t, hand, pelvis)
+        while need != cf.DONE:
+            self._draw(need)
+            need = cf.camera_frame(cs, t, hand, pelvis)
+        return cs[cf.OUT + cf.R_PTS:cf.OUT + cf.R_PTS + 6].tolist()
 
     def frame(self, t: float, true_points: Mapping[str, np.ndarray]) -> Observation:
         """Capture the true keypoints at ``t`` and return the observation available at ``t``.
@@ -180,19 +136,25 @@ class Camera:
             raise RuntimeError("Camera.frame() called before reset(rng)")
         if not (isinstance(t, (int, float, np.floating, np.integer)) and math.isfinite(t)):
             raise ValueError(f"t must be a finite number of seconds, got {t!r}")
-        if t < self._t_last:
-            raise ValueError(f"t must not go back: {t} after {self._t_last}")
+        t_last = float(self.state[cf.T_LAST])
+        if t < t_last:
+            raise ValueError(f"t must not go back: {t} after {t_last}")
         if not isinstance(true_points, Mapping):
             raise ValueError(f"true_points must be a dict, got {type(true_points).__name__}")
-        names = tuple(sorted(true_points))
-        values = []
-        for name in names:
+        given = {name: _NONE for name in _ORDER}
+        for name in sorted(true_points):
             if name not in KEYPOINTS:
                 raise ValueError(f"unknown keypoint {name!r}; known: {sorted(KEYPOINTS)}")
             x = np.asarray(true_points[name], dtype=np.float64)
             if x.ndim != 1 or x.shape[0] not in (2, 3) or not np.isfinite(x).all():
                 raise ValueError(f"keypoint {name!r} must be 2 or 3 finite numbers, got {x!r}")
-            values.append(x.tolist())
-        self._t_last = float(t)
-        f_names, points, tracked, t_cap = self._capture(float(t), names, values)
-        return Observation({k: np.array(v) for k, v in zip(f_names, points)}, tracked, t_cap)
+            given[name] = np.ascontiguousarray(x)
+        self.capture(float(t), given["hand"], given["pelvis"])
+        cs, out = self.state, cf.OUT
+        points = {}
+        for k, name in enumerate(_ORDER):
+            dim = int(cs[out + cf.R_DIM + k])
+            if dim:
+                p = out + cf.R_PTS + 3 * k
+                points[name] = cs[p:p + dim].copy()
+        return Observation(points, bool(cs[out + cf.R_TRACKED]), float(cs[out + cf.R_T]))
