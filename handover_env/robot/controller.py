@@ -33,8 +33,8 @@ We implement it as a torque controller, run every ``ticks`` physics steps on a g
   are precomputed in one matrix product per replan. With Λ frozen the whole law is affine in
   the measured TCP pose and twists, so each planned tick gets one (7, 26) matrix at the replan
   and a tick is J, three small products and the clip, one compiled call
-  (:mod:`handover_env.robot.impedance_tick`, the replan's Λ, W_k and posture torque too; numpy
-  keeps the speed check's one LAPACK solve and the limiter's rare matrix inverse).
+  (:mod:`handover_env.robot.impedance_tick`, the replan's Λ, W_k, posture torque and the speed
+  check's solve by numpy's own LAPACK too; numpy keeps the limiter's rare matrix inverse).
 
 This module is over 500 lines because the controller is one class whose per-tick law and the
 precomputation that makes it affine (gain maps, reference filter, frozen Λ) share the same
@@ -251,12 +251,14 @@ class ImpedanceController:
                  tk.I_PGAIN: 6 * _B_SIZE, tk.I_CGAIN: 6 * _B_SIZE, tk.I_TRAJ: n * 12,
                  tk.I_ROTMAPS: 36 * n, tk.I_PLAN: tk.P_SIZE, tk.I_POWERS: 9 * n, tk.I_CS: 3 * n,
                  tk.I_ROTB: 108, tk.I_JACPLAN: 36, tk.I_TWIST: 6 * n, tk.I_ARMROWS: 6 * nv,
-                 tk.I_REST: 6, tk.I_PTMP: 18}
+                 tk.I_REST: 6, tk.I_PTMP: 18, tk.I_SOLVE: 36 + 6 * n}
         chain = sorted(_chain_dofs(model, int(model.site_bodyid[ids.tcp_site])))
-        self._iw = iw = np.zeros(tk.I_SIZE + len(chain) + 18, dtype=np.int64)
+        lists = chain + [int(i) for part in (ids.arm_dof, ids.arm_act, ids.arm_qpos)
+                         for i in np.asarray(part)]
+        self._iw = iw = np.zeros(tk.I_SIZE + len(lists) + tk.L_SIZE, dtype=np.int64)
         iw[tk.I_NV], iw[tk.I_NCHAIN], iw[tk.I_NPLAN] = nv, len(chain), n
-        iw[tk.I_SIZE:] = chain + [int(i) for part in (ids.arm_dof, ids.arm_act, ids.arm_qpos)
-                                  for i in np.asarray(part)]
+        iw[tk.I_SIZE:tk.I_SIZE + len(lists)] = lists
+        iw[tk.I_LAPACK] = tk.I_SIZE + len(lists)
         self._fw = fw = np.zeros(sum(sizes.values()))
         views, at = {}, 0
         for slot, size in sizes.items():
@@ -553,18 +555,22 @@ class ImpedanceController:
         the same factor while its start stays where the reference is. The torque-level limiter
         (:meth:`_limit_joint_motion`) stays as the backstop for the feedback's own joint speeds.
 
-        Compiled (:func:`~handover_env.robot.impedance_tick.impedance_plan` and
-        :func:`~handover_env.robot.impedance_tick.impedance_plan_scale`) around numpy's solve of
-        the damped least squares (LAPACK's, whose order of operations the kernel does not copy).
+        One compiled call (:func:`~handover_env.robot.impedance_tick.impedance_replan`: the plan,
+        the damped least squares by numpy's own LAPACK ``dgesv`` and the scaling), so the solve
+        has ``numpy.linalg.solve``'s bits. Without numpy's bundled LAPACK
+        (:mod:`handover_env.lapack_calls`) and when the damped system is singular, the solve is
+        numpy's in Python between :func:`~handover_env.robot.impedance_tick.impedance_plan` and
+        :func:`~handover_env.robot.impedance_tick.impedance_plan_scale` (numpy raises its
+        ``LinAlgError`` for a singular system).
         """
         check = self._scale_speed and self._bound is not None
         mem = self._view.mem if self._bound is not None else self._fw
-        if tk.impedance_plan(mem, self._fw, self._iw, self._plan_i - 1, check):
-            # (6, n) damped least squares: LAPACK's dgesv through numpy's public solve (its
-            # private gufunc would save ~30 us per replan, not worth depending on numpy
-            # internals)
+        replan = tk.impedance_replan if tk.impedance_replan is not None else tk.impedance_plan
+        scaled = replan(mem, self._fw, self._iw, self._plan_i - 1, check)
+        if scaled == tk.SOLVE:
             sol = np.linalg.solve(self._jjt, self._plan_twist.T)
-            self.scaled_plans += tk.impedance_plan_scale(self._fw, self._iw, sol)
+            scaled = tk.impedance_plan_scale(self._fw, self._iw, sol)
+        self.scaled_plans += scaled
         self._plan_i = 0
         self._stale = True
 

@@ -30,11 +30,13 @@ import math
 
 from handover_env.compiled import kernel
 from handover_env.kernel_math import fma, mj_dot
+from handover_env.lapack_calls import dgesv
 from handover_env.mujoco_calls import mj_solve_m, mju_chol_solve
 
 JAC, WRENCH, TORQUE, CLIP, GATHER = 1, 2, 4, 8, 16
 ALL = JAC | WRENCH | TORQUE | CLIP
 DONE, FAR_ROTATION, LIMITED = 0, 1, 2
+SOLVE = -1  # the replan waits for the speed check's solve (impedance_plan, impedance_replan)
 
 # Integer workspace (int64): sizes, offsets in MjData's array and the float workspace, state.
 I_NV, I_NCHAIN, I_HAVE_PREV, I_LIMIT = 0, 1, 2, 3
@@ -52,8 +54,12 @@ I_PLAN, I_POWERS, I_CS, I_ROTB, I_JACPLAN, I_TWIST = 34, 35, 36, 37, 38, 39
 I_MODEL, I_DATA, I_ARMROWS = 40, 41, 42
 # The posture torque's (impedance_posture): qpos in MjData's array, q_rest (6), scratch (18).
 I_QPOS, I_REST, I_PTMP = 43, 44, 45
-I_SIZE = 46  # the fixed slots; then the chain dofs, the 6 arm dofs, the 6 arm actuators and the
-# 6 arm joints' qpos addresses
+# The replan's solve (plan_solve): its matrix and right-hand sides, column-major (36 + 6 n) in fw,
+# and in iw the offset of LAPACK's integers [n, nrhs, lda, ldb, info, ipiv (6)] (L_SIZE).
+I_SOLVE, I_LAPACK = 46, 47
+I_SIZE = 48  # the fixed slots; then the chain dofs, the 6 arm dofs, the 6 arm actuators and the
+# 6 arm joints' qpos addresses, then LAPACK's integers
+L_N, L_NRHS, L_LDA, L_LDB, L_INFO, L_IPIV, L_SIZE = 0, 1, 2, 3, 4, 5, 11
 # Scalars (float workspace at iw[I_SCAL]): payload weight factor 9.81 m, joint speed limit,
 # joint acceleration limit, 1 / tick.
 S_GM, S_VLIM, S_ALIM, S_INV_DT, S_DAMP, S_KN, S_DN = 0, 1, 2, 3, 4, 5, 6
@@ -293,8 +299,9 @@ def _plan_finish(fw, iw):  # type: ignore[no-untyped-def]
 def impedance_plan(mem, fw, iw, last, check_speed):  # type: ignore[no-untyped-def]
     """Plan the reference filter's next ticks from the state reached at planned tick ``last``
     (-1: the start); see ``ImpedanceController._plan``. With ``check_speed`` it leaves the
-    speed check's ``J Jᵀ + d I`` and the plan's twists in the workspace and returns 1 (the
-    caller solves and calls :func:`impedance_plan_scale`); else it finishes the plan, returns 0.
+    speed check's ``J Jᵀ + d I`` and the plan's twists in the workspace and returns
+    :data:`SOLVE` (the solve and :func:`impedance_plan_scale` follow); else it finishes the plan
+    and returns 0.
     """
     n, traj, p = iw[I_NPLAN], iw[I_TRAJ], iw[I_PLAN]
     if last >= 0:  # the reference state reached by the last tick of the current plan
@@ -354,7 +361,7 @@ def impedance_plan(mem, fw, iw, last, check_speed):  # type: ignore[no-untyped-d
         for c in range(3):
             fw[tw + 6 * k + c] = fw[traj + 12 * k + 4 + c]
         fw[tw + 6 * k + 5] = fw[traj + 12 * k + 7]
-    return 1
+    return SOLVE
 
 
 @kernel
@@ -391,6 +398,50 @@ def impedance_plan_scale(fw, iw, sol):  # type: ignore[no-untyped-def]
             scaled = 1
     _plan_finish(fw, iw)
     return scaled
+
+
+# The solve and the whole replan in one call exist where numpy's LAPACK was found
+# (:mod:`handover_env.lapack_calls`); else they are None and the controller calls
+# impedance_plan, numpy's solve and impedance_plan_scale.
+if dgesv is not None:
+
+    @kernel
+    def plan_solve(fw, iw):  # type: ignore[no-untyped-def]
+        """The speed check's ``sol = (J Jᵀ + d I)^-1 twistᵀ`` (6, n) by numpy's own ``dgesv``,
+        called as ``numpy.linalg.solve`` calls it: on column-major copies of the matrix and of
+        the right-hand sides (the (n, 6) twists, row-major, are the (6, n) right-hand sides
+        column-major), in one buffer at ``iw[I_SOLVE]`` (matrix, then the right-hand sides, which
+        hold the solution afterwards). Returns LAPACK's ``info`` (> 0: singular)."""
+        n, a, li = iw[I_NPLAN], iw[I_SOLVE], iw[I_LAPACK]
+        jjt, tw = iw[I_PLAN] + P_JJT, iw[I_TWIST]
+        b = a + 36
+        for r in range(6):
+            for c in range(6):
+                fw[a + 6 * c + r] = fw[jjt + 6 * r + c]
+        for k in range(6 * n):
+            fw[b + k] = fw[tw + k]
+        iw[li + L_N], iw[li + L_NRHS], iw[li + L_LDA], iw[li + L_LDB] = 6, n, 6, 6
+        iw[li + L_INFO] = 0
+        fp, ip = fw.ctypes.data, iw.ctypes.data + 8 * li
+        dgesv(ip + 8 * L_N, ip + 8 * L_NRHS, fp + 8 * a, ip + 8 * L_LDA, ip + 8 * L_IPIV,
+              fp + 8 * b, ip + 8 * L_LDB, ip + 8 * L_INFO)
+        return iw[li + L_INFO]
+
+    @kernel
+    def impedance_replan(mem, fw, iw, last, check_speed):  # type: ignore[no-untyped-def]
+        """The whole replan: :func:`impedance_plan`, with ``check_speed`` the solve
+        (:func:`plan_solve`) and :func:`impedance_plan_scale`. Returns 1 if the plan was slowed,
+        0 if not, :data:`SOLVE` if the damped system is singular (the plan then waits, as after
+        :func:`impedance_plan`, for the caller's solve: numpy's raises ``LinAlgError``)."""
+        if impedance_plan(mem, fw, iw, last, check_speed) == 0:
+            return 0
+        if plan_solve(fw, iw) != 0:
+            return SOLVE
+        n, b = iw[I_NPLAN], iw[I_SOLVE] + 36
+        return impedance_plan_scale(fw, iw, fw[b:b + 6 * n].reshape((n, 6)).T)
+
+else:
+    plan_solve = impedance_replan = None
 
 
 @kernel
