@@ -491,11 +491,10 @@ def test_closed_loop_refuses_replays_of_the_training_folds(tmp_path, capsys):
     assert "rl-scratch" in err and "held-out folds only" in err
 
 
-def test_quick_closed_loop_pairs_both_rl_agents_against_reactive(tmp_path):
-    out = tmp_path / "out"
-    argv = ["closed-loop", "--quick", "--no-progress", "--agents", "reactive", "rl-residual",
-            "rl-scratch", "--out", str(out), "--checkpoints", str(tmp_path / "cache")]
-    assert evaluate.main(argv) == 0
+def test_quick_closed_loop_pairs_both_rl_agents_against_reactive(closed_loop_every_agent):
+    """``closed-loop --quick`` with every agent, the RL ones trained on the spot (the session's
+    shared run, tests/conftest.py)."""
+    out = closed_loop_every_agent / "out"
     with (out / "closed_loop_episodes.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     by_agent = {a: [r for r in rows if r["agent"] == a] for a in ("reactive", "rl-residual",

@@ -4,8 +4,10 @@ independence, the episode rows, and clean errors on bad input."""
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -42,14 +44,10 @@ def _rows(path: Path) -> list[dict]:
 
 
 @pytest.fixture(scope="module")
-def quick_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The --quick closed-loop run with every agent (as `make test` runs it)."""
-    out = tmp_path_factory.mktemp("closed-loop")
-    argv = ["closed-loop", "--quick", "--no-progress", "--out", str(out / "out"),
-            "--checkpoints", str(out / "checkpoints"),
-            "--sensing", "ideal"]  # the exact world these tests were written for (issue 24)
-    assert evaluate.main(argv) == 0
-    return out / "out"
+def quick_run(closed_loop_every_agent: Path) -> Path:
+    """The --quick closed-loop run with every agent on the ideal sensing profile, the exact world
+    these tests were written for (issue 24): the session's shared run (tests/conftest.py)."""
+    return closed_loop_every_agent / "out"
 
 
 def test_quick_closed_loop_runs_every_agent_on_the_same_receivers(quick_run: Path) -> None:
@@ -155,19 +153,25 @@ def test_lagging_agent_hands_over_later_than_reactive(quick_run: Path) -> None:
     assert all(d > -1.0 / 30.0 for d in diffs.values())
 
 
-def test_results_do_not_depend_on_the_number_of_workers(tmp_path: Path) -> None:
-    tables = []
-    for workers in ("1", "2"):
-        argv = ["closed-loop", "--quick", "--no-progress", "--workers", workers, "--out",
-                str(tmp_path / workers), "--checkpoints", str(tmp_path / "checkpoints"),
-                "--agents", "reactive", "ours", "bc-mlp", "lagging", "static", "giver-replay"]
-        assert evaluate.main(argv) == 0
-        tables.append([{k: v for k, v in r.items() if k != "wall_s"}
-                       for r in _rows(tmp_path / workers / "closed_loop_episodes.csv")])
+def test_results_do_not_depend_on_the_number_of_workers(
+    tmp_path: Path, closed_loop_quick: Path
+) -> None:
+    """The shared run in 2 workers (tests/eval/conftest.py) and the same agents in 1, reusing its
+    BC-MLP checkpoint as a rerun does: the same episodes and paired table."""
+    shared = json.loads((closed_loop_quick / "DONE").read_text())  # the shared run's argv
+    at = shared.index("--workers")
+    assert shared[at + 1] == "2"
+    shutil.copytree(closed_loop_quick / "checkpoints", tmp_path / "checkpoints")
+    argv = shared[:at + 1] + ["1"] + shared[at + 2:] + [
+        "--out", str(tmp_path / "1"), "--checkpoints", str(tmp_path / "checkpoints")]
+    assert evaluate.main(argv) == 0
+    tables = [[{k: v for k, v in r.items() if k != "wall_s"}
+               for r in _rows(out / "closed_loop_episodes.csv")]
+              for out in (tmp_path / "1", closed_loop_quick / "out")]
     assert len(tables[0]) == 5 * 7 + 3
     assert tables[0] == tables[1]
     assert _rows(tmp_path / "1" / "closed_loop_paired.csv") == _rows(
-        tmp_path / "2" / "closed_loop_paired.csv"
+        closed_loop_quick / "out" / "closed_loop_paired.csv"
     )
 
 

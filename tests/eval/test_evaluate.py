@@ -23,9 +23,10 @@ def _rows(path: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
-def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    assert evaluate.main(["table1", "--quick", "--no-progress", "--out", str(tmp_path)]) == 0
-    rows = _rows(tmp_path / "table1.csv")
+def test_table1_quick_all_methods(table1_quick: Path) -> None:
+    """The shared ``table1 --quick`` run (tests/eval/conftest.py): every method's tables."""
+    out = table1_quick / "out"
+    rows = _rows(out / "table1.csv")
     assert [r["method"] for r in rows] == ["ours", "iaal", "act", "bc_mlp", "cv"]
     for r in rows:
         for key in ("id_rms_3d_mm", "ood_rms_3d_mm"):
@@ -33,7 +34,7 @@ def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture)
         assert float(r["id_rms_axis_mm"]) == pytest.approx(
             float(r["id_rms_3d_mm"]) / math.sqrt(3), rel=1e-4
         )
-    folds = _rows(tmp_path / "table1_folds.csv")
+    folds = _rows(out / "table1_folds.csv")
     assert len(folds) == 5 * 3  # methods x folds
     for (
         r
@@ -43,42 +44,33 @@ def test_table1_quick_all_methods(tmp_path: Path, capsys: pytest.CaptureFixture)
             sum(mine) / len(mine), rel=1e-4
         )  # CSV keeps 6 digits
         assert 0 < float(r["id_now_axis_mm"]) < float(r["id_rms_3d_mm"])
-    episodes = _rows(tmp_path / "table1_episodes.csv")
+    episodes = _rows(out / "table1_episodes.csv")
     assert len(episodes) == 5 * 30  # every episode is tested exactly once per method
-    md = (tmp_path / "table1.md").read_text()
+    md = (out / "table1.md").read_text()
     assert "55.13 ± 2.48" in md and "BC-MLP" in md and "IAAL" in md
-    out = capsys.readouterr().out
-    assert "Ours (SPGP)" in out and "wrote" in out
+    printed = (table1_quick / "stdout.txt").read_text()
+    assert "Ours (SPGP)" in printed and "wrote" in printed
 
 
-def test_table1_folds_in_two_processes_equal_the_serial_loop(tmp_path: Path) -> None:
-    """map_folds: the same per-episode errors whether the folds run in-process or in 2 workers."""
-    tables = []
-    for workers in ("1", "2"):
-        out = tmp_path / workers
-        argv = [
-            "table1",
-            "--quick",
-            "--no-progress",
-            "--methods",
-            "ours",
-            "bc_mlp",
-            "--workers",
-            workers,
-            "--out",
-            str(out),
-        ]
-        assert evaluate.main(argv) == 0
-        tables.append(_rows(out / "table1_episodes.csv"))
-    assert len(tables[0]) == 2 * 30
-    assert tables[0] == tables[1]
-
-
-def test_sample_efficiency_quick(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    argv = ["sample-efficiency", "--quick", "--no-progress", "--out", str(tmp_path),
-            "--methods", "ours", "bc_mlp", "--ratios", "0.5", "1.0"]
+def test_table1_folds_in_two_processes_equal_the_serial_loop(
+    table1_quick: Path, tmp_path: Path
+) -> None:
+    """map_folds: the same per-episode errors whether the folds run in-process or in 2 workers
+    (the shared run's, whose other methods are fitted and scored apart from these two)."""
+    argv = ["table1", "--quick", "--no-progress", "--methods", "ours", "bc_mlp", "--workers", "1",
+            "--out", str(tmp_path)]
     assert evaluate.main(argv) == 0
-    rows = _rows(tmp_path / "sample_efficiency.csv")
+    serial = _rows(tmp_path / "table1_episodes.csv")
+    two = [r for r in _rows(table1_quick / "out" / "table1_episodes.csv")
+           if r["method"] in ("ours", "bc_mlp")]
+    assert len(serial) == 2 * 30
+    assert serial == two
+
+
+def test_sample_efficiency_quick(sample_efficiency_quick: Path) -> None:
+    """The shared ``sample-efficiency --quick`` run (tests/eval/conftest.py)."""
+    out = sample_efficiency_quick / "out"
+    rows = _rows(out / "sample_efficiency.csv")
     assert {(r["method"], float(r["ratio"])) for r in rows} == {
         ("ours", 0.5), ("ours", 1.0), ("bc_mlp", 0.5), ("bc_mlp", 1.0)}
     half = [r for r in rows if r["method"] == "ours" and float(r["ratio"]) == 0.5][0]
@@ -91,8 +83,8 @@ def test_sample_efficiency_quick(tmp_path: Path, capsys: pytest.CaptureFixture) 
     assert pct["ours"] == pytest.approx(
         100 * (float(half["all_rms_3d_mm"]) / float(full["all_rms_3d_mm"]) - 1)
     )
-    assert "RMS at ratio 0.5 vs 1" in capsys.readouterr().out
-    assert (tmp_path / "sample_efficiency.png").stat().st_size > 10_000
+    assert "RMS at ratio 0.5 vs 1" in (sample_efficiency_quick / "stdout.txt").read_text()
+    assert (out / "sample_efficiency.png").stat().st_size > 10_000
 
 
 def test_tradeoff_quick(tmp_path: Path) -> None:

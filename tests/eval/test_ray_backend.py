@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import os
+import shutil
 import sys
 from dataclasses import asdict
 from pathlib import Path
@@ -23,6 +24,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 
 import evaluate  # noqa: E402
+from handover_eval.act_folds import EXPORT_PREFIX  # noqa: E402
 from handover_eval.backend import (  # noqa: E402
     WORKER_ENV,
     Backend,
@@ -42,25 +44,23 @@ def _rows(path: Path) -> list[dict[str, str]]:
 
 
 @pytest.fixture(scope="module")
-def table1_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """``table1 --quick`` on both backends; Ray started and shut down by the command itself."""
+def table1_runs(
+    tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest
+) -> dict[str, Path]:
+    """``table1 --quick`` on Ray, Ray started and shut down by the command itself, beside the
+    same run on processes (the session's shared run, tests/conftest.py). The Ray run starts from
+    the process run's ACT export (made in the calling process on either backend, as a rerun
+    finds it); every model, ACT's included, is trained on Ray."""
     assert not ray.is_initialized()
-    root = tmp_path_factory.mktemp("table1")
-    outs = {}
-    for backend in ("process", "ray"):
-        outs[backend] = root / backend
-        argv = [
-            "table1",
-            "--quick",
-            "--no-progress",
-            "--backend",
-            backend,
-            "--out",
-            str(outs[backend]),
-        ]
-        assert evaluate.main(argv) == 0
+    proc = request.getfixturevalue("table1_quick") / "out"
+    on_ray = tmp_path_factory.mktemp("table1") / "ray"
+    (export,) = (proc / "checkpoints").glob(f"{EXPORT_PREFIX}*")
+    shutil.copytree(export, on_ray / "checkpoints" / export.name)
+    argv = ["table1", "--quick", "--no-progress", "--workers", "2", "--backend", "ray",
+            "--out", str(on_ray)]
+    assert evaluate.main(argv) == 0
     assert not ray.is_initialized()  # the command shut its local instance down
-    return outs
+    return {"process": proc, "ray": on_ray}
 
 
 @pytest.fixture(scope="module")
@@ -90,58 +90,38 @@ def test_table1_quick_same_tables_on_ray_and_processes(table1_runs: dict[str, Pa
     assert _rows(on_ray / "table1_folds.csv")[0]["checkpoint_reused"] == "False"  # trained on Ray
 
 
-def test_sample_efficiency_quick_same_on_ray(tmp_path: Path, ray_instance) -> None:
-    tables = []
-    for backend in ("process", "ray"):
-        out = tmp_path / backend
-        argv = [
-            "sample-efficiency",
-            "--quick",
-            "--no-progress",
-            "--methods",
-            "ours",
-            "bc_mlp",
-            "--ratios",
-            "0.5",
-            "1.0",
-            "--backend",
-            backend,
-            "--out",
-            str(out),
-        ]
-        assert evaluate.main(argv) == 0
-        tables.append(
-            (_rows(out / "sample_efficiency_folds.csv"), _rows(out / "sample_efficiency.csv"))
-        )
+def test_sample_efficiency_quick_same_on_ray(
+    tmp_path: Path, ray_instance, request: pytest.FixtureRequest
+) -> None:
+    """Ray's tables equal the shared process run's (tests/eval/conftest.py; same argv)."""
+    argv = ["sample-efficiency", "--quick", "--no-progress", "--methods", "ours", "bc_mlp",
+            "--ratios", "0.5", "1.0", "--backend", "ray", "--out", str(tmp_path / "ray")]
+    assert evaluate.main(argv) == 0
+    proc = request.getfixturevalue("sample_efficiency_quick") / "out"
+    tables = [
+        (_rows(out / "sample_efficiency_folds.csv"), _rows(out / "sample_efficiency.csv"))
+        for out in (proc, tmp_path / "ray")
+    ]
     assert len(tables[0][0]) == 2 * 2 * 3  # method x ratio x fold
     assert tables[0] == tables[1]
 
 
-def test_closed_loop_quick_same_on_ray(tmp_path: Path, ray_instance) -> None:
-    tables = []
-    for backend in ("process", "ray"):
-        out = tmp_path / backend
-        argv = [
-            "closed-loop",
-            "--quick",
-            "--no-progress",
-            "--agents",
-            "reactive",
-            "ours",
-            "bc-mlp",
-            "--checkpoints",
-            str(tmp_path / "checkpoints"),
-            "--bootstrap",
-            "50",
-            "--backend",
-            backend,
-            "--out",
-            str(out),
-        ]
-        assert evaluate.main(argv) == 0
-        tables.append(_rows(out / "closed_loop_episodes.csv"))
-    assert len(tables[0]) > 10 and {r["agent"] for r in tables[0]} == {"reactive", "ours", "bc-mlp"}
-    assert tables[0] == tables[1]
+def test_closed_loop_quick_same_on_ray(
+    tmp_path: Path, ray_instance, closed_loop_quick: Path
+) -> None:
+    """Ray's episodes equal those of the same agents in the shared process run
+    (tests/eval/conftest.py), whose BC-MLP checkpoint the Ray run reuses, as a rerun does."""
+    agents = ["reactive", "ours", "bc-mlp"]
+    shutil.copytree(closed_loop_quick / "checkpoints", tmp_path / "checkpoints")
+    argv = ["closed-loop", "--quick", "--no-progress", "--agents", *agents,
+            "--checkpoints", str(tmp_path / "checkpoints"), "--bootstrap", "50",
+            "--backend", "ray", "--out", str(tmp_path / "ray")]
+    assert evaluate.main(argv) == 0
+    on_ray = _rows(tmp_path / "ray" / "closed_loop_episodes.csv")
+    proc = [r for r in _rows(closed_loop_quick / "out" / "closed_loop_episodes.csv")
+            if r["agent"] in agents]
+    assert len(proc) > 10 and {r["agent"] for r in proc} == set(agents)
+    assert on_ray == proc
 
 
 # ------------------------------------------------------------------------------- failures
