@@ -205,6 +205,7 @@ class Receiver:
         if stop_x is not None:
             motion = stopped(motion, stop_x)
         self.motion = motion
+        self._camera_xy = np.zeros(2)  # camera_xy's result
         self.reach_offset = offset
         self.calibration = calibrated
         self.kind, self.hand_mode, self.source_id = kind, hand_mode, motion.source_id
@@ -289,8 +290,23 @@ class Receiver:
         return max(0.0, self._t - self.tau / RATE)
 
     def camera_xy(self) -> np.ndarray:
-        """The pelvis xy a camera sees now (raw recorded track at the playback position)."""
-        return interp(self.motion.camera_xy, self.tau)
+        """The pelvis xy a camera sees now (raw recorded track at the playback position).
+
+        :func:`~handover_env.person.pose.interp`'s value (the same two products and sum per
+        coordinate), computed on floats into a (2,) array the receiver keeps: the env asks for
+        it at every 30 Hz step; copy it to keep it past the next call.
+        """
+        frames = self.motion.camera_xy
+        n = frames.shape[0]
+        f = min(max(self.tau, 0.0), n - 1.0)
+        i = min(int(f), n - 2)
+        a = f - i
+        b = 1.0 - a
+        (x0, y0), (x1, y1) = frames[i:i + 2].tolist()
+        out = self._camera_xy
+        out[0] = x0 * b + x1 * a
+        out[1] = y0 * b + y1 * a
+        return out
 
     def base(self) -> tuple[float, float, float]:
         """Nominal pelvis x, y and walking heading at the playback position."""
