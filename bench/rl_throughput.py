@@ -12,7 +12,7 @@ Loops over ``DynamicHandover-v0`` (scripted ID walkers, episodes reset as they e
   ``SubprocVecEnv`` (the vector envs ``train.py rl`` uses; skipped without the ``rl`` extra);
 * ``..., lean info``: async and Subproc over the env whose mid-episode info holds only the
   three reward terms, whose episode-ending step the whole info and whose reset info only the
-  receiver (:class:`_LeanInfo`, the rule of ``train.py rl``'s training env,
+  receiver (:class:`handover_env.envs.end_info.EndInfo`, the rule of ``train.py rl``'s training env,
   ``baselines/rl/envs.py``).
 
 Every loop is measured the same way. The random actions are one table drawn before any loop
@@ -64,13 +64,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import handover_env  # noqa: E402, F401
 from agents.reactive import ReactiveAgent  # noqa: E402
+from handover_env.envs.end_info import EndInfo  # noqa: E402
 
 ENV_ID = "handover_env/DynamicHandover-v0"
 OPTIONS = {"receiver": "id"}
 #: untimed steps of every env after its first reset (kernel loading, first-call costs)
 WARMUP = 20
-#: the env's reward terms, the whole of a lean mid-episode info
-REWARD_KEYS = ("reward_time", "reward_force", "reward_outcome")
 
 Rate = tuple[int, float, float]  # (env steps, wall s, CPU s)
 
@@ -129,25 +128,9 @@ class _Timed(gym.Wrapper):
         return self.stamps[start:]
 
 
-class _LeanInfo(gym.Wrapper):
-    """The env with the info a training loop reads: mid-episode only the reward terms, at the
-    step that ends an episode (terminated or truncated) the whole info, at a reset only the
-    receiver drawn (SB3's workers send the last reset's info with every step)."""
-
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        return obs, {"receiver_id": info["receiver_id"]}
-
-    def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        if not (terminated or truncated):
-            info = {k: info[k] for k in REWARD_KEYS}
-        return obs, reward, terminated, truncated, info
-
-
 def _timed_env(lean: bool = False) -> gym.Env:
     env = gym.make(ENV_ID)
-    return _Timed(_LeanInfo(env) if lean else env)
+    return _Timed(EndInfo(env) if lean else env)
 
 
 class _Single:
@@ -238,7 +221,7 @@ class _Independent:
 
 class _Vector:
     """A two-env vector env (``mode``: sync / async (gymnasium), sb3-dummy / sb3-subproc), over
-    the env or with ``lean`` over :class:`_LeanInfo`; every vector step stamped (module
+    the env or with ``lean`` over :class:`EndInfo`; every vector step stamped (module
     docstring), the splits summed over rounds in :attr:`loss`."""
 
     def __init__(self, mode: str, actions: np.ndarray, lean: bool = False) -> None:
@@ -253,7 +236,7 @@ class _Vector:
             self.envs.reset()
             self._call = self.envs.env_method
         else:
-            wrappers = ([_LeanInfo] if lean else []) + [
+            wrappers = ([EndInfo] if lean else []) + [
                 functools.partial(_Timed, reset_own_step=True)]
             self.envs = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode=mode,
                                      wrappers=wrappers)

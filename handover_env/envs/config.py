@@ -75,7 +75,7 @@ class EnvConfig:
     width: int = 640
     height: int = 480
     camera: str = "overview"
-    person: Mapping[str, float] | None = None
+    person: Mapping[str, float | bool] | None = None
     task: HandoverTask | None = None
     reward: HandoverReward | Mapping[str, float] | None = None
     sensing: str = "paper"
