@@ -222,6 +222,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._obs_bounds = np.vstack([low, high]).astype(np.float64)
         self._obs_pv = np.zeros(ob.PV_SIZE)
         self._vel6 = np.zeros(6)
+        self._obj_linvel_v = self._vel6[3:]  # the object's linear velocity (mj_objectVelocity)
 
     def default_task(self, reward: HandoverReward) -> HandoverTask:
         """The task of this env when none is given (the dynamic handover here)."""
@@ -260,6 +261,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._tcp_xmat_v = d.site_xmat[ids.tcp_site]
         self._grip_v = d.site_xpos[ids.body.grip_site]
         self._object_xmat_v = d.xmat[ids.object_body]
+        self._object_rot_v = self._object_xmat_v.reshape(3, 3)
+        self._tcp_axis_v = self._tcp_xmat_v.reshape(3, 3)[:, 2]  # the gripper's approach axis
         # MuJoCo's warning counters of a diverging state (the binding's objects view MjData)
         self._diverged = tuple(d.warning[w] for w in _DIVERGED)
 
@@ -447,12 +450,11 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self.controller.set_target(READY_POS, READY_YAW)
         t1 = t0 + self.dt
         mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, self._object_body, self._vel6, 0)
-        self.receiver.plan_step(t0, t1, d, self._object_pos_v.copy(), self._vel6[3:].copy(),
-                                self._object_xmat_v.reshape(3, 3).copy(),
-                                object_free=not self._receiver_holds, released=self.released,
-                                gripper_pos=self._tcp_pos_v.copy(),
-                                gripper_axis=(self._tcp_xmat_v.reshape(3, 3)[:, 2].copy()
-                                              if self._gripper_holds else None))
+        # views, not copies: plan_step only reads them, before any physics moves them
+        self.receiver.plan_step(t0, t1, d, self._object_pos_v, self._obj_linvel_v,
+                                self._object_rot_v, not self._receiver_holds, self.released,
+                                self._tcp_pos_v,
+                                self._tcp_axis_v if self._gripper_holds else None)
         self.receiver.targets.plan_ticks(self._tick_alphas[self._global_step % self._ticks])
 
         # The controller ticks on the global step clock: the schedule of (tick?, physics steps)

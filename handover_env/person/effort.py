@@ -64,6 +64,7 @@ class Effort:
         self._acc[SHOULDER] = body.bodies[RIGHT_ARM[0]]
         self._acc[GRIP] = body.grip_site
         self._acc[PELVIS] = body.bodies[0]
+        self._bound: mujoco.MjData | None = None
         self.reset()
 
     reach_distance = property(lambda self: float(self._acc[REACH_DISTANCE]))
@@ -82,8 +83,10 @@ class Effort:
         pelvis at its end."""
         acc = self._acc
         acc[ARM_OUT], acc[DT] = arm_out, dt
-        acc[TARGET_X], acc[TARGET_Y] = pelvis_target[0], pelvis_target[1]
-        track_kernel(data.xpos, data.site_xpos, acc)
+        acc[TARGET_X], acc[TARGET_Y] = pelvis_target.tolist()[:2]
+        if data is not self._bound:  # MjData's buffers never move: its views are kept
+            self._bound, self._xpos, self._site_xpos = data, data.xpos, data.site_xpos
+        track_kernel(self._xpos, self._site_xpos, acc)
 
     def took(self, data: mujoco.MjData, object_pos: np.ndarray) -> None:
         """The person took the object now: record the shoulder-object distance

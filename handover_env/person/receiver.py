@@ -144,6 +144,7 @@ class Receiver:
             model, int(ids.body.bodies[SEG["hand_r"]]), ids.body.grip_site, ids.object_body
         )
         self._v6 = np.zeros(6)
+        self._grasp_bound: mujoco.MjData | None = None
         self._judge_io = np.zeros(pa.IO_SIZE)
         self._hand_io = np.zeros(hp.IO_SIZE)
         self.motion: PersonMotion | None = None
@@ -536,15 +537,31 @@ class Receiver:
         """True while the person's hand holds the object."""
         return self.grip.active
 
+    def _bind_grasp(self, data: mujoco.MjData) -> None:
+        """Views of the grip site's and the object's rows of ``data`` (its buffers never move)."""
+        ob = self.ids.object_body
+        self._grasp_bound = data
+        self._grip_v = data.site_xpos[self.body.grip_site]
+        self._object_xpos_v, self._object_xmat_v = data.xpos[ob], data.xmat[ob]
+
     def try_grasp(self, model: mujoco.MjModel, data: mujoco.MjData) -> bool:
         """Grasp if the grip point is at the object's grasp point and moves with it (within
         ``grasp_radius`` and ``grasp_speed``). Returns True on grasp."""
         if self.state != "reaching":
             return False
         cfg = self.config
-        grip = data.site_xpos[self.body.grip_site]
-        if length(grip - self.grasp_point(data)) > cfg.grasp_radius:
+        if data is not self._grasp_bound:
+            self._bind_grasp(data)
+        # grip - grasp_point(data) and its length on floats (the same products and sums; the
+        # 3-vector's BLAS dot adds left to right)
+        gx, gy, gz = self._grip_v.tolist()
+        ox, oy, oz = self._object_xpos_v.tolist()
+        _, _, ax, _, _, ay, _, _, az = self._object_xmat_v.tolist()
+        s = self._grasp_side * cfg.grasp_offset
+        dx, dy, dz = gx - (ox + ax * s), gy - (oy + ay * s), gz - (oz + az * s)
+        if math.sqrt(dx * dx + dy * dy + dz * dz) > cfg.grasp_radius:
             return False
+        grip = self._grip_v
         v = self._v6
         mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_SITE, self.body.grip_site, v, 0)
         v_grip = v[3:].copy()
