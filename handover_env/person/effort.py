@@ -72,6 +72,10 @@ class Effort:
     arm_out_time = property(lambda self: float(self._acc[ARM_OUT_TIME]))
     path_deviation = property(lambda self: float(self._acc[PATH_DEVIATION]))
 
+    def measures(self) -> list[float]:
+        """``[reach_distance, reach_max, arm_out_time, path_deviation]`` (one read)."""
+        return self._acc[:PATH_DEVIATION + 1].tolist()
+
     def reset(self) -> None:
         """Nothing measured yet (a new episode)."""
         self._acc[:PATH_DEVIATION + 1] = 0.0

@@ -78,7 +78,7 @@ from handover_env.person.effort import Effort
 from handover_env.person.grip import ArmGrip
 from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
 from handover_env.person.pose import STRAIGHT_ARM, TRUNK_MAX_TURN, MotionPose, interp
-from handover_env.person.receiver_rules import Meeting, meeting_of
+from handover_env.person.receiver_rules import Meeting
 from handover_env.person.rotations import length
 from handover_env.person.settings import (
     HEIGHT_OPTION_RANGE,
@@ -256,6 +256,8 @@ class Receiver:
         self.t_hand_raised = math.nan
         self.grasp_pelvis_xy = None
         self._hand: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        #: the hand state _hand_target last read out of its io (still there while it is _hand)
+        self._hand_out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._hand_goal_time = 0.0
         self.targets.reset()
         self.measured.reset()
@@ -266,7 +268,9 @@ class Receiver:
         self._clear = False
         self._gripper_axis: np.ndarray | None = None
         self._left = False
-        self._meet: Meeting | None = None
+        #: this step's meeting (:func:`~handover_env.person.receiver_rules.meeting_of`'s fields:
+        #: time, distance, closest, take, reachable)
+        self._meet: tuple[float, float, float, float, bool] | None = None
 
     # ------------------------------------------------------------------ queries
     @property
@@ -348,8 +352,12 @@ class Receiver:
         self._gripper_axis = (
             None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
         )
-        self._object_axis = object_rot[:, 2].copy()
-        grasp_point = object_pos + object_rot[:, 2] * (self._grasp_side * cfg.grasp_offset)
+        # object_pos + object_rot[:, 2] * (side * offset), the same product and sum on floats
+        (_, _, ax), (_, _, ay), (_, _, az) = object_rot.tolist()
+        ox, oy, oz = object_pos.tolist()
+        s = self._grasp_side * cfg.grasp_offset
+        self._object_axis = np.array((ax, ay, az))
+        grasp_point = np.array((ox + ax * s, oy + ay * s, oz + az * s))
         if object_free and not self.present_after_walk and self.state in ("walking", "reaching"):
             self._judge(grasp_point, object_vel)
         # ---- how fast to walk on
@@ -385,16 +393,19 @@ class Receiver:
         if self.state == "reaching" and self.reach_plan is not None:
             io[pa.CLOSEST], io[pa.TAKE] = self.reach_plan.closest, self.reach_plan.take
         pa.judge_kernel(self._track, self._path, io)
-        self._left = io[pa.LEFT] > 0.0
-        self._meet = meeting_of(io[pa.MEETING:])
+        # LEFT, then the meeting's five values (meeting_of's fields; a Meeting is built only
+        # when the hand's plan keeps one)
+        left, t, distance, closest, take, reachable = io[pa.LEFT:pa.MEETING + 5].tolist()
+        self._left = left > 0.0
+        self._meet = (t, distance, closest, take, reachable > 0.0)
 
     def _should_slow(self, grasp_point: np.ndarray, object_vel: np.ndarray) -> bool:
         """Slow down: the person is about to meet the object (within the reach lead time) farther
         than is comfortable, or to pass it out of reach."""
         if self.present_after_walk or self._left:
             return False
-        m = self._meet
-        return m.time <= self.config.reach_lead_time and m.distance > self._comfort
+        t, distance = self._meet[:2]
+        return t <= self.config.reach_lead_time and distance > self._comfort
 
     def _decide(self, t: float, grasp_point: np.ndarray, object_vel: np.ndarray) -> None:
         cfg = self.config
@@ -402,10 +413,10 @@ class Receiver:
             if self._left:
                 self._pass(t)
                 return
-            m = self._meet
-            if m.reachable and m.time <= cfg.reach_lead_time:
-                self._begin_reach(t, min(max(m.time, cfg.close_time), cfg.reach_duration))
-                self.reach_plan = m
+            m_time, _, _, _, reachable = self._meet
+            if reachable and m_time <= cfg.reach_lead_time:
+                self._begin_reach(t, min(max(m_time, cfg.close_time), cfg.reach_duration))
+                self.reach_plan = Meeting(*self._meet)
         elif (
             self.state == "walking" and self.hand_mode == "recorded" and not self.present_after_walk
         ):
@@ -437,13 +448,14 @@ class Receiver:
             # later only when it is put off by more than REPLAN_SLACK (the person pauses or turns
             # away, or the object is taken back), not for the last centimetres of an object that
             # moves on with the walk.
-            m = self._meet
-            goal = t + m.time
-            if m.reachable and (goal < self._hand_goal_time
-                                or goal > self._hand_goal_time + REPLAN_SLACK):
+            m_time, distance, _, take, reachable = self._meet
+            goal = t + m_time
+            if reachable and (goal < self._hand_goal_time
+                              or goal > self._hand_goal_time + REPLAN_SLACK):
                 self._hand_goal_time = goal
-                self.reach_plan = Meeting(m.time, m.distance, self.reach_plan.closest, m.take,
-                                          True) if self.reach_plan is not None else m
+                self.reach_plan = Meeting(m_time, distance, self.reach_plan.closest, take,
+                                          True) if self.reach_plan is not None else (
+                                              Meeting(*self._meet))
 
     def _pass(self, t: float) -> None:
         """The object is left behind: the person walks on (the arm returns to its swing)."""
@@ -483,13 +495,14 @@ class Receiver:
         io[hp.GRASP:hp.GRASP + 3], io[hp.OBJ_VEL:hp.OBJ_VEL + 3] = grasp_point, object_vel
         if state == "holding":
             io[hp.HOLD_REL:hp.HOLD_REL + 3] = self._hold_rel
-        x, v, a = self._hand
-        io[hp.X:hp.X + 3], io[hp.V:hp.V + 3], io[hp.A:hp.A + 3] = x, v, a
+        if self._hand is not self._hand_out:  # else io holds it: the kernel's last output
+            x, v, a = self._hand
+            io[hp.X:hp.X + 3], io[hp.V:hp.V + 3], io[hp.A:hp.A + 3] = x, v, a
         io[hp.GOAL_TIME] = self._hand_goal_time
         hp.hand_kernel(self.pose.rows, self.pose.io, io)
         self._hand_goal_time = float(io[hp.GOAL_TIME])
-        self._hand = (io[hp.X:hp.X + 3].copy(), io[hp.V:hp.V + 3].copy(),
-                      io[hp.A:hp.A + 3].copy())
+        xva = io[hp.X:hp.A + 3].copy()  # X, V, A are consecutive
+        self._hand = self._hand_out = (xva[:3], xva[3:6], xva[6:])
         return self._hand[0]
 
     def _pose_at(self, tau: float, grasp: tuple | None,
@@ -583,10 +596,11 @@ class Receiver:
     # ------------------------------------------------------------------ effort
     def effort(self) -> dict[str, float]:
         """The person's effort so far (see the module docstring)."""
+        reach_distance, _, arm_out_time, path_deviation = self.measured.measures()
         return {
-            "reach_distance": self.measured.reach_distance,
-            "arm_extended_time": self.measured.arm_out_time,
+            "reach_distance": reach_distance,
+            "arm_extended_time": arm_out_time,
             "time_lost": self.time_lost,
             "min_speed_factor": self.min_rho,
-            "path_deviation": self.measured.path_deviation,
+            "path_deviation": path_deviation,
         }
