@@ -88,14 +88,14 @@ def trace(data: str, agent: str, per_fold: int, person: tuple[str, ...],
                 or mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, model.geom_bodyid[g]))
 
     def traced(d: mujoco.MjData) -> None:
-        cls = monitor._cls  # noqa: SLF001 - the monitor's own geom classes, read only
+        cls = monitor.geom_class
         for i in range(d.ncon):
             c = d.contact[i]
-            pair = cls[c.geom1] | cls[c.geom2]
+            pair = cls(c.geom1) | cls(c.geom2)
             if pair not in (ROBOT | PERSON, OBJECT | PERSON):
                 continue
             mujoco.mj_contactForce(model, d, i, f6)
-            g_body, g_robot = ((c.geom1, c.geom2) if cls[c.geom1] == PERSON
+            g_body, g_robot = ((c.geom1, c.geom2) if cls(c.geom1) == PERSON
                                else (c.geom2, c.geom1))
             key = (name(g_body).rsplit("/", 1)[-1], _part(name(g_robot)))
             f = abs(float(f6[0]))

@@ -54,7 +54,7 @@ def action_change_cost(weight: float, u: np.ndarray, u_previous: np.ndarray) -> 
 def segment_forces(env) -> np.ndarray:
     """(S,) N: each body segment's filtered contact force now, from the env's contact monitor
     (read from the unwrapped env: it is no part of the observation)."""
-    forces = getattr(env.unwrapped.contacts, "_force", None)
+    forces = getattr(env.unwrapped.contacts, "force", None)
     if forces is None or np.shape(forces) != PAIN_ONSET_N.shape:
         raise RuntimeError("the env's contact monitor has no per-segment force to penalise")
     return np.asarray(forces, dtype=np.float64)

@@ -50,6 +50,7 @@ class ContactMonitor:
         penetration: deepest robot/object-person penetration so far, m (0 if none).
         touched_robot, touched_object: whether the robot / the object touched the person.
         unsafe_segment: index of the first segment whose force exceeded its ISO limit, or -1.
+        force: (S,) the filtered force per segment now, N (read only).
         count_object: whether object-person contacts count (set by the env at every tick:
             False once the person holds the object and the robot no longer does).
     """
@@ -126,6 +127,19 @@ class ContactMonitor:
             self.unsafe_segment = int(long[0])
         self.active = bool(force.max() > 1e-3)
         self._summarise()
+
+    @property
+    def force(self) -> np.ndarray:
+        """(S,) N: each segment's filtered contact force as of the last scan (read only: a view
+        of the monitor's own array)."""
+        view = self._force.view()
+        view.flags.writeable = False
+        return view
+
+    def geom_class(self, geom: int) -> int:
+        """What geom ``geom`` is to the monitor: :data:`ROBOT`, :data:`OBJECT`, :data:`PERSON`,
+        or 0 (the floor, anything else)."""
+        return int(self._cls[geom])
 
     def _summarise(self) -> None:
         """The body's peak (:attr:`peak_max`) and the info entries, as of the last scan (they

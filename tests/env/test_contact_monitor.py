@@ -72,3 +72,20 @@ def test_env_sets_it_from_who_holds_the_object():
     assert all(c == (g or not p) for g, p, c in states)
     assert info["outcome"] == "success"  # the person takes the held-still object
     assert any(not c for *_, c in states)  # ... and then holds it alone
+
+
+def test_force_and_geom_class_read_the_monitor(pressed):
+    from handover_env.envs.contacts import OBJECT, PERSON, ROBOT
+
+    mon = pressed.contacts
+    mon.count_object = True
+    mon.scan(pressed.data)
+    force = mon.force
+    abdomen = int(np.argmax(force))
+    assert force[abdomen] > 0.0 and np.array_equal(force, mon._force)  # noqa: SLF001
+    with pytest.raises(ValueError):
+        force[0] = 1.0  # a read-only view: the monitor's filter state cannot be changed
+    assert mon.geom_class(int(pressed.ids.object_geom)) == OBJECT
+    assert mon.geom_class(int(pressed.ids.receiver_geoms[0])) == PERSON
+    assert mon.geom_class(int(pressed.ids.robot_geoms[0])) == ROBOT
+    assert mon.geom_class(0) == 0  # the floor
