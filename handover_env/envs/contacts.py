@@ -46,7 +46,9 @@ class ContactMonitor:
     Attributes:
         peak: (S,) peak contact force on each body segment so far, N.
         peak_max: the largest of :attr:`peak`, N (a float).
-        entries: the info entries (:meth:`info`) as of the last scan; read, do not change.
+        entries: the info entries as of the last scan (``contact_force_<segment>`` for every
+            segment, the body's peak, its raw peak, penetration and the touched flags); the
+            monitor's own dict: read, do not change.
         penetration: deepest robot/object-person penetration so far, m (0 if none).
         touched_robot, touched_object: whether the robot / the object touched the person.
         unsafe_segment: index of the first segment whose force exceeded its ISO limit, or -1.
@@ -101,12 +103,13 @@ class ContactMonitor:
                 continue
             mujoco.mj_contactForce(self.model, data, i, self._force6)
             s = int(seg[g1] if seg[g1] >= 0 else seg[g2])
-            now[s] += abs(float(self._force6[0]))
+            f = abs(float(self._force6[0]))
+            now[s] += f
             if -c.dist > self.penetration:
                 self.penetration = -float(c.dist)
             if pair == ROBOT | PERSON:
                 self.touched_robot = True
-                robot_now[s] += abs(float(self._force6[0]))
+                robot_now[s] += f
             else:
                 self.touched_object = True
         self.raw_peak = max(self.raw_peak, float(now.max()))
@@ -152,8 +155,3 @@ class ContactMonitor:
         entries["body_contact_robot"] = self.touched_robot
         entries["body_contact_object"] = self.touched_object
         self.entries = entries
-
-    def info(self) -> dict[str, float | bool]:
-        """Flat info entries: ``contact_force_<segment>`` for every segment, the body's peak,
-        penetration and the touched flags (a new dict; :attr:`entries` is the monitor's own)."""
-        return dict(self.entries)

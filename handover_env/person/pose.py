@@ -59,12 +59,17 @@ def quat_to_mat(q: np.ndarray) -> np.ndarray:
                      [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
-def interp(frames: np.ndarray, tau: float) -> np.ndarray:
-    """``frames`` (T, ...) linearly interpolated at the fractional frame ``tau`` (clamped)."""
-    n = frames.shape[0]
+def frame_weight(n: int, tau: float) -> tuple[int, float]:
+    """``(i, a)``: the fractional frame ``tau`` of ``n`` frames (clamped) lies ``a`` of the way
+    from frame ``i`` to frame ``i + 1``."""
     f = min(max(tau, 0.0), n - 1.0)
     i = min(int(f), n - 2)
-    a = f - i
+    return i, f - i
+
+
+def interp(frames: np.ndarray, tau: float) -> np.ndarray:
+    """``frames`` (T, ...) linearly interpolated at the fractional frame ``tau`` (clamped)."""
+    i, a = frame_weight(frames.shape[0], tau)
     return frames[i] * (1.0 - a) + frames[i + 1] * a
 
 

@@ -77,7 +77,13 @@ from handover_env.person.calibrated_range import warning_text
 from handover_env.person.effort import Effort
 from handover_env.person.grip import ArmGrip
 from handover_env.person.person import RATE, PersonMotion, recorded_motion, scripted_motion, stopped
-from handover_env.person.pose import STRAIGHT_ARM, TRUNK_MAX_TURN, MotionPose, interp
+from handover_env.person.pose import (
+    STRAIGHT_ARM,
+    TRUNK_MAX_TURN,
+    MotionPose,
+    frame_weight,
+    interp,
+)
 from handover_env.person.receiver_rules import Meeting
 from handover_env.person.rotations import length
 from handover_env.person.settings import (
@@ -302,10 +308,7 @@ class Receiver:
         it at every 30 Hz step; copy it to keep it past the next call.
         """
         frames = self.motion.camera_xy
-        n = frames.shape[0]
-        f = min(max(self.tau, 0.0), n - 1.0)
-        i = min(int(f), n - 2)
-        a = f - i
+        i, a = frame_weight(frames.shape[0], self.tau)
         b = 1.0 - a
         (x0, y0), (x1, y1) = frames[i:i + 2].tolist()
         out = self._camera_xy
@@ -352,12 +355,9 @@ class Receiver:
         self._gripper_axis = (
             None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
         )
-        # object_pos + object_rot[:, 2] * (side * offset), the same product and sum on floats
         (_, _, ax), (_, _, ay), (_, _, az) = object_rot.tolist()
-        ox, oy, oz = object_pos.tolist()
-        s = self._grasp_side * cfg.grasp_offset
         self._object_axis = np.array((ax, ay, az))
-        grasp_point = np.array((ox + ax * s, oy + ay * s, oz + az * s))
+        grasp_point = np.array(self._grasp_xyz(object_pos.tolist(), (ax, ay, az)))
         if object_free and not self.present_after_walk and self.state in ("walking", "reaching"):
             self._judge(grasp_point, object_vel)
         # ---- how fast to walk on
@@ -538,12 +538,14 @@ class Receiver:
         self.measured.track(data, arm_out, self._pelvis_target, self._dt)
 
     # ------------------------------------------------------------------ grasp
-    def grasp_point(self, data: mujoco.MjData) -> np.ndarray:
-        """Where the hand holds the object: on its axis, ``grasp_offset`` from its centre."""
-        ob = self.ids.object_body
-        return data.xpos[ob] + data.xmat[ob].reshape(3, 3)[:, 2] * (
-            self._grasp_side * self.config.grasp_offset
-        )
+    def _grasp_xyz(self, centre: list[float],
+                   axis: tuple[float, float, float]) -> tuple[float, float, float]:
+        """Where the hand holds the object: on its axis, ``grasp_offset`` from its centre
+        (``centre + axis * (side * offset)``, one product and one sum per coordinate, on floats:
+        numpy's elementwise value of the same expression)."""
+        s = self._grasp_side * self.config.grasp_offset
+        (ox, oy, oz), (ax, ay, az) = centre, axis
+        return ox + ax * s, oy + ay * s, oz + az * s
 
     @property
     def holding(self) -> bool:
@@ -565,13 +567,11 @@ class Receiver:
         cfg = self.config
         if data is not self._grasp_bound:
             self._bind_grasp(data)
-        # grip - grasp_point(data) and its length on floats (the same products and sums; the
-        # 3-vector's BLAS dot adds left to right)
+        # |grip - grasp point| on floats (the 3-vector's BLAS dot adds left to right)
         gx, gy, gz = self._grip_v.tolist()
-        ox, oy, oz = self._object_xpos_v.tolist()
         _, _, ax, _, _, ay, _, _, az = self._object_xmat_v.tolist()
-        s = self._grasp_side * cfg.grasp_offset
-        dx, dy, dz = gx - (ox + ax * s), gy - (oy + ay * s), gz - (oz + az * s)
+        px, py, pz = self._grasp_xyz(self._object_xpos_v.tolist(), (ax, ay, az))
+        dx, dy, dz = gx - px, gy - py, gz - pz
         if math.sqrt(dx * dx + dy * dy + dz * dz) > cfg.grasp_radius:
             return False
         grip = self._grip_v
