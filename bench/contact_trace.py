@@ -137,6 +137,8 @@ def trace(data: str, agent: str, per_fold: int, person: tuple[str, ...],
 
 
 def main(argv: list[str] | None = None) -> int:
+    from handover_eval.cli.args import add_person_argument
+
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, metavar="PATH",
                    help="a public-dataset folder (whole_motions/): its held-out replays")
@@ -144,8 +146,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="the agent (a built-in name; default giver-replay)")
     p.add_argument("--per-fold", type=int, default=25, metavar="N",
                    help="replays per held-out fold, spread evenly (default 25: 125 in all)")
-    p.add_argument("--person", nargs="*", default=[], metavar="SETTING",
-                   help="opt-in person settings switched on (reach_offset, arm_yield)")
+    add_person_argument(p)
     p.add_argument("--force", type=float, default=50.0, metavar="N",
                    help="the filtered body-contact force over which an episode is traced (50)")
     args = p.parse_args(argv)

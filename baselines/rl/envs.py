@@ -50,6 +50,7 @@ from baselines.rl.action_filter import ActionMemory
 from baselines.rl.config import RLConfig, episode_seed
 from baselines.rl.penalties import action_change_cost, contact_cost, segment_forces
 from baselines.rl.privileged import PRIVILEGED_SIZE, privileged_observation
+from handover_env.envs.end_info import reward_info
 from handover_env.envs.observation import ObsLayout
 
 ENV_ID = "handover_env/DynamicHandover-v0"
@@ -286,9 +287,7 @@ class HandoverTrainingEnv(gym.Wrapper):
             if c.contact_penalty else 0.0
         terms = {"reward_shaping": shaping, "reward_action_change": change,
                  "reward_contact": contact}
-        info = {**info, **terms} if terminated or truncated else {
-            "reward_time": info["reward_time"], "reward_force": info["reward_force"],
-            "reward_outcome": info["reward_outcome"], **terms}
+        info = {**(info if terminated or truncated else reward_info(info)), **terms}
         if self.base is not None and not (terminated or truncated):
             self._target = np.asarray(self.base.act(obs), dtype=np.float64)
         return (self._observation(obs), float(reward) + shaping + change + contact, terminated,

@@ -7,8 +7,9 @@ vector env (gymnasium's ``AsyncVectorEnv``, SB3's ``SubprocVecEnv``) pickles eve
 through its pipe and merges it in the main process, about half of the main process's CPU per
 vector step (``bench/rl_throughput.py``: gymnasium async 0.83-0.89 ms -> 0.44-0.51 ms, 1,363 ->
 161 bytes per step). :class:`EndInfo` keeps what a training loop reads: mid-episode only the
-reward terms (``reward_time``, ``reward_force``, ``reward_outcome``: Eq. of
-:class:`~handover_env.envs.tasks.base.HandoverReward`), the whole info at the step that ends the
+reward terms (``reward_<term>``: the default task's ``reward_time``, ``reward_force``,
+``reward_outcome`` of :class:`~handover_env.envs.tasks.base.HandoverReward`, and any term a
+custom task adds), the whole info at the step that ends the
 episode (terminated, or truncated by the TimeLimit), and at a reset only the receiver drawn.
 It changes no observation, reward or flag.
 
@@ -24,8 +25,13 @@ import gymnasium as gym
 
 from handover_env.envs.tasks.base import TERMS
 
-#: the mid-episode info: the reward terms
+#: the mid-episode info of the default task: its reward terms
 REWARD_KEYS = tuple(f"reward_{term}" for term in TERMS)
+
+
+def reward_info(info: dict[str, Any]) -> dict[str, Any]:
+    """The reward terms of a step's info (every ``reward_<term>`` the env's task reports)."""
+    return {k: v for k, v in info.items() if k.startswith("reward_")}
 
 
 class EndInfo(gym.Wrapper):
@@ -38,8 +44,8 @@ class EndInfo(gym.Wrapper):
     def step(self, action: Any):
         obs, reward, terminated, truncated, info = self.env.step(action)
         if not (terminated or truncated):
-            info = {k: info[k] for k in REWARD_KEYS}
+            info = reward_info(info)
         return obs, reward, terminated, truncated, info
 
 
-__all__ = ["REWARD_KEYS", "EndInfo"]
+__all__ = ["REWARD_KEYS", "EndInfo", "reward_info"]
