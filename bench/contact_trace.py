@@ -23,7 +23,7 @@ The raw force is the solver's force at the tick (``mj_contactForce``); the repor
 only (its own bookkeeping is unchanged).
 
 Usage: ``python bench/contact_trace.py --data PATH/whole_motions [--agent giver-replay]
-[--per-fold 25] [--person reach_offset arm_yield] [--force 50]``
+[--per-fold 25] [--person reach_offset arm_yield=off] [--force 50]``
 """
 
 from __future__ import annotations
@@ -64,6 +64,7 @@ def trace(data: str, agent: str, per_fold: int, person: tuple[str, ...],
     from handover_env.config import HandoverParams
     from handover_env.data.public import load_public_dataset
     from handover_env.envs.contacts import OBJECT, PERSON, ROBOT
+    from handover_env.person.settings import switch_tokens
     from handover_eval import receivers as rc
     from handover_eval import roster
     from handover_eval.methods import MethodOptions
@@ -77,7 +78,7 @@ def trace(data: str, agent: str, per_fold: int, person: tuple[str, ...],
     specs = rc.replays(dataset, rc.fold_of(dataset, 10, 0), rc.held_out_folds(10),
                        rc.recording_paths(data, dataset), per_fold)
     env = gym.make("handover_env/DynamicHandover-v0", sensing="paper", params=theta,
-                   person={s: True for s in person} or None).unwrapped
+                   person=switch_tokens(person) or None).unwrapped
     model, monitor = env.model, env.contacts
     scan = monitor.scan
     f6 = np.zeros(6)

@@ -7,10 +7,11 @@ and how many of the walkers the env found within the calibrated range
 (``info["within_calibration"]``, ``docs/calibration/calibrated_range.md``: median speed 0.59-1.11
 m/s).
 
-``--opt-in`` meets the opt-in person instead (the person settings ``reach_offset`` and
-``arm_yield`` on, ``docs/simulator.md``); the default is the default person.
+``--person`` sets person switches apart from their defaults (``docs/simulator.md``, e.g.
+``--person reach_offset``); without it, the default person.
 
-Usage: ``python bench/speed_range.py [--walkers 20] [--speeds 0.6 1.0 1.4 1.8 2.2] [--opt-in]``
+Usage: ``python bench/speed_range.py [--walkers 20] [--speeds 0.6 1.0 1.4 1.8 2.2]
+[--person SWITCH ...]``
 """
 
 from __future__ import annotations
@@ -22,14 +23,10 @@ from collections import Counter
 FIRST_SEED = 5000
 
 
-#: The opt-in person settings (``--opt-in``).
-OPT_IN = {"reach_offset": True, "arm_yield": True}
-
-
 def measure(speeds: list[float], walkers: int,
             person: dict[str, bool] | None = None) -> list[dict[str, object]]:
     """One row per speed: successes and outcomes per agent, walkers within the range
-    (``person``: person settings, e.g. :data:`OPT_IN`)."""
+    (``person``: person switches, e.g. ``{"reach_offset": True}``)."""
     import gymnasium as gym
 
     import handover_env  # noqa: F401 - registers the envs
@@ -60,15 +57,17 @@ def measure(speeds: list[float], walkers: int,
 
 
 def main() -> None:
+    from handover_env.person.settings import switch_tokens
+    from handover_eval.cli.args import add_person_argument
+
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--walkers", type=int, default=20)
     p.add_argument("--speeds", type=float, nargs="+", default=[0.6, 1.0, 1.4, 1.8, 2.2])
-    p.add_argument("--opt-in", action="store_true",
-                   help="the opt-in person (reach_offset and arm_yield on)")
+    add_person_argument(p)
     args = p.parse_args()
     print("| speed (m/s) | within the calibrated range | success reactive / null | mostly |")
     print("| --- | --- | --- | --- |")
-    for r in measure(args.speeds, args.walkers, OPT_IN if args.opt_in else None):
+    for r in measure(args.speeds, args.walkers, switch_tokens(args.person) or None):
         rx, nl = r["reactive"], r["null"]
         other = (rx + nl).copy()
         del other["success"]

@@ -53,7 +53,11 @@ X, V, A, GOAL_TIME = 21, 24, 27, 30  # the hand's state (3 each) and its goal ti
 CLOSE_TIME, APPROACH_DISTANCE, APPROACH_HEIGHT, HOLD_TIME = 31, 32, 33, 34
 PULL_DISTANCE, PULL_TIME, CARRY_FORWARD, MAX_REACH, ARM_REACH = 35, 36, 37, 38, 39
 RATE_HZ, HOLD_TRACK, CLEARANCE, PRESENT = 40, 41, 42, 43  # PRESENT: 3
-IO_SIZE = 46
+# The gripper the held object is drawn out of (``avoid_gripper``): its approach axis when it last
+# held (3), its TCP now (3), the hand's depth along that axis at the grasp, whether they are set,
+# when the draw-out started (inf: not yet) and how far out it goes.
+GRIP_AXIS, TCP, DEPTH, HAS_GRIP, T_OUT, OUT_DISTANCE = 46, 49, 52, 53, 54, 55
+IO_SIZE = 56
 
 
 @kernel
@@ -133,6 +137,23 @@ def _pelvis(motion: np.ndarray, io: np.ndarray, tau: float,
 
 
 @kernel
+def _out_of_gripper(io: np.ndarray, goal: tuple, goal_v: tuple) -> tuple[tuple, tuple]:
+    """A held object not yet out of the gripper leaves it by the open side: the hand's goal
+    comes no deeper along the gripper's approach axis (from its TCP) than the hand was at the
+    grasp, and from the release on ``OUT_DISTANCE`` farther out; it does not move toward the
+    gripper's palm."""
+    a0, a1, a2 = io[GRIP_AXIS], io[GRIP_AXIS + 1], io[GRIP_AXIS + 2]
+    depth = (goal[0] - io[TCP]) * a0 + (goal[1] - io[TCP + 1]) * a1 + (goal[2] - io[TCP + 2]) * a2
+    lack = io[DEPTH] + (io[OUT_DISTANCE] if io[NOW] >= io[T_OUT] else 0.0) - depth
+    if lack <= 0.0:
+        return goal, goal_v
+    va = goal_v[0] * a0 + goal_v[1] * a1 + goal_v[2] * a2
+    va = min(va, 0.0)
+    return ((goal[0] + lack * a0, goal[1] + lack * a1, goal[2] + lack * a2),
+            (goal_v[0] - va * a0, goal_v[1] - va * a1, goal_v[2] - va * a2))
+
+
+@kernel
 def hand_kernel(motion: np.ndarray, pose: np.ndarray, io: np.ndarray) -> None:
     """Advance the hand ``io[X:X + 9]`` (position, velocity, acceleration) one env step of
     ``io[DT]`` at playback position ``io[TAU]`` in state ``io[STATE]`` (module docstring);
@@ -142,7 +163,7 @@ def hand_kernel(motion: np.ndarray, pose: np.ndarray, io: np.ndarray) -> None:
     i, a = _at(tau, motion.shape[0])
     torso = _torso(motion, pose, i, a)
     s0, s1, s2 = _shoulder(motion, pose, i, a, torso)
-    held = io[T_GRASP] + io[HOLD_TIME]
+    held = min(io[T_GRASP] + io[HOLD_TIME], io[T_OUT])
     scale = io[RATE_HZ]
     if state == REACHING:
         g0, g1, g2 = io[GRASP], io[GRASP + 1], io[GRASP + 2]
@@ -187,6 +208,8 @@ def hand_kernel(motion: np.ndarray, pose: np.ndarray, io: np.ndarray) -> None:
             goal = (p0[0] + c * math.cos(h), p0[1] + c * math.sin(h), p0[2] + c * 0.0)
         else:
             goal = p0
+    if state == HOLDING and io[CLEAR] == 0.0 and io[HAS_GRIP] > 0.0:
+        goal, goal_v = _out_of_gripper(io, goal, goal_v)
     if state == HOLDING and now < held:
         remaining = max(held - now, io[HOLD_TRACK])
     elif state == PASSED:
@@ -209,8 +232,8 @@ def hand_kernel(motion: np.ndarray, pose: np.ndarray, io: np.ndarray) -> None:
 
 
 def hand_settings(io: np.ndarray, config, max_reach: float, arm_reach: float, rate: float,
-                  hold_tracking: float, clearance: float, present: tuple[float, float, float]
-                  ) -> None:
+                  hold_tracking: float, clearance: float, present: tuple[float, float, float],
+                  out_distance: float) -> None:
     """Write a person's settings (a :class:`~handover_env.person.settings.ReceiverConfig` and
     their reach) into the hand's io array."""
     io[CLOSE_TIME], io[APPROACH_DISTANCE] = config.close_time, config.approach_distance
@@ -219,3 +242,4 @@ def hand_settings(io: np.ndarray, config, max_reach: float, arm_reach: float, ra
     io[CARRY_FORWARD], io[MAX_REACH], io[ARM_REACH] = config.carry_forward, max_reach, arm_reach
     io[RATE_HZ], io[HOLD_TRACK], io[CLEARANCE] = rate, hold_tracking, clearance
     io[PRESENT:PRESENT + 3] = present
+    io[HAS_GRIP], io[T_OUT], io[OUT_DISTANCE] = 0.0, math.inf, out_distance

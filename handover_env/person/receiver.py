@@ -245,7 +245,7 @@ class Receiver:
             self._max_reach, self.config.reach_lead_time, self._comfort)
         io[pa.OFFSET] = offset.value
         hp.hand_settings(self._hand_io, self.config, self._max_reach, self.pose.arm_reach, RATE,
-                         HOLD_TRACKING, CARRY_CLEARANCE, PRESENT_OFFSET)
+                         HOLD_TRACKING, CARRY_CLEARANCE, PRESENT_OFFSET, CLEAR_OF_GRIPPER)
         self._reset_state()
 
     def _reset_state(self) -> None:
@@ -273,6 +273,11 @@ class Receiver:
         self._gripper: np.ndarray | None = None
         self._clear = False
         self._gripper_axis: np.ndarray | None = None
+        #: avoid_gripper: the gripper's axis as it last held the object, the hand's depth along
+        #: it at the grasp, and when the draw-out started (inf: not yet)
+        self._out_axis: np.ndarray | None = None
+        self._out_depth = 0.0
+        self._t_out = math.inf
         self._left = False
         #: this step's meeting (:func:`~handover_env.person.receiver_rules.meeting_of`'s fields:
         #: time, distance, closest, take, reachable)
@@ -355,6 +360,8 @@ class Receiver:
         self._gripper_axis = (
             None if gripper_axis is None else np.asarray(gripper_axis, dtype=np.float64)
         )
+        if cfg.avoid_gripper and self.state == "holding":
+            self._note_gripper(t0, released)
         (_, _, ax), (_, _, ay), (_, _, az) = object_rot.tolist()
         self._object_axis = np.array((ax, ay, az))
         grasp_point = np.array(self._grasp_xyz(object_pos.tolist(), (ax, ay, az)))
@@ -457,6 +464,18 @@ class Receiver:
                                           True) if self.reach_plan is not None else (
                                               Meeting(*self._meet))
 
+    def _note_gripper(self, t: float, released: bool) -> None:
+        """``avoid_gripper``: while the person holds the object, remember the gripper's approach
+        axis as it last held it and the hand's depth along it at the grasp, and when the draw-out
+        starts: the first step that sees the gripper open (the hand's pull, which opened it, goes
+        on by the open side; :func:`~handover_env.person.hand_path.hand_kernel`)."""
+        if self._gripper_axis is not None and self._gripper is not None:
+            if self._out_axis is None and self._hand is not None:
+                self._out_depth = float((self._hand[0] - self._gripper) @ self._gripper_axis)
+            self._out_axis = self._gripper_axis
+        if released and math.isinf(self._t_out):
+            self._t_out = t
+
     def _pass(self, t: float) -> None:
         """The object is left behind: the person walks on (the arm returns to its swing)."""
         self.state = "passed"
@@ -495,6 +514,13 @@ class Receiver:
         io[hp.GRASP:hp.GRASP + 3], io[hp.OBJ_VEL:hp.OBJ_VEL + 3] = grasp_point, object_vel
         if state == "holding":
             io[hp.HOLD_REL:hp.HOLD_REL + 3] = self._hold_rel
+            io[hp.T_OUT] = self._t_out
+            if self._out_axis is not None and self._gripper is not None:
+                io[hp.HAS_GRIP], io[hp.DEPTH] = 1.0, self._out_depth
+                io[hp.GRIP_AXIS:hp.GRIP_AXIS + 3], io[hp.TCP:hp.TCP + 3] = (
+                    self._out_axis, self._gripper)
+            else:
+                io[hp.HAS_GRIP] = 0.0
         if self._hand is not self._hand_out:  # else io holds it: the kernel's last output
             x, v, a = self._hand
             io[hp.X:hp.X + 3], io[hp.V:hp.V + 3], io[hp.A:hp.A + 3] = x, v, a

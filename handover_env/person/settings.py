@@ -59,10 +59,12 @@ SETTING_RANGES: dict[str, tuple[float, float, str, str]] = {
     "present_time": (SHORTEST_MOVE, LONGEST_EPISODE, "s", "one env step .. the longest episode"),
     "present_reach": (0.005, LONGEST_REACH, "m", "5 mm .. the longest reach"),
 }
-#: The person's opt-in behaviours (True or False; off by default, docs/simulator.md "Opt-in
-#: person"): ``reach_offset`` (a person's own reach, :mod:`handover_env.person.take`) and
-#: ``arm_yield`` (the reaching arm yields to the robot, :mod:`handover_env.person.arm_yield`).
-SWITCHES = ("reach_offset", "arm_yield")
+#: The person's behaviours that can be switched (True or False; docs/simulator.md "Person
+#: switches"): ``reach_offset`` (a person's own reach, :mod:`handover_env.person.take`; off by
+#: default), ``arm_yield`` (the reaching arm yields to the robot,
+#: :mod:`handover_env.person.arm_yield`; on) and ``avoid_gripper`` (the held object leaves the
+#: gripper by its open side, :func:`handover_env.person.hand_path.hand_kernel`; on).
+SWITCHES = ("reach_offset", "arm_yield", "avoid_gripper")
 
 
 @dataclass(frozen=True)
@@ -118,13 +120,18 @@ class ReceiverConfig:
         carry_forward: the carry pose is this far forward of the hand's walking swing, m.
         present_time: static handover: time to raise the hand, s.
         present_reach: static handover: the raised hand takes the object once it is this close, m.
-        reach_offset: opt-in: the take distance adds the person's own reach offset (drawn with
-            the seed for a scripted walker, the recorded person's own for a replayed recording;
-            :mod:`handover_env.person.take`). Off: every person reaches by the giver-dependent
-            line alone.
-        arm_yield: opt-in: touched by the robot, the reaching arm pushes at most as hard as a
-            human arm and stops pushing after the tactile latency
+        reach_offset: switch, off by default: the take distance adds the person's own reach
+            offset (drawn with the seed for a scripted walker, the recorded person's own for a
+            replayed recording; :mod:`handover_env.person.take`). Off: every person reaches by
+            the giver-dependent line alone.
+        arm_yield: switch, on by default: touched by the robot, the reaching arm pushes at most
+            as hard as a human arm and stops pushing after the tactile latency
             (:mod:`handover_env.person.arm_yield`). Off: the arm's welds drive it to its targets.
+        avoid_gripper: switch, on by default: the hand that holds the object draws it out of the
+            gripper by its open side (never deeper along the gripper's approach axis than at the
+            grasp, and from the first step that sees the gripper open ``CLEAR_OF_GRIPPER``
+            farther out; :func:`handover_env.person.hand_path.hand_kernel`). Off: the hand stays
+            with the body for ``hold_time`` whatever the gripper does.
     """
 
     reach_duration: float = 0.63
@@ -147,7 +154,8 @@ class ReceiverConfig:
     present_time: float = 0.8
     present_reach: float = 0.15
     reach_offset: bool = False
-    arm_yield: bool = False
+    arm_yield: bool = True
+    avoid_gripper: bool = True
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
@@ -159,10 +167,28 @@ class ReceiverConfig:
 
 
 def check_switch(name: str, value: object) -> bool:
-    """``value`` if it is True or False (an opt-in person setting, :data:`SWITCHES`)."""
+    """``value`` if it is True or False (a person switch, :data:`SWITCHES`)."""
     if not isinstance(value, bool | np.bool_):
         raise ValueError(f"person setting {name} must be True or False, got {value!r}")
     return bool(value)
+
+
+def switch_tokens(tokens: tuple[str, ...] | list[str]) -> dict[str, bool]:
+    """The person switches named by command-line tokens: ``NAME`` or ``NAME=on`` switches one on,
+    ``NAME=off`` off (any of :data:`SWITCHES`, each at most once); the rest keep their defaults.
+    One ValueError names every bad token."""
+    out: dict[str, bool] = {}
+    bad = []
+    for token in tokens:
+        name, _, state = str(token).partition("=")
+        if name not in SWITCHES or state not in ("", "on", "off") or name in out:
+            bad.append(token)
+            continue
+        out[name] = state != "off"
+    if bad:
+        raise ValueError(f"--person {list(tokens)}: {bad} not understood; each of "
+                         f"{list(SWITCHES)} at most once, as NAME, NAME=on or NAME=off")
+    return out
 
 
 def check_setting(name: str, value: object) -> float:

@@ -1,4 +1,4 @@
-"""The benchmark of dynamic robot-to-human handover (protocol v1, docs/benchmark.md).
+"""The benchmark of dynamic robot-to-human handover (protocol v2, docs/benchmark.md).
 
 * :mod:`.protocol`: the versioned protocol constants, the receivers of the closed-loop track and
   the fingerprints of a run.

@@ -39,7 +39,7 @@ from handover_eval.backend import map_folds
 from handover_eval.benchmark.guard import AgentError, agent_guard, forget_stopped
 from handover_eval.benchmark.outcomes import EVENTS, events, first_failure
 from handover_eval.benchmark.plugin import AgentSource, fit_plugin
-from handover_eval.benchmark.protocol import ENV_ID, SENSING, BenchReceiver
+from handover_eval.benchmark.protocol import ENV_ID, PERSON, SENSING, BenchReceiver
 from handover_eval.closedloop.models import fold_model, prepare_models
 from handover_eval.episodes import ENV_IDS, Setting, clear_envs, env_for, run_receiver
 from handover_eval.methods import MethodOptions
@@ -54,7 +54,7 @@ CHUNK = 4
 #: The track's env: DynamicHandover-v0 (:data:`.protocol.ENV_ID`) on the :data:`.protocol.SENSING`
 #: profile.
 ENV_KIND = next(kind for kind, env_id in ENV_IDS.items() if env_id == ENV_ID)
-ENV_KWARGS = json.dumps({"sensing": SENSING})
+ENV_KWARGS = json.dumps({"sensing": SENSING, "person": PERSON})
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
 """``evaluate.py leaderboard``: the ranked Markdown table and a figure from result files.
 
-Only comparable results are ranked together: every file must be protocol v1 (the same version),
+Only comparable results are ranked together: every file must be of one protocol version,
 and for each track every result that reports it must share that track's fingerprint (the same
 data, the same scoring data and receivers, the same protocol settings); otherwise
 :class:`LeaderboardError` says which files differ and how, in one line. Rank: by closed-loop

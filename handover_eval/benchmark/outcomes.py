@@ -1,4 +1,4 @@
-"""The outcome taxonomy of protocol v1: one cause per failed episode, and every event flag.
+"""The benchmark's outcome taxonomy (protocols v1, v2): one cause per failed episode, every flag.
 
 The env ends an episode at its first terminal condition (``info["outcome"]``), but a failed
 handover often fails more than one check on the way (a release before the grasp *and* a miss; a

@@ -1,4 +1,4 @@
-"""Protocol v1 of the benchmark, as constants (docs/benchmark.md says what each one means).
+"""Protocol v2 of the benchmark, as constants (docs/benchmark.md says what each one means).
 
 A result is comparable with another only under the same :data:`PROTOCOL_VERSION` and the same
 fingerprint of each track it reports (:func:`fingerprints`): the data the agent fit on, the data
@@ -12,7 +12,8 @@ every frame from frame 5, a 30-frame (1 s) horizon, and the metrics of
 episode of the other data instead.
 
 Closed-loop track: ``DynamicHandover-v0`` on the ``"paper"`` sensing profile (:data:`SENSING`, the
-env's default at v1, passed explicitly so that a later default cannot move v1) at Θ̂, and the
+env's default, passed explicitly so that a later default cannot move the protocol), the person
+of :data:`PERSON` (passed explicitly too), at Θ̂, and the
 receivers of :func:`receivers`: scripted ID and OOD walkers and the far-pass stress set on **test
 seeds** (:data:`TEST_SEEDS`, never used by any tuning, training or development command of this
 project, all of whose seeds are below :data:`TRAIN_SEED_LIMIT`), and recorded replays (held-out
@@ -32,9 +33,11 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval.openloop.protocol import OpenLoopProtocol
 from handover_eval.receivers import ReceiverSpec
 
-PROTOCOL_VERSION = 1
-#: Every version this code can read (leaderboard, rescore); only this one is written.
-KNOWN_VERSIONS: tuple[int, ...] = (1,)
+PROTOCOL_VERSION = 2
+#: Every version this code can read (leaderboard, rescore); only this one is written. v1 (up to
+#: handover_env 0.9): the person without the arm's yield and the draw-out by the gripper's open
+#: side; v2: the person of :data:`PERSON` (docs/benchmark.md, "Versions").
+KNOWN_VERSIONS: tuple[int, ...] = (1, 2)
 TRACKS: tuple[str, ...] = ("openloop", "closedloop")
 
 # ------------------------------------------------------------------------------ open-loop track
@@ -55,8 +58,11 @@ OPENLOOP_SETS: tuple[str, ...] = ("id", "ood")
 # ---------------------------------------------------------------------------- closed-loop track
 THETA = HandoverParams()  # Θ̂ = (114.3, 17.1, 0.14, 7.1)
 ENV_ID = "handover_env/DynamicHandover-v0"
-#: The env's sensing profile (docs/sensing.md): the paper's robot, the env's default at v1.
+#: The env's sensing profile (docs/sensing.md): the paper's robot, the env's default.
 SENSING = "paper"
+#: The person's switches (docs/simulator.md; the env's defaults at v2): no reach offset of their
+#: own, the arm that yields to the robot, the held object drawn out by the gripper's open side.
+PERSON = {"reach_offset": False, "arm_yield": True, "avoid_gripper": True}
 #: Every seed this project's own commands use (closed-loop 0.., 10000..; the simulated
 #: participants' walks pid * 1000 + stream * 100 + k) lies below this: the tuning/training range.
 TRAIN_SEED_LIMIT = 100_000_000
@@ -131,6 +137,7 @@ class BenchmarkSettings:
             },
             "closedloop": {
                 "env": ENV_ID,
+                "person": dict(PERSON),
                 "theta": list(THETA.as_array()),
                 "walkers_per_set": self.walkers,
                 "test_seeds": dict(TEST_SEEDS),

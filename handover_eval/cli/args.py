@@ -160,20 +160,31 @@ def add_sensing_argument(parser: argparse.ArgumentParser, default: str = "paper"
 
 
 def add_person_argument(parser: argparse.ArgumentParser) -> None:
-    """``--person``: the opt-in person settings (docs/simulator.md; default: the default person)."""
-    from handover_env.person.settings import SWITCHES
+    """``--person``: person switches set apart from their defaults (docs/simulator.md)."""
+    from handover_env.person.settings import SWITCHES, ReceiverConfig, switch_tokens
 
+    def token(value: str) -> str:
+        try:
+            switch_tokens([value])
+        except ValueError as err:
+            raise argparse.ArgumentTypeError(str(err)) from None
+        return value
+
+    defaults = ReceiverConfig()
     parser.add_argument(
         "--person",
         nargs="+",
-        choices=SWITCHES,
+        type=token,
         default=[],
-        metavar="SETTING",
-        help="switch on opt-in person settings, any of "
-        f"{list(SWITCHES)} (docs/simulator.md): reach_offset, the person's own reach offset "
-        "(scripted walkers draw it with their seed, a replay carries its recorded one); "
-        "arm_yield, a reaching arm that pushes at most as hard as a human arm and stops on "
-        "contact with the robot (default: none, the default person)",
+        metavar="SWITCH",
+        help="set person switches apart from their defaults, each as NAME (on), NAME=on or "
+        f"NAME=off, NAME any of {list(SWITCHES)} (docs/simulator.md): reach_offset, the "
+        "person's own reach offset (scripted walkers draw it with their seed, a replay carries "
+        "its recorded one); arm_yield, a reaching arm that pushes at most as hard as a human "
+        "arm and stops on contact with the robot; avoid_gripper, a held object drawn out of "
+        "the gripper by its open side (defaults: "
+        + ", ".join(f"{s} {'on' if getattr(defaults, s) else 'off'}" for s in SWITCHES)
+        + "; none given: the default person)",
     )
 
 

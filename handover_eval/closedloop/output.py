@@ -66,7 +66,7 @@ def _person(settings: tuple[str, ...]) -> str:
     """The person of a run, as its header names it."""
     if not settings:
         return "the default person"
-    return "opt-in settings " + ", ".join(f"`{s}`" for s in settings) + " (docs/simulator.md)"
+    return "person switches " + ", ".join(f"`{s}`" for s in settings) + " (docs/simulator.md)"
 
 
 def _header(title: str, dataset, receivers: ClosedLoopEvalConfig, quick: bool, n_rec: str) -> str:

@@ -40,7 +40,7 @@ import numpy as np
 
 from handover_env.config import HandoverParams
 from handover_env.data.dataset import HandoverDataset
-from handover_env.person.settings import SWITCHES
+from handover_env.person.settings import switch_tokens
 from handover_env.sensors.profiles import PROFILES
 from handover_eval import roster
 from handover_eval.backend import map_folds
@@ -77,8 +77,9 @@ class ClosedLoopEvalConfig:
         chunk: receivers per worker job.
         workers: processes running episodes (1 = in this process).
         sensing: the env's sensor profile ("paper", "ideal", "randomized"; docs/sensing.md).
-        person: the opt-in person settings switched on (any of
-            :data:`handover_env.person.settings.SWITCHES`; () for the default person).
+        person: the person switches set apart from their defaults, as tokens ``NAME``,
+            ``NAME=on`` or ``NAME=off`` (:func:`handover_env.person.settings.switch_tokens`; ()
+            for the default person).
     """
 
     agents: tuple[str, ...] = field(default_factory=roster.compared_agents)
@@ -111,17 +112,14 @@ class ClosedLoopEvalConfig:
             raise ValueError(f"--sensing must be one of {list(PROFILES)}, got {self.sensing!r}")
         if not 0 <= self.walker_fold < self.folds:
             raise ValueError(f"walker fold {self.walker_fold} is not a fold of {self.folds}")
-        bad = [s for s in self.person if s not in SWITCHES]
-        if bad or len(set(self.person)) != len(self.person):
-            raise ValueError(f"--person {list(self.person)}: each at most once, any of "
-                             f"{list(SWITCHES)}")
+        switch_tokens(self.person)  # one error naming every bad token
 
     def env_kwargs(self, **more: object) -> str:
         """The ``gym.make`` keywords of this run's env as JSON: the sensing profile, the person
-        settings switched on (none for the default person) and ``more``."""
+        switches set apart from their defaults (none for the default person) and ``more``."""
         kwargs: dict[str, object] = {"sensing": self.sensing, **more}
         if self.person:
-            kwargs["person"] = {s: True for s in self.person}
+            kwargs["person"] = switch_tokens(self.person)
         return json.dumps(kwargs, sort_keys=True)
 
 

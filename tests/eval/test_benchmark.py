@@ -1,4 +1,4 @@
-"""The benchmark (protocol v1): a plug-in agent from a file outside the repo scored on both tracks
+"""The benchmark (protocol v2): a plug-in agent from a file outside the repo scored on both tracks
 with no edit to the project, determinism, the leaderboard and its refusals, rescore byte for byte,
 --replay-data fitting on one half and scoring every episode of the other, first-failure
 attribution, and the readers' field checks."""
@@ -110,7 +110,7 @@ def test_leaderboard_ranks_result_files(plugin_runs) -> None:
     assert proc.returncode == 0, proc.stderr
     md = (tmp / "lb" / "leaderboard.md").read_text()
     assert "| ridge (quick) |" in md and "| reactive (quick) |" in md
-    assert "protocol v1" in md and (tmp / "lb" / "leaderboard.png").stat().st_size > 10_000
+    assert "protocol v2" in md and (tmp / "lb" / "leaderboard.png").stat().st_size > 10_000
     # the same agent twice is refused
     proc = _evaluate(["leaderboard", str(plugin_runs["a"] / "result.json"),
                       str(plugin_runs["b"] / "result.json"), "--out", str(tmp / "lb2")], tmp)
@@ -126,15 +126,20 @@ def _one_line_error(capsys) -> str:
 def test_leaderboard_refuses_mixed_versions_and_fingerprints(plugin_runs, tmp_path, capsys,
                                                              monkeypatch) -> None:
     data = json.loads((plugin_runs["a"] / "result.json").read_text())
-    v2 = dict(data, protocol_version=2, agent=dict(data["agent"], name="other"))
-    (tmp_path / "v2.json").write_text(json.dumps(v2))
+    old = json.loads(json.dumps(data))  # a v1 result (the person before v2)
+    old["protocol_version"], old["agent"]["name"] = 1, "other"
+    for fp in old["fingerprints"].values():
+        fp["protocol_version"] = 1
+    (tmp_path / "v1.json").write_text(json.dumps(old))
     ref = str(plugin_runs["reactive"] / "result.json")
     out = ["--out", str(tmp_path / "lb")]
-    assert evaluate.main(["leaderboard", ref, str(tmp_path / "v2.json"), *out]) == 2
+    assert evaluate.main(["leaderboard", ref, str(tmp_path / "v1.json"), *out]) == 2
     err = _one_line_error(capsys)
-    assert "protocol version 2" in err and "not comparable" in err
+    assert "protocol version 1" in err and "not comparable" in err
     # a file of a version this code does not know is refused on its own too
-    assert evaluate.main(["leaderboard", str(tmp_path / "v2.json"), *out]) == 2
+    v3 = dict(data, protocol_version=3, agent=dict(data["agent"], name="other"))
+    (tmp_path / "v3.json").write_text(json.dumps(v3))
+    assert evaluate.main(["leaderboard", str(tmp_path / "v3.json"), *out]) == 2
     assert "field protocol_version must be a known protocol version" in _one_line_error(capsys)
     # the same version but another fingerprint (other receivers or data)
     other = json.loads(json.dumps(data))

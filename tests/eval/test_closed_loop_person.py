@@ -44,20 +44,23 @@ def test_person_settings_reach_every_episode_and_default_stays_default(tmp_path:
     env.close()
     assert any(abs(float(r["reach_offset"])) > 1e-3 for r in offset)
     header = (tmp_path / "offset" / "closed_loop.md").read_text()
-    assert "opt-in settings `reach_offset`" in header
+    assert "person switches `reach_offset`" in header
     assert "the default person" in (tmp_path / "default" / "closed_loop.md").read_text()
 
 
 def test_env_kwargs_carry_the_person_only_when_set() -> None:
     assert json.loads(ClosedLoopEvalConfig(agents=("reactive",)).env_kwargs()) == {
         "sensing": "paper"}
-    cfg = ClosedLoopEvalConfig(agents=("reactive",), person=("arm_yield", "reach_offset"))
+    cfg = ClosedLoopEvalConfig(agents=("reactive",), person=("arm_yield=off", "reach_offset"))
     assert json.loads(cfg.env_kwargs(sensors={"x": 1})) == {
         "sensing": "paper", "sensors": {"x": 1},
-        "person": {"arm_yield": True, "reach_offset": True}}
+        "person": {"arm_yield": False, "reach_offset": True}}
+    cfg = ClosedLoopEvalConfig(agents=("reactive",), person=("avoid_gripper=on",))
+    assert json.loads(cfg.env_kwargs())["person"] == {"avoid_gripper": True}
 
 
-@pytest.mark.parametrize("person", [("tall",), ("arm_yield", "arm_yield")])
+@pytest.mark.parametrize("person", [("tall",), ("arm_yield", "arm_yield"),
+                                    ("arm_yield", "arm_yield=off"), ("arm_yield=maybe",)])
 def test_unknown_or_repeated_person_setting_is_refused(person: tuple[str, ...]) -> None:
     with pytest.raises(ValueError, match="--person"):
         ClosedLoopEvalConfig(agents=("reactive",), person=person)
@@ -66,4 +69,5 @@ def test_unknown_or_repeated_person_setting_is_refused(person: tuple[str, ...]) 
 def test_cli_refuses_an_unknown_setting(capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(SystemExit):
         evaluate.main(["closed-loop", "--person", "tall"])
-    assert "invalid choice: 'tall'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--person" in err and "'tall'" in err and "NAME=off" in err

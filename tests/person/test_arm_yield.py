@@ -75,9 +75,12 @@ def test_a_new_episode_starts_untouched() -> None:
     env.close()
 
 
-def test_the_yield_is_opt_in() -> None:
-    """Off by default: a touch is not felt and the targets are never limited."""
+def test_the_yield_is_on_by_default_and_can_be_switched_off() -> None:
+    """On by default; switched off, a touch is not felt and the targets are never limited."""
     env = gym.make("handover_env/DynamicHandover-v0").unwrapped
+    assert env.receiver.config.arm_yield is True and env.receiver.targets.arm.enabled is True
+    env.close()
+    env = gym.make("handover_env/DynamicHandover-v0", person={"arm_yield": False}).unwrapped
     env.reset(seed=0, options={"receiver": "id"})
     arm = env.receiver.targets.arm
     assert env.receiver.config.arm_yield is False and arm.enabled is False

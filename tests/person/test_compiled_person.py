@@ -208,7 +208,7 @@ def test_the_hand_arrives_when_its_time_is_up_and_stays_within_the_arm():
     cfg = type("Cfg", (), dict(close_time=0.25, approach_distance=0.12, approach_height=0.04,
                                hold_time=0.63, pull_distance=0.2, pull_time=0.5,
                                carry_forward=0.1))()
-    hp.hand_settings(io, cfg, 0.75, pose.arm_reach, RATE, 0.3, 0.35, (0.3, -0.15, -0.15))
+    hp.hand_settings(io, cfg, 0.75, pose.arm_reach, RATE, 0.3, 0.35, (0.3, -0.15, -0.15), 0.1)
     tau = 30.0
     shoulder, _, _ = pose.body_frame(tau, 1.0)
     io[hp.STATE], io[hp.TAU], io[hp.RHO], io[hp.NOW], io[hp.DT] = hp.PRESENTING, tau, 1.0, 0.0, 1.0
@@ -224,6 +224,50 @@ def test_the_hand_arrives_when_its_time_is_up_and_stays_within_the_arm():
     hp.hand_kernel(pose.rows, pose.io, io)  # out of reach: held at the arm's length, goal put off
     assert length(io[hp.X:hp.X + 3] - shoulder) == pytest.approx(pose.arm_reach, abs=1e-12)
     assert io[hp.GOAL_TIME] == pytest.approx(0.25)
+
+
+def _holding_io(pose, tau: float, rel) -> np.ndarray:
+    io = np.zeros(hp.IO_SIZE)
+    cfg = type("Cfg", (), dict(close_time=0.25, approach_distance=0.12, approach_height=0.04,
+                               hold_time=0.63, pull_distance=0.2, pull_time=0.5,
+                               carry_forward=0.1))()
+    hp.hand_settings(io, cfg, 0.75, pose.arm_reach, RATE, 0.3, 0.35, (0.3, -0.15, -0.15), 0.1)
+    # a person standing (speed factor 0): the pelvis-fixed hold does not move on
+    io[hp.STATE], io[hp.TAU], io[hp.RHO], io[hp.NOW], io[hp.DT] = hp.HOLDING, tau, 0.0, 0.5, 1.0
+    io[hp.T_GRASP], io[hp.HOLD_REL:hp.HOLD_REL + 3] = 0.0, rel
+    io[hp.GOAL_TIME] = 0.0  # a step of 1 s > the hold's tracking time: the hand is at its goal
+    return io
+
+
+def test_a_held_object_leaves_the_gripper_by_its_open_side():
+    """avoid_gripper: the hold's goal (a point fixed to the pelvis) is kept no deeper along the
+    gripper's axis than at the grasp, and from the release on OUT_DISTANCE farther out."""
+    motion = _motion()
+    pose = MotionPose(motion)
+    tau, rel = 30.0, np.array([0.25, -0.2, 0.4])  # 0.3 m ahead of the right shoulder
+    io = _holding_io(pose, tau, rel)
+    hp.hand_kernel(pose.rows, pose.io, io)
+    free = io[hp.X:hp.X + 3].copy()  # no gripper known: the pelvis-fixed hold itself
+    shoulder, _, _ = pose.body_frame(tau, 1.0)
+    assert length(free - shoulder) < pose.arm_reach - 0.2  # room to move without the arm's clamp
+    axis = np.array([*(shoulder - free)[:2], 0.0])  # a gripper whose fingertips face the person
+    axis /= length(axis)
+    for released, extra in ((False, 0.0), (True, 0.1)):
+        io = _holding_io(pose, tau, rel)
+        io[hp.HAS_GRIP], io[hp.GRIP_AXIS:hp.GRIP_AXIS + 3] = 1.0, axis
+        io[hp.TCP:hp.TCP + 3] = free - 0.05 * axis  # the hold would sit 5 cm out of the TCP
+        io[hp.DEPTH] = 0.12  # but the hand took the object 12 cm out
+        if released:
+            io[hp.T_OUT] = 0.4
+        hp.hand_kernel(pose.rows, pose.io, io)
+        moved = io[hp.X:hp.X + 3] - free
+        assert (io[hp.X:hp.X + 3] - io[hp.TCP:hp.TCP + 3]) @ axis == pytest.approx(0.12 + extra)
+        np.testing.assert_allclose(moved, (0.07 + extra) * axis, atol=1e-12)  # only along it
+    io = _holding_io(pose, tau, rel)  # deep enough already: the hold is left as it is
+    io[hp.HAS_GRIP], io[hp.GRIP_AXIS:hp.GRIP_AXIS + 3] = 1.0, axis
+    io[hp.TCP:hp.TCP + 3], io[hp.DEPTH] = free - 0.2 * axis, 0.12
+    hp.hand_kernel(pose.rows, pose.io, io)
+    np.testing.assert_array_equal(io[hp.X:hp.X + 3], free)
 
 
 def test_the_effort_tracks_arm_time_reach_and_the_pelvis_offset():

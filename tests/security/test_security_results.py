@@ -85,7 +85,8 @@ def closed_rows(agent: str, per_set: int = 4, fail_every: int = 3) -> list[dict]
 
 
 def fingerprints(tracks: tuple[str, ...]) -> dict:
-    base = {"protocol_version": 1, "data": "d" * 32, "replay_data": None, "protocol": {}}
+    base = {"protocol_version": protocol.PROTOCOL_VERSION, "data": "d" * 32, "replay_data": None,
+            "protocol": {}}
     out = {"openloop": {"fingerprint": "a" * 32, **base},
            "closedloop": {"fingerprint": "b" * 32, **base, "receivers": "c" * 32,
                           "n_receivers": 25}}
