@@ -10,6 +10,11 @@ that moved.
 
     python bench/fingerprint.py            # prints the digest
     python bench/fingerprint.py --per-episode
+    python bench/fingerprint.py --person arm_yield=off avoid_gripper=off   # the v1 person
+
+Digests: 8766a3cf... the default env since the person of protocol v2 (``arm_yield`` and
+``avoid_gripper`` on by default); eedb8e88... the env before it, which the two switches off
+still give.
 """
 
 from __future__ import annotations
@@ -33,9 +38,9 @@ PROFILES = ("ideal", "paper")
 RECEIVERS = ("id", "ood", "replay")
 SEEDS = (11, 12)
 #: Final-info entries left out of the digest: whether the walk is within the calibrated range
-#: and the person's own reach offset (0.0 unless the opt-in person setting ``reach_offset`` is
-#: on). They are entries added beside the episode, not numbers of it, so the digest of the
-#: default env is comparable with the one taken before they existed (eedb8e88...).
+#: and the person's own reach offset (0.0 unless the person switch ``reach_offset`` is on).
+#: They are entries added beside the episode, not numbers of it, so the digest stays comparable
+#: with the one taken before they existed (eedb8e88...).
 UNHASHED = ("within_calibration", "reach_offset")
 
 
@@ -57,9 +62,10 @@ def _canon(value: Any) -> Any:
 
 
 def episode_digest(task: str, profile: str, agent_name: str, receiver: str, seed: int,
-                   replay_episodes: list) -> str:
-    """One episode's SHA-256 over its observations, rewards and final info."""
-    env = gym.make(task, sensing=profile)
+                   replay_episodes: list, person: dict[str, bool] | None = None) -> str:
+    """One episode's SHA-256 over its observations, rewards and final info (``person``: person
+    switches apart from their defaults)."""
+    env = gym.make(task, sensing=profile, person=person)
     agent = ReactiveAgent() if agent_name == "reactive" else NullAgent()
     options: dict[str, Any] = {"receiver": receiver}
     if receiver == "replay":
@@ -80,7 +86,7 @@ def episode_digest(task: str, profile: str, agent_name: str, receiver: str, seed
     return h.hexdigest()
 
 
-def fingerprint(per_episode: bool = False) -> str:
+def fingerprint(per_episode: bool = False, person: dict[str, bool] | None = None) -> str:
     """The digest of all 48 episodes (printing each one's digest when ``per_episode``)."""
     replay = list(generate_synthetic(n=4, ood_fraction=0.5, seed=3).episodes)
     total = hashlib.sha256()
@@ -89,7 +95,8 @@ def fingerprint(per_episode: bool = False) -> str:
             for agent in ("reactive", "null"):
                 for receiver in RECEIVERS:
                     for seed in SEEDS:
-                        d = episode_digest(task, profile, agent, receiver, seed, replay)
+                        d = episode_digest(task, profile, agent, receiver, seed, replay,
+                                           person)
                         total.update(d.encode())
                         if per_episode:
                             print(f"{task.split('/')[1]:<22} {profile:<6} {agent:<9} "
@@ -98,11 +105,15 @@ def fingerprint(per_episode: bool = False) -> str:
 
 
 def main() -> None:
+    from handover_env.person.settings import switch_tokens
+    from handover_eval.cli.args import add_person_argument
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--per-episode", action="store_true",
                         help="print each episode's digest (first 16 hex digits) before the total")
+    add_person_argument(parser)
     args = parser.parse_args()
-    print(fingerprint(args.per_episode))
+    print(fingerprint(args.per_episode, switch_tokens(args.person) or None))
 
 
 if __name__ == "__main__":
