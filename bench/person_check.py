@@ -14,10 +14,8 @@ public-dataset folder) and prints, per agent and receiver set (``walker-id``, ``
 * the deepest penetration, and the episodes with a body-contact force over ``--force`` N, in all
   and by the segment that carried it (an episode counts once per segment over the threshold).
 
-The closed-loop evaluation runs the default person. The issue-35 figures in ``docs/results.md``
-were measured with the reach offset and the arm yield on (then the default on that work's
-branch; in this version they are the opt-in person settings ``reach_offset`` and ``arm_yield``,
-which ``evaluate.py closed-loop`` does not pass yet).
+The run's person is whatever ``evaluate.py closed-loop --person`` set (its ``closed_loop.md``
+header names it); without ``--person`` the default person.
 
 Usage: ``python bench/person_check.py RUN_FOLDER --data PATH/whole_motions [--force 50]``
 """

@@ -146,4 +146,8 @@ class DynamicHandoverEnv(HandoverEnvBase):
       joint accelerations at the limit; "ideal" is unchanged. Contacts of the object with the
       person count as the robot's while the robot holds it or nobody does, no longer once the
       person alone holds it (the physics is unchanged; contact figures after the take change).
+      The person's arm yields to the robot and a held object leaves the gripper by its open
+      side (the person switches ``arm_yield`` and ``avoid_gripper``, on by default since
+      benchmark protocol v2; both off give the person before, same-seed rollouts byte for
+      byte). The id stays v0: the benchmark's protocol version marks the change.
     """
