@@ -1,6 +1,6 @@
 """The calibration of the simulated person against the recordings of the public dataset: analysis,
-not simulation (``handover-data transfer-stats``, ``walk-stats``, ``sensing``, ``reach-spread``
-and ``calibrated-range``, and ``evaluate.py far-pass``).
+not simulation (``handover-data transfer-stats``, ``walk-stats``, ``sensing``, ``reach-spread``,
+``calibrated-range`` and ``grasp-height``, and ``evaluate.py far-pass``).
 
 * the transfer and the reach onset in a recording are detected by :mod:`handover_env.data.detect`
   (the simulator replays a recorded person's own reach with it); :mod:`.release`: the giver's
@@ -13,7 +13,10 @@ and ``calibrated-range``, and ``evaluate.py far-pass``).
 * :mod:`.sensing`: the camera model's numbers (jitter, hand error, re-fit bursts);
 * :mod:`.farpass`: the far-pass stress set's lateral range;
 * :mod:`.reach_spread`: the reach's giver-dependent line and the per-person offsets;
-* :mod:`.calibrated_range`: the range of walks the person was calibrated on.
+* :mod:`.calibrated_range`: the range of walks the person was calibrated on;
+* :mod:`.grasp_height`: the recorded arm at the transfer: the hand below the object's centre
+  (the evidence of the person's ``grasp_below``) and the elbow's swivel direction (the arm IK's
+  elbow pole).
 
 Every file goes through :mod:`handover_eval.reporting`'s writers. The Markdown pages quote the
 command and module paths that generated ``docs/calibration/`` when they lived in

@@ -17,19 +17,21 @@ Commands (each has ``--help``)::
     reach-spread PUBLIC_DIR --out DIR  the reach: the giver's part and the per-person offsets
     calibrated-range PUBLIC_DIR --out DIR
                                        the walks the person was calibrated on (speed, height, ...)
+    grasp-height PUBLIC_DIR --out DIR  the recorded arm at the transfer: hand below the object,
+                                       the elbow's swivel direction
 
-The module is over 500 lines because it holds the one parser of the eleven subcommands and a
+The module is over 500 lines because it holds the one parser of the twelve subcommands and a
 short handler for each (argparse lives only in ``cli/``).
 
 Wherever a dataset is read, PATH may be a ``.npz``, a public-dataset folder, or ``synthetic``
 for the embedded default (900 ID + 100 OOD, seed 0).
 
 The argument types are :mod:`handover_eval.cli.args`'s; the calibration commands
-(``transfer-stats``, ``sensing``, ``walk-stats``, ``reach-spread``, ``calibrated-range``) run
-:mod:`handover_eval.calibration`, whose files go through :mod:`handover_eval.reporting`'s
-writers. A dataset file is written by its format's own writer (:meth:`HandoverDataset.save`), a
-LeRobot export by LeRobot's, a plot by :func:`handover_env.data.plot.plot_paths` (PNG, PDF or
-SVG).
+(``transfer-stats``, ``sensing``, ``walk-stats``, ``reach-spread``, ``calibrated-range``,
+``grasp-height``) run :mod:`handover_eval.calibration`, whose files go through
+:mod:`handover_eval.reporting`'s writers. A dataset file is written by its format's own writer
+(:meth:`HandoverDataset.save`), a LeRobot export by LeRobot's, a plot by
+:func:`handover_env.data.plot.plot_paths` (PNG, PDF or SVG).
 """
 
 from __future__ import annotations
@@ -288,6 +290,40 @@ def cmd_calibrated_range(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_grasp_height(args: argparse.Namespace) -> int:
+    from handover_eval.calibration.grasp_height import JOINT_NAMES, SHORT, run_grasp_height
+
+    def num(x: float | None) -> str:
+        return "–" if x is None else f"{x:.3f}"
+
+    def vec(v: Sequence[float] | None) -> str:
+        return "–" if v is None else "(" + ", ".join(f"{x:+.3f}" for x in v) + ")"
+
+    summary, written = run_grasp_height(
+        args.public_dir, args.out, folds=args.folds, seed=args.seed,
+        calibration_folds=args.calibration_folds, skip_bad=args.skip_bad,
+    )
+    for half in ("calibration", "held_out"):
+        group = f"{half}/all"
+        joints = "; ".join(
+            f"{SHORT[j]} {100 * (v['share_below'] or 0):.1f} % (median {v['p50']:+.3f} m)"
+            for j in JOINT_NAMES for v in (summary["height"][j][group],))
+        fore = summary["forearm_elevation"][group]
+        print(f"{half.replace('_', '-')} (n = {summary['detection'][group]['transfer']}): below "
+              f"the object's centre: {joints}; forearm elevation median {fore['p50']:.1f} deg")
+        pole = summary["elbow_pole"][half]["pooled"]
+        print(f"  elbow swivel direction (forward, left, up; n = {pole['n']}, skipped "
+              f"{sum(pole['skipped'].values())}): normalised mean {vec(pole['direction'])}, "
+              f"R = {num(pole['resultant_length'])}, median {vec(pole['median'])}; "
+              f"shoulder-to-wrist median {vec(pole['shoulder_to_wrist_median'])}, "
+              f"{num(pole['shoulder_to_wrist_distance_median'])} m")
+    for name, why in summary["skipped"]:
+        print(f"skipped {name}: {why}", file=sys.stderr)
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
 def _split_arguments(p: argparse.ArgumentParser) -> None:
     """--folds, --seed, --calibration-folds and --skip-bad of the calibration commands."""
     p.add_argument(
@@ -502,6 +538,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder (e.g. docs/calibration)")
     _split_arguments(p)
     p.set_defaults(func=cmd_calibrated_range)
+
+    p = sub.add_parser(
+        "grasp-height",
+        help="the recorded arm at the transfer: the hand below the object's centre or above, "
+        "and the elbow's swivel direction",
+        description="Detect the transfer in every recording (receiver and object filtered as "
+        "a replay is) and measure there the height of the receiver's right wrist, hand, hand "
+        "tip and elbow (BODY_34) relative to the object's recorded position (the bottle's "
+        "centre), and the forearm's elevation: quantiles 5/25/50/75/95 and the share of "
+        "recordings below the centre; and the elbow's swivel direction off the shoulder-wrist "
+        "line in the walking frame (normalised mean, R, medians); ID/OOD/pooled, for the "
+        "calibration half and the held-out half of Table I's folds (the evidence of the "
+        "person's grasp_below switch and of its arm IK's elbow pole). Writes "
+        "grasp_height.md and grasp_height.json into --out. Nothing per recording is written.",
+    )
+    p.add_argument("public_dir", help="the public dataset's data/whole_motions folder")
+    p.add_argument("--out", required=True, help="output folder (e.g. docs/calibration)")
+    _split_arguments(p)
+    p.set_defaults(func=cmd_grasp_height)
     return parser
 
 
