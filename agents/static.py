@@ -31,16 +31,18 @@ class StaticConfig:
         ready_pos: the ready pose (x, y, z), m (the env's ready pose).
         ready_yaw: gripper yaw while waiting and delivering, rad.
         hand_offset: added to the detected hand position to get the object's target, m (the object
-            is carried at the TCP). The default puts the bottle's centre 6 cm below the hand, so
-            the hand closes on its upper part, above the gripper's fingers, instead of the
-            gripper pushing into the hand.
+            is carried at the TCP). The default puts the bottle's centre 6 cm above the hand, so
+            the hand closes on its lower part, below the gripper's fingers (the part the
+            simulated person takes, its switch ``grasp_below``), instead of the gripper pushing
+            into the hand. ``(0, 0, -0.06)`` is the delivery for a hand that takes the top part
+            (``grasp_below`` off; the static baseline of benchmark protocols v1 and v2).
         x_range, y_range, z_range: workspace clip of the delivery point, m.
         horizon: H, frames returned by :meth:`StaticAgent.predict`.
     """
 
     ready_pos: tuple[float, float, float] = (0.3, -0.4, 1.15)
     ready_yaw: float = -math.pi / 2
-    hand_offset: tuple[float, float, float] = (0.0, 0.0, -0.06)
+    hand_offset: tuple[float, float, float] = (0.0, 0.0, 0.06)
     x_range: tuple[float, float] = (-0.15, 0.7)
     y_range: tuple[float, float] = (-0.8, -0.35)
     z_range: tuple[float, float] = (0.9, 1.45)

@@ -10,11 +10,16 @@ that moved.
 
     python bench/fingerprint.py            # prints the digest
     python bench/fingerprint.py --per-episode
-    python bench/fingerprint.py --person arm_yield=off avoid_gripper=off   # the v1 person
+    python bench/fingerprint.py --person reach_offset=off grasp_below=off recorded_elbow=off \
+        joint_damping=on                                                # the v2 person
+    python bench/fingerprint.py --person reach_offset=off grasp_below=off recorded_elbow=off \
+        joint_damping=on arm_yield=off avoid_gripper=off                # the v1 person
 
-Digests: 8766a3cf... the default env since the person of protocol v2 (``arm_yield`` and
-``avoid_gripper`` on by default); eedb8e88... the env before it, which the two switches off
-still give.
+Digests on the 2-core x86_64 machine of 2026-12-07: d4ae804a... the default env since the
+person of protocol v3; cf6f8976... the person of protocol v2, which the four switches above
+give bit for bit (the v2 code's default on this machine; 8766a3cf... on the machine of
+2026-12-03, where eedb8e88... was the v1 person's). The digest depends on the machine's
+floating-point libraries, so compare digests made on one machine.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A trained RL checkpoint as a benchmark plug-in: scored on protocol v1's closed-loop track.
+"""A trained RL checkpoint as a benchmark plug-in, scored on the closed-loop track.
 
     python evaluate.py benchmark --agent baselines.rl.benchmark:rl_agent \\
         --agent-config '{"checkpoint": "runs/rl"}' --tracks closedloop --name rl-residual

@@ -220,6 +220,18 @@ _MATERIALS = {
 }
 
 
+#: The passive damping of every ball joint with the person switch ``joint_damping`` (N m s/rad,
+#: relative to the parent segment): the value the body was built with before the switch existed
+#: (the persons of benchmark protocols v1 and v2), which no source gave. Without it (the default)
+#: the body's damping is its welds', about the intended motion.
+PASSIVE_JOINT_DAMPING = 0.5
+
+
+def set_joint_damping(model: mujoco.MjModel, ids: BodyIds, on: bool) -> None:
+    """Give every ball joint of the body :data:`PASSIVE_JOINT_DAMPING` (``on``) or none."""
+    model.dof_damping[ids.dofs.start + 6:ids.dofs.stop] = PASSIVE_JOINT_DAMPING if on else 0.0
+
+
 def segment_mass(name: str, height: float) -> float:
     """Mass of segment ``name`` for a body of ``height`` m, kg."""
     return MASS_FRACTION[name] * BMI * height * height
@@ -323,7 +335,7 @@ def add_receiver(world: mujoco.MjSpec, dims: BodyDims | None = None, contype: in
             body.add_joint(
                 name=PREFIX + s.name + "_ball",
                 type=mujoco.mjtJoint.mjJNT_BALL,
-                damping=0.5,
+                damping=0.0,
                 armature=0.01,
             )
         bodies.append(body)

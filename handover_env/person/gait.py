@@ -108,8 +108,9 @@ def arm_pose(shoulder: np.ndarray, torso_rot: np.ndarray, grip: np.ndarray, dims
     wrist to the grip point (a hand held out level toward an object, the wrist bent as needed);
     without it the hand stays in line with the forearm (wrist straight) and the second link runs
     to the grip point. A target beyond reach is approached along the line from the shoulder. The
-    elbow lies in the plane of the shoulder-wrist line and a pole pointing down and out to the
-    right of the torso, as a person holding an object out holds their elbow.
+    elbow lies in the plane of the shoulder-wrist line and a pole in the torso frame
+    (:data:`handover_env.person.posing.ELBOW_POLE_RECORDED`: down and back, as the recorded
+    receivers held their elbow at the transfer).
 
     Args:
         shoulder: (3,) right shoulder (upper arm origin), world.

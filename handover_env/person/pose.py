@@ -17,6 +17,7 @@ import numpy as np
 
 from handover_env.person.person import RATE, PersonMotion
 from handover_env.person.posing import (
+    ELBOW_POLE_RECORDED,
     HAND,
     HAS_HAND,
     SWING_ARM,
@@ -89,7 +90,8 @@ class MotionPose:
             (:func:`handover_env.person.posing.arm_constants`).
     """
 
-    def __init__(self, motion: PersonMotion) -> None:
+    def __init__(self, motion: PersonMotion,
+                 elbow_pole: tuple[float, float, float] = ELBOW_POLE_RECORDED) -> None:
         self.motion = motion
         dims = motion.dims
         self.shoulder_local = dims.local(J["RIGHT_SHOULDER"], SEG["torso"])
@@ -103,7 +105,7 @@ class MotionPose:
         self.rows = motion_rows(motion.origin, motion.quat, motion.arm_swing, motion.heading)
         self.io = arm_constants(self.shoulder_local, self._elbow_local, self._wrist_local,
                                  self.grip_local, STRAIGHT_ARM * self.arm_reach, TRUNK_MAX_TURN,
-                                 SEG["torso"], RIGHT_ARM, UPPER_BODY, len(SEGMENTS))
+                                 SEG["torso"], RIGHT_ARM, UPPER_BODY, len(SEGMENTS), elbow_pole)
 
     def body_frame(self, tau: float, rho: float) -> tuple[np.ndarray, np.ndarray, float]:
         """(right shoulder, walking direction (3,), walking speed) at playback position tau."""

@@ -35,8 +35,20 @@ Mat3 = tuple[float, float, float, float, float, float, float, float, float]
 TAU, HAND, HAS_HAND, SWING_ARM = 0, 1, 4, 5
 SHOULDER, ELBOW, WRIST, GRIP, REST_LOWER = 6, 9, 12, 15, 18  # local vectors (3 each)
 STRAIGHT_REACH, MAX_TURN, GRIP_LEN, L_UPPER, L_FORE, L_LOWER = 21, 22, 23, 24, 25, 26
-SEGS, TORSO, ARM, UPPER = 27, 28, 29, 32  # segment count, torso, right arm (3), upper-body mask
-IO_BASE = 32  # + one upper-body flag per segment
+SEGS, TORSO, ARM = 27, 28, 29  # segment count, torso, right arm (3)
+POLE = 32  # the elbow's pole in the torso frame (3)
+UPPER = 35  # upper-body mask
+IO_BASE = 35  # + one upper-body flag per segment
+
+#: The elbow's pole in the torso frame (x forward, y left, z up) with the person switch
+#: ``recorded_elbow`` (on by default): the direction in which the recorded receivers held the
+#: elbow off their shoulder-wrist line at the transfer, down and back (the calibration half's
+#: normalised mean, R = 0.94 over 427 recordings: ``handover-data grasp-height``,
+#: ``docs/calibration/grasp_height.md``, JSON ``elbow_pole.calibration.pooled.direction``).
+ELBOW_POLE_RECORDED = (-0.566, -0.151, -0.810)
+#: The pole with ``recorded_elbow`` off (the persons of benchmark protocols v1 and v2): down and
+#: out to the right, which swings a folded arm's elbow out to the side.
+ELBOW_POLE_OUT = (0.0, -0.35, -1.0)
 
 
 @kernel
@@ -158,7 +170,7 @@ def arm_kernel(io: np.ndarray, shoulder: tuple[float, float, float], torso: Mat3
     dist_c = min(max(dist, abs(l1 - l2) + 1e-4), (l1 + l2) * 0.9995)
     dn = max(dist, 1e-9)
     u0, u1, u2 = d0 / dn, d1 / dn, d2 / dn
-    p0, p1, p2 = mat_vec(torso, 0.0, -0.35, -1.0)  # down and to the right
+    p0, p1, p2 = mat_vec(torso, io[POLE], io[POLE + 1], io[POLE + 2])
     pu = p0 * u0 + p1 * u1 + p2 * u2
     p0, p1, p2 = p0 - pu * u0, p1 - pu * u1, p2 - pu * u2
     if norm3(p0, p1, p2) < 1e-6:
@@ -306,11 +318,13 @@ def motion_rows(origin: np.ndarray, quat: np.ndarray, arm_swing: np.ndarray,
 def arm_constants(shoulder: np.ndarray, elbow: np.ndarray, wrist: np.ndarray, grip: np.ndarray,
                   straight_reach: float = 0.0, max_turn: float = 0.0, torso: int = 0,
                   right_arm: tuple[int, int, int] = (0, 0, 0), upper_body: tuple[int, ...] = (),
-                  segments: int = 0) -> np.ndarray:
+                  segments: int = 0,
+                  pole: tuple[float, float, float] = ELBOW_POLE_RECORDED) -> np.ndarray:
     """A person's io array for :func:`pose_kernel` and :func:`arm_kernel`: the right shoulder in
     the torso frame, the elbow in the upper arm's, the wrist in the forearm's and the grip point
     in the hand's (m), the straight arm's reach for the lean and its largest turn (rad), and the
-    segment indices (torso, right arm, the upper body that turns with the torso)."""
+    segment indices (torso, right arm, the upper body that turns with the torso) and the elbow's
+    pole in the torso frame (:data:`ELBOW_POLE_RECORDED` or :data:`ELBOW_POLE_OUT`)."""
     io = np.zeros(IO_BASE + segments)
     io[SHOULDER:SHOULDER + 3], io[ELBOW:ELBOW + 3] = shoulder, elbow
     io[WRIST:WRIST + 3], io[GRIP:GRIP + 3] = wrist, grip
@@ -320,6 +334,7 @@ def arm_constants(shoulder: np.ndarray, elbow: np.ndarray, wrist: np.ndarray, gr
     io[GRIP_LEN], io[L_UPPER] = norm3(*grip.tolist()), norm3(*elbow.tolist())
     io[L_FORE], io[L_LOWER] = norm3(*wrist.tolist()), norm3(*lower.tolist())
     io[SEGS], io[TORSO], io[ARM:ARM + 3] = segments, torso, right_arm
+    io[POLE:POLE + 3] = pole
     io[[UPPER + i for i in upper_body]] = 1.0
     return io
 

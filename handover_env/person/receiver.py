@@ -15,18 +15,18 @@ it by :mod:`~handover_env.person.pose` and moved by :mod:`~handover_env.person.t
   ``reach_lead_time``: when its grasp point (moving on at its velocity) comes within their take
   distance of the right shoulder, not behind it. The take distance grows with how far the object
   is held from their path (its closest approach; fitted to the recordings), so a person reaches
-  as far as they need to, not always to full extension, plus, with the opt-in person setting
-  ``reach_offset``, the person's own reach offset (:mod:`handover_env.person.take`: drawn for a
+  as far as they need to, not always to full extension, plus (person switch ``reach_offset``, on
+  by default) the person's own reach offset (:mod:`handover_env.person.take`: drawn for a
   scripted walker, the recorded person's own for a replayed recording); it is fixed at the reach
-  onset. The hand
-  then moves on a minimum-jerk path re-planned every step toward the moving grasp point (Hoff &
-  Arbib 1993), planned to arrive at the meeting (at most ``reach_duration`` after the onset; put
-  off only when the meeting comes over ``REPLAN_SLACK`` later, brought forward whenever it comes
-  earlier). The arm follows by two-link inverse kinematics
-  (:func:`handover_env.person.gait.arm_pose`). With the opt-in person setting ``arm_yield`` it
-  yields to the robot (:mod:`handover_env.person.arm_yield`): touched, it pushes at most as hard
-  as a human arm and stops pushing after the tactile latency, and the reach starts again from
-  where the hand is.
+  onset. The hand then moves on a minimum-jerk path re-planned every step toward the moving
+  grasp point (Hoff & Arbib 1993) on the object's lower part (person switch ``grasp_below``, on
+  by default; its top part when off), planned to arrive at the meeting (at most
+  ``reach_duration`` after the onset; put off only when the meeting comes over ``REPLAN_SLACK``
+  later, brought forward whenever it comes earlier). The arm follows by two-link inverse
+  kinematics (:func:`handover_env.person.gait.arm_pose`). With the person switch ``arm_yield``
+  (on by default) it yields to the robot (:mod:`handover_env.person.arm_yield`): touched, it
+  pushes at most as hard as a human arm and stops pushing after the tactile latency, and the
+  reach starts again from where the hand is.
 * **Calibrated range**: at reset the person's walk is measured against the walks the person was
   calibrated on (:mod:`handover_env.person.walk_range`); :meth:`Receiver.warn_outside` warns
   once per receiver (so once per env) and ``calibration.within`` is the env's
@@ -72,7 +72,7 @@ import numpy as np
 from handover_env.person import hand_path as hp
 from handover_env.person import motion as rm
 from handover_env.person import path_ahead as pa
-from handover_env.person.body_model import BodyIds, apply_dims
+from handover_env.person.body_model import BodyIds, apply_dims, set_joint_damping
 from handover_env.person.calibrated_range import warning_text
 from handover_env.person.effort import Effort
 from handover_env.person.grip import ArmGrip
@@ -84,6 +84,7 @@ from handover_env.person.pose import (
     frame_weight,
     interp,
 )
+from handover_env.person.posing import ELBOW_POLE_OUT, ELBOW_POLE_RECORDED
 from handover_env.person.receiver_rules import Meeting
 from handover_env.person.rotations import length
 from handover_env.person.settings import (
@@ -156,6 +157,7 @@ class Receiver:
         self.motion: PersonMotion | None = None
         self.kind, self.source_id, self.hand_mode = "id", "", "reach"
         self.present_after_walk = False
+        set_joint_damping(model, ids.body, self.config.joint_damping)
         self.targets = BodyTargets(model, ids.body, arm_yield=self.config.arm_yield)
         self._pelvis_target = self.targets.key1[0][0]  # a view: the nominal pelvis at step end
         self.measured = Effort(ids.body)
@@ -222,7 +224,8 @@ class Receiver:
         apply_dims(self.model, self.body, motion.dims)
         self.targets.resize()
         dims = motion.dims
-        self.pose = MotionPose(motion)
+        self.pose = MotionPose(motion, ELBOW_POLE_RECORDED if self.config.recorded_elbow
+                               else ELBOW_POLE_OUT)
         # Arm length as the recordings measure it (shoulder-elbow-wrist-hand joints) sets the
         # comfortable distance; the trunk's turn adds to the straight arm's reach.
         arm_length = sum(
@@ -249,7 +252,8 @@ class Receiver:
         self._reset_state()
 
     def _reset_state(self) -> None:
-        self._grasp_side = 1.0  # +1: the hand takes the object's top part; -1: its bottom part
+        # +1: the hand takes the object's top part; -1: its lower part (grasp_below)
+        self._grasp_side = -1.0 if self.config.grasp_below else 1.0
         self._object_axis = np.array([0.0, 0.0, 1.0])
         self.grip.active = False  # mj_resetData clears the grip's applied wrench
         self.grip.force[:] = 0.0

@@ -60,11 +60,15 @@ SETTING_RANGES: dict[str, tuple[float, float, str, str]] = {
     "present_reach": (0.005, LONGEST_REACH, "m", "5 mm .. the longest reach"),
 }
 #: The person's behaviours that can be switched (True or False; docs/simulator.md "Person
-#: switches"): ``reach_offset`` (a person's own reach, :mod:`handover_env.person.take`; off by
-#: default), ``arm_yield`` (the reaching arm yields to the robot,
-#: :mod:`handover_env.person.arm_yield`; on) and ``avoid_gripper`` (the held object leaves the
-#: gripper by its open side, :func:`handover_env.person.hand_path.hand_kernel`; on).
-SWITCHES = ("reach_offset", "arm_yield", "avoid_gripper")
+#: switches"): ``reach_offset`` (a person's own reach, :mod:`handover_env.person.take`; on),
+#: ``arm_yield`` (the reaching arm yields to the robot, :mod:`handover_env.person.arm_yield`;
+#: on), ``avoid_gripper`` (the held object leaves the gripper by its open side,
+#: :func:`handover_env.person.hand_path.hand_kernel`; on), ``grasp_below`` (the modelled hand
+#: takes the object's lower part; on), ``recorded_elbow`` (the elbow held down and back as the
+#: recorded receivers held it; on) and ``joint_damping`` (a passive damping in every joint of
+#: the body, :data:`handover_env.person.body_model.PASSIVE_JOINT_DAMPING`; off).
+SWITCHES = ("reach_offset", "arm_yield", "avoid_gripper", "grasp_below", "recorded_elbow",
+            "joint_damping")
 
 
 @dataclass(frozen=True)
@@ -106,10 +110,9 @@ class ReceiverConfig:
         grasp_radius: the hand grasps when its grip point is this close to the grasp point, m,
         grasp_speed: and moves relative to it slower than this, m/s (a hand closes on an object
             it has caught up with; the grip is then :mod:`handover_env.person.grip`'s spring).
-        grasp_offset: the grasp point's offset from the object's centre along its axis, m: the
-            top of the bottle, above the gripper's pads (a modelled reach, which lifts the hand
-            above the object), or its bottom, below the pads (a recorded hand that closes in
-            from below).
+        grasp_offset: the grasp point's distance from the object's centre along its axis, m, on
+            the part the hand takes (``grasp_below``): the bottle's lower part, below the
+            gripper's pads, or its top, above them.
         approach_distance, approach_height: the hand approaches the grasp point from this far
             toward the person and this far above it, closing in over the last ``close_time``, m.
         close_radius: recorded hand: the hand closes onto the object once the recorded grip point
@@ -120,7 +123,7 @@ class ReceiverConfig:
         carry_forward: the carry pose is this far forward of the hand's walking swing, m.
         present_time: static handover: time to raise the hand, s.
         present_reach: static handover: the raised hand takes the object once it is this close, m.
-        reach_offset: switch, off by default: the take distance adds the person's own reach
+        reach_offset: switch, on by default: the take distance adds the person's own reach
             offset (drawn with the seed for a scripted walker, the recorded person's own for a
             replayed recording; :mod:`handover_env.person.take`). Off: every person reaches by
             the giver-dependent line alone.
@@ -132,6 +135,28 @@ class ReceiverConfig:
             grasp, and from the first step that sees the gripper open ``CLEAR_OF_GRIPPER``
             farther out; :func:`handover_env.person.hand_path.hand_kernel`). Off: the hand stays
             with the body for ``hold_time`` whatever the gripper does.
+        grasp_below: switch, on by default: the modelled hand takes the object's lower part,
+            ``grasp_offset`` below its centre and below the gripper's pads, approached from
+            below, as the recorded receivers did (at the transfer their right wrist and hand
+            joints were below the object's centre in all 427 calibration recordings, median
+            -0.11 m, the elbow too, the forearm about level: ``handover-data grasp-height``,
+            ``docs/calibration/grasp_height.md``), so the forearm stays below the fingers.
+            Off: the top part, above the pads, approached from above, the forearm running down
+            past the fingers. A recorded hand (``hand_mode="recorded"``) takes the part it
+            comes from either way.
+        recorded_elbow: switch, on by default: the reaching arm's elbow lies off the
+            shoulder-wrist line in the direction the recorded receivers held it at the transfer,
+            down and back (:data:`~handover_env.person.posing.ELBOW_POLE_RECORDED`,
+            ``docs/calibration/grasp_height.md``). Off: down and out to the right
+            (:data:`~handover_env.person.posing.ELBOW_POLE_OUT`), which swings the elbow of an
+            arm folded to take an object close to the body out toward the robot, past the
+            gripper.
+        joint_damping: switch, off by default: every ball joint of the body carries the passive
+            damping :data:`~handover_env.person.body_model.PASSIVE_JOINT_DAMPING` relative to
+            its parent segment. Off: the body's damping is its welds', about its intended
+            motion (damping ratio about 1); a joint damping relative to the parent resists
+            the voluntary motion itself, which the targets' feed-forward does not make up for,
+            and kept a folded, moving arm 4-5 cm off its target (docs/simulator.md).
     """
 
     reach_duration: float = 0.63
@@ -153,9 +178,12 @@ class ReceiverConfig:
     carry_forward: float = 0.15
     present_time: float = 0.8
     present_reach: float = 0.15
-    reach_offset: bool = False
+    reach_offset: bool = True
     arm_yield: bool = True
     avoid_gripper: bool = True
+    grasp_below: bool = True
+    recorded_elbow: bool = True
+    joint_damping: bool = False
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:

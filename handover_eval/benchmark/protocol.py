@@ -33,11 +33,12 @@ from handover_env.data.dataset import HandoverDataset
 from handover_eval.openloop.protocol import OpenLoopProtocol
 from handover_eval.receivers import ReceiverSpec
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 #: Every version this code can read (leaderboard, rescore); only this one is written. v1 (up to
 #: handover_env 0.9): the person without the arm's yield and the draw-out by the gripper's open
-#: side; v2: the person of :data:`PERSON` (docs/benchmark.md, "Versions").
-KNOWN_VERSIONS: tuple[int, ...] = (1, 2)
+#: side; v2: with them, but the top grasp, the passive joint damping and no reach offset of
+#: their own; v3: the person of :data:`PERSON` (docs/benchmark.md, "Versions").
+KNOWN_VERSIONS: tuple[int, ...] = (1, 2, 3)
 TRACKS: tuple[str, ...] = ("openloop", "closedloop")
 
 # ------------------------------------------------------------------------------ open-loop track
@@ -60,9 +61,13 @@ THETA = HandoverParams()  # Θ̂ = (114.3, 17.1, 0.14, 7.1)
 ENV_ID = "handover_env/DynamicHandover-v0"
 #: The env's sensing profile (docs/sensing.md): the paper's robot, the env's default.
 SENSING = "paper"
-#: The person's switches (docs/simulator.md; the env's defaults at v2): no reach offset of their
-#: own, the arm that yields to the robot, the held object drawn out by the gripper's open side.
-PERSON = {"reach_offset": False, "arm_yield": True, "avoid_gripper": True}
+#: The person's switches (docs/simulator.md; the env's defaults at v3): their own reach offset,
+#: the arm that yields to the robot, the held object drawn out by the gripper's open side, the
+#: hand on the object's lower part, the elbow held as the recorded receivers held it, no passive
+#: joint damping. v2's person: ``{"reach_offset": False, "arm_yield": True, "avoid_gripper":
+#: True, "grasp_below": False, "recorded_elbow": False, "joint_damping": True}``.
+PERSON = {"reach_offset": True, "arm_yield": True, "avoid_gripper": True, "grasp_below": True,
+          "recorded_elbow": True, "joint_damping": False}
 #: Every seed this project's own commands use (closed-loop 0.., 10000..; the simulated
 #: participants' walks pid * 1000 + stream * 100 + k) lies below this: the tuning/training range.
 TRAIN_SEED_LIMIT = 100_000_000

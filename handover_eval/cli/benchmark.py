@@ -19,6 +19,7 @@ from handover_eval.benchmark.guard import (
     MAX_EPISODE_LIMIT_S,
     AgentError,
 )
+from handover_eval.benchmark.protocol import PROTOCOL_VERSION
 from handover_eval.cli.args import (
     EPOCHS,
     STEPS,
@@ -38,7 +39,8 @@ SECURITY = (
     "(size-bounded JSON/CSV, every field checked)."
 )
 BENCHMARK_DESCRIPTION = (
-    "Score an agent under the benchmark's protocol v1 (docs/benchmark.md): the open-loop track "
+    f"Score an agent under the benchmark's protocol v{PROTOCOL_VERSION} (docs/benchmark.md): "
+    "the open-loop track "
     "(Table I's folds; current-frame and 1 s RMS, ADE/FDE at 0.5 s and 1 s) and the closed-loop "
     "track (test-seed ID, OOD and far-pass walkers and recorded replays, against the reactive "
     "reference). Writes result.json (protocol version, fingerprints of the data and receivers, "
@@ -49,7 +51,8 @@ BENCHMARK_DESCRIPTION = (
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Add the four sub-commands to evaluate.py's parser."""
-    p = sub.add_parser("benchmark", help="score any agent (built-in or your own) under protocol v1",
+    p = sub.add_parser("benchmark", help="score any agent (built-in or your own) under protocol "
+                       f"v{PROTOCOL_VERSION}",
                        description=BENCHMARK_DESCRIPTION)
     both = [n for n in roster.benchmark_agents() if "openloop" in roster.entry(n).tracks]
     only = [n for n in roster.benchmark_agents() if n not in both]

@@ -9,7 +9,7 @@
     matter?
     python evaluate.py user-study --participants 8 --trials 5     # H1-H3 with simulated
     participants
-    python evaluate.py benchmark --agent my_agent.py:make_agent   # score your agent (protocol v1)
+    python evaluate.py benchmark --agent my_agent.py:make_agent   # score your agent
     python evaluate.py leaderboard a/result.json b/result.json    # ranked table + PNG
     python evaluate.py rescore a/closedloop_episodes.csv          # rebuild the tables, no episode
 

@@ -31,20 +31,20 @@ def _run(tmp_path: Path, name: str, *person: str) -> list[dict]:
 
 def test_person_settings_reach_every_episode_and_default_stays_default(tmp_path: Path) -> None:
     default = _run(tmp_path, "default")
-    offset = _run(tmp_path, "offset", "reach_offset")
-    assert [r["receiver"] for r in default] == [r["receiver"] for r in offset]
-    # the default person has no reach offset; with the setting each walker draws its own, the
-    # same as gym.make(..., person={"reach_offset": True}) with that walker's seed
-    assert all(float(r["reach_offset"]) == 0.0 for r in default)
-    env = gym.make("handover_env/DynamicHandover-v0", person={"reach_offset": True})
-    for row in offset:
+    plain = _run(tmp_path, "plain", "reach_offset=off")
+    assert [r["receiver"] for r in default] == [r["receiver"] for r in plain]
+    # switched off the person has no reach offset; by default each walker draws its own, the
+    # same as gym.make(...) with that walker's seed
+    assert all(float(r["reach_offset"]) == 0.0 for r in plain)
+    env = gym.make("handover_env/DynamicHandover-v0")
+    for row in default:
         _, info = env.reset(seed=int(row["seed"]), options={"receiver": "id"})
         # the CSV keeps 7 significant digits
         assert float(row["reach_offset"]) == pytest.approx(info["reach_offset"], abs=1e-6)
     env.close()
-    assert any(abs(float(r["reach_offset"])) > 1e-3 for r in offset)
-    header = (tmp_path / "offset" / "closed_loop.md").read_text()
-    assert "person switches `reach_offset`" in header
+    assert any(abs(float(r["reach_offset"])) > 1e-3 for r in default)
+    header = (tmp_path / "plain" / "closed_loop.md").read_text()
+    assert "person switches `reach_offset=off`" in header
     assert "the default person" in (tmp_path / "default" / "closed_loop.md").read_text()
 
 

@@ -91,19 +91,22 @@ def test_a_replayed_recording_carries_its_own_offset(tmp_path: Path) -> None:
     env.close()
 
 
-def test_the_offset_is_opt_in() -> None:
-    """Off by default: nothing is drawn (the walk and everything after it are as without the
-    setting) and the offset is 0."""
-    plain = gym.make("handover_env/DynamicHandover-v0").unwrapped
+def test_the_offset_is_on_by_default_and_can_be_switched_off() -> None:
+    """On by default: each scripted walker draws its own offset with its seed. Switched off,
+    nothing is drawn (the walk and everything after it are as without the setting) and the
+    offset is 0."""
+    plain = gym.make("handover_env/DynamicHandover-v0", person={"reach_offset": False}).unwrapped
     _, info = plain.reset(seed=4, options={"receiver": "id"})
     assert info["reach_offset"] == 0.0 and plain.receiver.reach_offset.origin == "off"
     assert plain.receiver.config.reach_offset is False
     after_plain = plain.np_random.random()
-    opted = gym.make("handover_env/DynamicHandover-v0", person={"reach_offset": True}).unwrapped
-    opted.reset(seed=4, options={"receiver": "id"})
-    assert opted.np_random.random() != after_plain  # the opt-in draw moves the stream on
+    default = gym.make("handover_env/DynamicHandover-v0").unwrapped
+    assert default.receiver.config.reach_offset is True
+    _, info = default.reset(seed=4, options={"receiver": "id"})
+    assert default.receiver.reach_offset.origin == "drawn" and info["reach_offset"] != 0.0
+    assert default.np_random.random() != after_plain  # the draw moves the stream on
     plain.close()
-    opted.close()
+    default.close()
     with pytest.raises(ValueError, match="reach_offset must be True or False"):
         gym.make("handover_env/DynamicHandover-v0", person={"reach_offset": "yes"})
 
