@@ -1,4 +1,4 @@
-"""The benchmark (protocol v2): a plug-in agent from a file outside the repo scored on both tracks
+"""The benchmark: a plug-in agent from a file outside the repo scored on both tracks
 with no edit to the project, determinism, the leaderboard and its refusals, rescore byte for byte,
 --replay-data fitting on one half and scoring every episode of the other, first-failure
 attribution, and the readers' field checks."""
@@ -110,7 +110,8 @@ def test_leaderboard_ranks_result_files(plugin_runs) -> None:
     assert proc.returncode == 0, proc.stderr
     md = (tmp / "lb" / "leaderboard.md").read_text()
     assert "| ridge (quick) |" in md and "| reactive (quick) |" in md
-    assert "protocol v2" in md and (tmp / "lb" / "leaderboard.png").stat().st_size > 10_000
+    assert f"protocol v{protocol.PROTOCOL_VERSION}" in md
+    assert (tmp / "lb" / "leaderboard.png").stat().st_size > 10_000
     # the same agent twice is refused
     proc = _evaluate(["leaderboard", str(plugin_runs["a"] / "result.json"),
                       str(plugin_runs["b"] / "result.json"), "--out", str(tmp / "lb2")], tmp)
@@ -126,7 +127,7 @@ def _one_line_error(capsys) -> str:
 def test_leaderboard_refuses_mixed_versions_and_fingerprints(plugin_runs, tmp_path, capsys,
                                                              monkeypatch) -> None:
     data = json.loads((plugin_runs["a"] / "result.json").read_text())
-    old = json.loads(json.dumps(data))  # a v1 result (the person before v2)
+    old = json.loads(json.dumps(data))  # a v1 result (the first person)
     old["protocol_version"], old["agent"]["name"] = 1, "other"
     for fp in old["fingerprints"].values():
         fp["protocol_version"] = 1
@@ -137,9 +138,10 @@ def test_leaderboard_refuses_mixed_versions_and_fingerprints(plugin_runs, tmp_pa
     err = _one_line_error(capsys)
     assert "protocol version 1" in err and "not comparable" in err
     # a file of a version this code does not know is refused on its own too
-    v3 = dict(data, protocol_version=3, agent=dict(data["agent"], name="other"))
-    (tmp_path / "v3.json").write_text(json.dumps(v3))
-    assert evaluate.main(["leaderboard", str(tmp_path / "v3.json"), *out]) == 2
+    unknown = max(protocol.KNOWN_VERSIONS) + 1
+    future = dict(data, protocol_version=unknown, agent=dict(data["agent"], name="other"))
+    (tmp_path / "future.json").write_text(json.dumps(future))
+    assert evaluate.main(["leaderboard", str(tmp_path / "future.json"), *out]) == 2
     assert "field protocol_version must be a known protocol version" in _one_line_error(capsys)
     # the same version but another fingerprint (other receivers or data)
     other = json.loads(json.dumps(data))
