@@ -16,7 +16,8 @@ not simulation (``handover-data transfer-stats``, ``walk-stats``, ``sensing``, `
 * :mod:`.calibrated_range`: the range of walks the person was calibrated on;
 * :mod:`.grasp_height`: the recorded arm at the transfer: the hand below the object's centre
   (the evidence of the person's ``grasp_below``) and the elbow's swivel direction (the arm IK's
-  elbow pole).
+  elbow pole);
+* :mod:`.grasp_height_report`: its page and the command's runner (writes the JSON and the page).
 
 Every file goes through :mod:`handover_eval.reporting`'s writers. The Markdown pages quote the
 command and module paths that generated ``docs/calibration/`` when they lived in

@@ -291,7 +291,8 @@ def cmd_calibrated_range(args: argparse.Namespace) -> int:
 
 
 def cmd_grasp_height(args: argparse.Namespace) -> int:
-    from handover_eval.calibration.grasp_height import JOINT_NAMES, SHORT, run_grasp_height
+    from handover_eval.calibration.grasp_height import JOINT_NAMES, SHORT
+    from handover_eval.calibration.grasp_height_report import run_grasp_height
 
     def num(x: float | None) -> str:
         return "–" if x is None else f"{x:.3f}"

@@ -28,14 +28,13 @@ from handover_eval.calibration.grasp_height import (
     SWIVEL_SKIPS,
     ElbowSwivel,
     TransferHeights,
-    describe,
     elbow_swivel,
-    markdown,
     recording_heights,
     swivel_stats,
     transfer_heights,
     walking_frame,
 )
+from handover_eval.calibration.grasp_height_report import describe, markdown
 from handover_eval.cli.data import main
 
 ROOT = Path(__file__).resolve().parents[2]
