@@ -15,6 +15,12 @@ order, and the kernels here reproduce them exactly (compiled with
   transposed 3x3 matrix times a vector the plain ``a0 x0 + a1 x1 + a2 x2``
   (:func:`mat3_mul`, :func:`mat3_vec`, :func:`mat3t_vec`). On a CPU without FMA instructions
   LLVM calls the C library's ``fma``, which rounds the same way.
+
+The kernels' bits are the same on every CPU; numpy's are not: on a CPU with AVX-512, OpenBLAS
+takes its SkylakeX kernels and numpy its AVX-512 loops, whose sums are in another order, so
+there numpy differs from these orders in the last bits. The test session pins numpy and OpenBLAS
+to their AVX2 paths before they load (``tests/conftest.py``), so the tests compare against the
+orders stated here on any x86-64 CPU with AVX2 and FMA.
 """
 
 from __future__ import annotations

@@ -26,6 +26,7 @@ import json
 import os
 import shutil
 import sys
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -34,6 +35,42 @@ import pytest
 TESTS = Path(__file__).resolve().parent
 if str(TESTS) not in sys.path:
     sys.path.insert(0, str(TESTS))
+
+#: numpy's dispatched AVX-512 paths (numpy 2.x on x86-64), turned off for the test session.
+NUMPY_AVX512 = ("AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX AVX512_CLX AVX512_CNL "
+                "AVX512_ICL AVX512_SPR")
+
+
+def _pin_numeric_paths() -> None:
+    """Give numpy and its OpenBLAS the code paths the compiled kernels' references are.
+
+    The kernels sum small products in a stated order (:mod:`handover_env.kernel_math`): numpy's
+    ``matmul`` and ``dot`` as OpenBLAS's Haswell kernels compute them, its ``exp`` as its AVX2
+    loop does. The kernels' own bits do not depend on the CPU; numpy's do: on a CPU with AVX-512,
+    OpenBLAS picks its SkylakeX kernels and numpy its AVX-512 loops, whose sums are in another
+    order, and the bit-for-bit tests of the kernels against numpy (tests/env/test_compiled_*.py,
+    tests/agents/test_flow_kernels.py) then differ in the last bits. So on any x86-64 CPU with AVX2
+    and FMA, the test session asks for the Haswell kernels (``OPENBLAS_CORETYPE``) and turns
+    numpy's AVX-512 dispatch off (``NPY_DISABLE_CPU_FEATURES``; names this numpy does not
+    dispatch are ignored with an ImportWarning). Both are read when the libraries load, so this
+    runs before anything imports numpy; a value the user set is kept; pytest-xdist's workers
+    inherit it."""
+    try:
+        flags = Path("/proc/cpuinfo").read_text().split()
+    except OSError:
+        return
+    if "avx2" not in flags or "fma" not in flags:
+        return
+    if "numpy" in sys.modules and "OPENBLAS_CORETYPE" not in os.environ:
+        warnings.warn("numpy was imported before tests/conftest.py could pin its code paths: "
+                      "the kernels' bit-for-bit tests may differ from numpy in the last bits "
+                      "(run with OPENBLAS_CORETYPE=Haswell and NPY_DISABLE_CPU_FEATURES set)",
+                      stacklevel=1)
+    os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
+    os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", NUMPY_AVX512)
+
+
+_pin_numeric_paths()
 
 #: The agents of the shared closed-loop run: the baseline, two fold models and the three
 #: model-free agents (``giver-replay`` on the replays only).
