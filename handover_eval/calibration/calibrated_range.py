@@ -32,12 +32,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from handover_env.data.errors import DatasetError
 from handover_env.data.public import (
     OOD_PREFIX,
-    list_public_files,
     safe_load_pickle,
     validate_record,
 )
@@ -53,6 +51,7 @@ from handover_eval.calibration.report import (
     DEFAULT_CALIBRATION_FOLDS,
     DEFAULT_FOLDS,
     DEFAULT_SEED,
+    measure_files,
     table1_folds,
     write_json,
 )
@@ -73,22 +72,16 @@ def measure_folder(
 ) -> tuple[list[dict], list[tuple[str, str]]]:
     """``recording_fields`` of every recording (in memory only) with ``is_ood``, and the skipped
     files as ``(name, reason)``."""
-    files = list_public_files(folder)
-    rows: list[dict] = []
-    skipped: list[tuple[str, str]] = []
-    for path in tqdm(files, desc="calibrated-range", unit="file", disable=not progress):
+    def measure(path: Path) -> dict:
         try:
             record = validate_record(safe_load_pickle(path), str(path))
             values = recording_fields(record["pose_receiver"])
         except (DatasetError, OSError, ValueError) as exc:
-            if not skip_bad:
-                raise DatasetError(f"{path}: {exc}") from exc
-            skipped.append((path.name, str(exc)))
-            continue
-        rows.append({**values, "is_ood": path.name.startswith(OOD_PREFIX)})
-    if not rows:
-        raise DatasetError(f"{folder}: none of the {len(files)} dataset file(s) could be measured")
-    return rows, skipped
+            raise DatasetError(f"{path}: {exc}") from exc
+        return {**values, "is_ood": path.name.startswith(OOD_PREFIX)}
+
+    return measure_files(folder, measure, desc="calibrated-range", skip_bad=skip_bad,
+                         progress=progress)
 
 
 def assign_halves(

@@ -68,16 +68,15 @@ import os
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from handover_env.data.detect import RATE_HZ, detect_transfer
 from handover_env.data.errors import DatasetError
 from handover_env.data.filtering import smooth_track
 from handover_env.data.public import (
     OOD_PREFIX,
-    list_public_files,
     safe_load_pickle,
     validate_record,
 )
@@ -87,6 +86,7 @@ from handover_eval.calibration.report import (
     DEFAULT_FOLDS,
     DEFAULT_SEED,
     QUANTILES,
+    measure_files,
     quantiles,
     table1_folds,
 )
@@ -312,25 +312,16 @@ def measure_folder(
 ) -> tuple[list[HeightRow], list[tuple[str, str]]]:
     """One :class:`HeightRow` per recording of ``folder`` (in :func:`list_public_files` order),
     and the skipped files as ``(name, reason)``."""
-    files = list_public_files(folder)
-    rows: list[HeightRow] = []
-    skipped: list[tuple[str, str]] = []
-    for path in tqdm(files, desc="grasp-height", unit="file", disable=not progress):
+    def measure(path: Path) -> HeightRow:
+        record = validate_record(safe_load_pickle(path), str(path))
         try:
-            record = validate_record(safe_load_pickle(path), str(path))
-            try:
-                heights, failure = recording_heights(record["pose_receiver"], record["pose_object"])
-            except ValueError as exc:
-                raise DatasetError(f"{path}: cannot measure: {exc}") from exc
-        except (DatasetError, OSError) as exc:
-            if not skip_bad:
-                raise
-            skipped.append((path.name, str(exc).removeprefix(f"{path}: ")))
-            continue
-        rows.append(HeightRow(path.name.startswith(OOD_PREFIX), heights, failure))
-    if not rows:
-        raise DatasetError(f"{folder}: none of the {len(files)} dataset file(s) could be measured")
-    return rows, skipped
+            heights, failure = recording_heights(record["pose_receiver"], record["pose_object"])
+        except ValueError as exc:
+            raise DatasetError(f"{path}: cannot measure: {exc}") from exc
+        return HeightRow(path.name.startswith(OOD_PREFIX), heights, failure)
+
+    return measure_files(folder, measure, desc="grasp-height", skip_bad=skip_bad,
+                         progress=progress)
 
 
 def assign_halves(rows: list[HeightRow], folds: int, seed: int, calibration_folds: int) -> None:

@@ -24,8 +24,10 @@ from __future__ import annotations
 import json
 import os
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 from tqdm.auto import tqdm
@@ -57,6 +59,7 @@ HALVES = ("calibration", "held_out")
 KINDS = ("id", "ood", "all")
 DEFAULT_FOLDS, DEFAULT_SEED, DEFAULT_CALIBRATION_FOLDS = 10, 0, 5
 JSON_NAME, MD_NAME = "receiver_calibration.json", "receiver_calibration.md"
+T = TypeVar("T")
 
 
 @dataclass
@@ -137,18 +140,44 @@ def analyse_folder(
     if limit is not None:
         ood = [p for p in files if p.name.startswith(OOD_PREFIX)]
         files = [p for p in files if not p.name.startswith(OOD_PREFIX)][:limit] + ood[:limit]
-    results: list[RecordingResult] = []
+    return measure_files(folder, analyse_file, desc="transfer-stats", skip_bad=skip_bad,
+                         progress=progress, files=files, verb="analysed")
+
+
+def measure_files(
+    folder: str | os.PathLike,
+    measure: Callable[[Path], T],
+    *,
+    desc: str,
+    skip_bad: bool = False,
+    progress: bool = True,
+    files: list[Path] | None = None,
+    verb: str = "measured",
+) -> tuple[list[T], list[tuple[str, str]]]:
+    """``measure(path)`` of every dataset file of ``folder`` (``files``, default
+    :func:`list_public_files` order), under a tqdm bar named ``desc``: the calibration family's
+    one file loop.
+
+    A file whose ``measure`` raises :class:`DatasetError` or ``OSError`` is re-raised, or with
+    ``skip_bad`` left out and listed as ``(file name, reason)``, the reason without the
+    ``"{path}: "`` its message starts with.
+
+    Raises:
+        DatasetError: no file of ``folder`` could be measured (``verb`` names how).
+    """
+    files = list_public_files(folder) if files is None else files
+    rows: list[T] = []
     skipped: list[tuple[str, str]] = []
-    for path in tqdm(files, desc="transfer-stats", unit="file", disable=not progress):
+    for path in tqdm(files, desc=desc, unit="file", disable=not progress):
         try:
-            results.append(analyse_file(path))
+            rows.append(measure(path))
         except (DatasetError, OSError) as exc:
             if not skip_bad:
                 raise
             skipped.append((path.name, str(exc).removeprefix(f"{path}: ")))
-    if not results:
-        raise DatasetError(f"{folder}: none of the {len(files)} dataset file(s) could be analysed")
-    return results, skipped
+    if not rows:
+        raise DatasetError(f"{folder}: none of the {len(files)} dataset file(s) could be {verb}")
+    return rows, skipped
 
 
 def assign_halves(

@@ -32,11 +32,10 @@ from handover_env.data.dataset import stratified_fold_ids
 from handover_env.data.errors import DatasetError
 from handover_env.data.public import (
     OOD_PREFIX,
-    list_public_files,
     safe_load_pickle,
     validate_record,
 )
-from handover_eval.calibration.report import write_json
+from handover_eval.calibration.report import measure_files, write_json
 from handover_eval.calibration.walks import (
     PAUSE_MIN_TIME,
     PAUSE_SPEED,
@@ -86,22 +85,16 @@ def measure_folder(
 ) -> tuple[list[tuple[WalkStatistics, bool]], list[tuple[str, str]]]:
     """Every recording's walk statistics and whether it is OOD, in :func:`list_public_files`
     order; ``skipped`` lists ``(file name, reason)`` of files that failed with ``skip_bad``."""
-    files = list_public_files(folder)
-    out: list[tuple[WalkStatistics, bool]] = []
-    skipped: list[tuple[str, str]] = []
-    for path in tqdm(files, desc="walk-stats", unit="file", disable=not progress):
+    def measure(path: Path) -> tuple[WalkStatistics, bool]:
         try:
             record = validate_record(safe_load_pickle(path), str(path))
             stats = walk_statistics(recorded_walk(record["pose_receiver"]))
         except (DatasetError, OSError, ValueError) as exc:
-            if not skip_bad:
-                raise DatasetError(f"{path}: {exc}") from exc
-            skipped.append((path.name, str(exc)))
-            continue
-        out.append((stats, path.name.startswith(OOD_PREFIX)))
-    if not out:
-        raise DatasetError(f"{folder}: none of the {len(files)} dataset file(s) could be measured")
-    return out, skipped
+            raise DatasetError(f"{path}: {exc}") from exc
+        return stats, path.name.startswith(OOD_PREFIX)
+
+    return measure_files(folder, measure, desc="walk-stats", skip_bad=skip_bad,
+                         progress=progress)
 
 
 def measure_walkers(
