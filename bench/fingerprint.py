@@ -42,11 +42,13 @@ TASKS = ("handover_env/DynamicHandover-v0", "handover_env/StaticHandover-v0")
 PROFILES = ("ideal", "paper")
 RECEIVERS = ("id", "ood", "replay")
 SEEDS = (11, 12)
-#: Final-info entries left out of the digest: whether the walk is within the calibrated range
-#: and the person's own reach offset (0.0 unless the person switch ``reach_offset`` is on).
+#: Final-info entries left out of the digest: whether the walk is within the calibrated range,
+#: the person's own reach offset (0.0 unless the person switch ``reach_offset`` is on) and the
+#: presentation at the grasp (the bottle in the walking frame, its speed, the TCP's jerk).
 #: They are entries added beside the episode, not numbers of it, so the digest stays comparable
 #: with the one taken before they existed (eedb8e88...).
-UNHASHED = ("within_calibration", "reach_offset")
+UNHASHED = ("within_calibration", "reach_offset", "transfer_object_body", "transfer_object_speed",
+            "transfer_robot_jerk")
 
 
 def _canon(value: Any) -> Any:

@@ -56,6 +56,7 @@ LEADING_INFO = (
 SPLIT = {
     "transfer_pelvis_xy": ("transfer_pelvis", "xy"),
     "transfer_object_pos": ("transfer_object", "xyz"),
+    "transfer_object_body": ("transfer_object", ("fwd", "lat", "up")),
 }
 
 

@@ -302,6 +302,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.pull_force = 0.0
         self.released_while_held = False
         self.transfer_object_pos: np.ndarray | None = None
+        self.transfer_robot_jerk = math.nan
         self.wrist.reset()
         self._gripper_holds = True
         self._last_held_z = float(READY_POS[2])
@@ -322,6 +323,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self._jerk_sq = 0.0
         self._jerk_peak_sq = 0.0
         self._jerk_n = 0
+        self._jerk_now = math.nan
         self.reward_terms = dict.fromkeys(TERMS, 0.0)
 
     # ------------------------------------------------------------------ gym API
@@ -576,6 +578,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
             self.wrist.update_payload(self._gripper_holds)
         if rec.state == "reaching" and rec.try_grasp(self.model, d):
             self.transfer_object_pos = self._object_pos_v.copy()
+            self.transfer_robot_jerk = self._jerk_now
         if grip.active:
             grip.apply(d)
         contacts = self.contacts
@@ -590,7 +593,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
         self.controller.compute(d)  # writes the arm's torques to d.ctrl
 
     def _track_jerk(self) -> None:
-        """Robot TCP jerk from the third difference of its 30 Hz positions (RMS and peak)."""
+        """Robot TCP jerk from the third difference of its 30 Hz positions (RMS, peak, and the
+        last step's, which the grasp records as ``transfer_robot_jerk``)."""
         hist = self._tcp_hist
         hist.append(self._tcp_pos_v.tolist())
         if len(hist) < 4:
@@ -603,6 +607,7 @@ class HandoverEnvBase(gym.Env, EzPickle):
               + ((a1 - 3.0 * b1 + 3.0 * c1 - e1) * r) ** 2
               + ((a2 - 3.0 * b2 + 3.0 * c2 - e2) * r) ** 2)
         self._jerk_sq += j2
+        self._jerk_now = math.sqrt(j2)
         self._jerk_n += 1
         if j2 > self._jerk_peak_sq:
             self._jerk_peak_sq = j2
@@ -639,7 +644,8 @@ class HandoverEnvBase(gym.Env, EzPickle):
 
         Besides the outcome and the paper's handover time: when and where the object changed
         hands (``transfer_time``: the person's grasp; ``transfer_pelvis_xy``,
-        ``transfer_object_pos``),
+        ``transfer_object_pos``; the presentation: ``transfer_object_body``, the bottle in the
+        person's walking frame, ``transfer_object_speed`` and ``transfer_robot_jerk``),
         whether the person walks within the calibrated range (``within_calibration``) and their
         own reach offset (``reach_offset``, m; 0 unless the person setting is on), the person's
         effort (``reach_distance``, ``arm_extended_time``, ``time_lost``,
@@ -680,6 +686,11 @@ class HandoverEnvBase(gym.Env, EzPickle):
                 if self.transfer_object_pos is None
                 else tuple(self.transfer_object_pos.tolist())
             ),
+            "transfer_object_body": rec.grasp_object_body,
+            "transfer_object_speed": (None if rec.grasp_object_speed != rec.grasp_object_speed
+                                      else rec.grasp_object_speed),
+            "transfer_robot_jerk": (None if self.transfer_robot_jerk != self.transfer_robot_jerk
+                                    else self.transfer_robot_jerk),
             "departure_time": t_depart,
             "within_calibration": rec.calibration.within,
             "reach_offset": rec.reach_offset.value,

@@ -97,6 +97,7 @@ class DynamicHandoverEnv(HandoverEnvBase):
     | is_success, outcome | True on success; "running", "success", "premature_release", "dropped", "unsafe_force", "missed" |
     | handover_time | s from when the receiver leaves the start point to the release (paper Sec. V-C) |
     | transfer_time, transfer_pelvis_xy, transfer_object_pos | the person's grasp: when, where they were, where the bottle was |
+    | transfer_object_body, transfer_object_speed, transfer_robot_jerk | the presentation at the grasp: the bottle's centre forward, left and up of the pelvis in the walking frame (m; as the recordings' `object_fwd/lat/up_transfer`), its speed (m/s) and the TCP's jerk over the last 30 Hz step (m/s^3) |
     | release_time, release_force, pull_force | the release; N, wrist force then; N, peak grip force while both held |
     | peak_contact_force, peak_wrist_force | N, max measured wrist force or body contact force so far |
     | reach_distance, arm_extended_time | m, right shoulder to the object's centre when the person took it (0 before; as the recordings' `object_shoulder_transfer`); s, the arm out (reaching, raised, holding) |

@@ -265,6 +265,10 @@ class Receiver:
         self.reach_plan: Meeting | None = None
         self.t_hand_raised = math.nan
         self.grasp_pelvis_xy = None
+        #: at the grasp: the bottle's centre in the walking frame (forward, left, up from the
+        #: pelvis; as the recordings' object_fwd/lat/up_transfer) and its speed (m/s)
+        self.grasp_object_body: tuple[float, float, float] | None = None
+        self.grasp_object_speed = math.nan
         self._hand: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         #: the hand state _hand_target last read out of its io (still there while it is _hand)
         self._hand_out: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -615,6 +619,11 @@ class Receiver:
         self.state = "holding"
         self.t_grasp = float(data.time)
         self.grasp_pelvis_xy = data.xpos[self.body.bodies[0], :2].copy()
+        self.grasp_object_speed = length(v[3:])
+        heading = self.base()[2]
+        c, s = math.cos(heading), math.sin(heading)
+        rx, ry, rz = (self._object_xpos_v - data.xpos[self.body.bodies[0]]).tolist()
+        self.grasp_object_body = (rx * c + ry * s, -rx * s + ry * c, rz)
         self.measured.took(data, data.xpos[self.ids.object_body])
         pelvis, rot, _ = self.pose.pelvis(self.tau, self.rho)
         self._hold_rel = (

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 import pytest
 
@@ -85,6 +86,49 @@ def test_reactive_handover_to_an_id_walker_under_physics():
     assert info["receiver_id"] == "id:scripted_id"
 
 
+def test_the_presentation_at_the_grasp_is_the_physics_state_then():
+    """transfer_object_body is the bottle's centre relative to the pelvis in the walking frame (a
+    rotation about z: its horizontal length is |object - pelvis| in x, y), transfer_object_speed
+    the bottle's speed (MuJoCo's object velocity at the grasp) and transfer_robot_jerk the third
+    difference of the TCP's last four 30 Hz positions before the grasp."""
+    env = gym.make(ENV_ID, sensing="ideal")
+    u = env.unwrapped
+    rec = u.receiver
+    grasp = rec.try_grasp
+    seen: dict[str, float] = {}
+
+    def recording_grasp(model, data) -> bool:
+        took = grasp(model, data)
+        if took:
+            v = np.zeros(6)
+            mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, u.ids.object_body, v, 0)
+            seen["speed"] = float(np.linalg.norm(v[3:]))
+            seen["up"] = float(data.xpos[u.ids.object_body][2] - data.xpos[rec.body.bodies[0]][2])
+            seen["tcp_steps"] = len(tcp)
+        return took
+
+    rec.try_grasp = recording_grasp
+    obs, _ = env.reset(seed=2, options={"receiver": "id"})
+    agent = ReactiveAgent()
+    agent.reset()
+    tcp, done = [], False
+    while not done:
+        obs, _, term, trunc, info = env.step(agent.act(obs))
+        tcp.append(u.data.site_xpos[u.ids.tcp_site].copy())
+        done = term or trunc
+    assert info["outcome"] == "success"
+    fwd, lat, up = info["transfer_object_body"]
+    rel = np.subtract(info["transfer_object_pos"][:2], info["transfer_pelvis_xy"])
+    assert math.hypot(fwd, lat) == pytest.approx(float(np.linalg.norm(rel)), rel=1e-12)
+    assert fwd > 0.0 and lat < 0.0  # ahead of the person, to their right (the robot's side)
+    assert up == pytest.approx(seen["up"], rel=1e-12)
+    assert info["transfer_object_speed"] == pytest.approx(seen["speed"], rel=1e-12)
+    n = seen["tcp_steps"]
+    a, b, c, e = tcp[n - 1], tcp[n - 2], tcp[n - 3], tcp[n - 4]
+    jerk = float(np.linalg.norm(a - 3.0 * b + 3.0 * c - e)) * 30.0**3
+    assert info["transfer_robot_jerk"] == pytest.approx(jerk, rel=1e-9)
+
+
 def test_robot_that_stays_away_gives_missed():
     # the exact wrist: on "paper" the sudden move away can read as a pull (a premature release)
     env = gym.make(ENV_ID, sensing="ideal")
@@ -92,6 +136,9 @@ def test_robot_that_stays_away_gives_missed():
     assert term and not trunc
     assert info["outcome"] == "missed" and not info["is_success"]
     assert not info["released"] and info["handover_time"] is None and info["release_force"] is None
+    # no grasp, no presentation
+    assert info["transfer_object_body"] is None and info["transfer_object_speed"] is None
+    assert info["transfer_robot_jerk"] is None
 
 
 def test_huge_release_force_never_releases():
