@@ -156,6 +156,13 @@ MEASURES: dict[str, tuple[str, str, str]] = {
         "object speed along the walk / walking, 0.5 s before transfer",
         "",
     ),
+    "object_speed_transfer": ("giver and object", "object speed at transfer", "m/s"),
+    "object_jerk_transfer": (
+        "giver and object",
+        "object jerk at transfer (third difference of the last four frames)",
+        "m/s³",
+    ),
+    "object_jerk_transfer_raw": ("giver and object", "the same, unsmoothed track", "m/s³"),
 }
 MEASURES.update(WALK_MEASURES)
 EVENTS = ("near", "transfer", "onset", "release", "arm_back", "nearest")
@@ -302,6 +309,12 @@ def analyse_recording(
     before = slice(max(0, k - int(round(0.5 * rate_hz))), k + 1)
     obj_along = np.einsum("ij,ij->i", np.gradient(o[:, :2], axis=0) * rate_hz, fwd)
     m["object_along_before"] = float(np.mean(obj_along[before]) / np.median(walking.speed[: k + 1]))
+    m["object_speed_transfer"] = float(np.linalg.norm(np.gradient(o, axis=0)[k]) * rate_hz)
+    if k >= 3:  # the env's robot_jerk estimator: (x_k - 3 x_k-1 + 3 x_k-2 - x_k-3) * rate^3
+        third = o[k] - 3.0 * o[k - 1] + 3.0 * o[k - 2] - o[k - 3]
+        m["object_jerk_transfer"] = float(np.linalg.norm(third) * rate_hz**3)
+        raw = raw_o[k] - 3.0 * raw_o[k - 1] + 3.0 * raw_o[k - 2] - raw_o[k - 3]
+        m["object_jerk_transfer_raw"] = float(np.linalg.norm(raw) * rate_hz**3)
     out.traces["d15"] = _aligned(d15, k, lags)
     out.traces["dnear"] = _aligned(detection.distance, k, lags)
 

@@ -192,6 +192,25 @@ def test_detects_transfer_onset_release(smooth: bool) -> None:
     )
 
 
+def test_object_speed_and_jerk_at_transfer_are_the_tracks_differences() -> None:
+    """A constant jerk c along x from 10 frames before the transfer: the third difference of the
+    unsmoothed track is c h^3 exactly, and numpy's central gradient of the cubic c t^3 / 6 is
+    c t^2 / 2 + c h^2 / 6."""
+    rec = recording()
+    r, o, g = rec["pose_receiver"], rec["pose_object"].copy(), rec["pose_giver"]
+    k0, c, h = 60, 0.5, 1.0 / RATE
+    t = np.clip(np.arange(o.shape[0]) - k0, 0, None) * h
+    o[:, 0] += c * t**3 / 6.0
+    a = analyse_recording(r, o, g, RATE, smooth=False)
+    k = a.events["transfer"]
+    assert k - 3 >= k0
+    m = a.measures
+    assert m["object_jerk_transfer"] == pytest.approx(c, rel=1e-6)
+    assert m["object_jerk_transfer_raw"] == pytest.approx(c, rel=1e-6)
+    tk = (k - k0) * h
+    assert m["object_speed_transfer"] == pytest.approx(c * tk**2 / 2 + c * h**2 / 6, rel=1e-9)
+
+
 def test_slowdown_is_measured() -> None:
     rec = recording(slow=0.5)
     a = analyse_recording(rec["pose_receiver"], rec["pose_object"], rec["pose_giver"], RATE)
