@@ -2,7 +2,8 @@
 
 closed-loop writes ``closed_loop.md/.csv/.png`` and ``closed_loop_{episodes,paired,ghosts,models,
 timing}.csv``; theta-sweep writes ``theta_sweep.md/.csv/.png`` and
-``theta_sweep_{episodes,extremes}.csv``. Both take the values a run returned
+``theta_sweep_{episodes,extremes}.csv``; presentation writes ``presentation.md/.csv/.png``. They
+take the values a run returned
 (:class:`.run.ClosedLoopRun`, :class:`.theta_sweep.SweepRun`) and start no computation beyond
 the tables of :mod:`.report` and :mod:`.theta_sweep`.
 """
@@ -234,3 +235,14 @@ def write_theta_sweep(
             ],
         )
     )
+
+
+def write_presentation(rows: list[dict], ranges: dict, table: list[dict], out_dir: Path,
+                       source: str = "") -> list[Path]:
+    """``presentation.md``, ``.csv`` and ``.png`` (:mod:`.presentation`) into ``out_dir``."""
+    from handover_eval.closedloop.presentation import figure, markdown
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return [write_text(markdown(table, ranges, source), out_dir / "presentation.md"),
+            write_csv(table, out_dir / "presentation.csv"),
+            write_png(figure(rows, ranges), out_dir / "presentation.png", dpi=110)]
