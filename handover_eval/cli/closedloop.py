@@ -100,6 +100,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "StaticHandover-v0 on the same receivers",
     )
     p.add_argument(
+        "--reference",
+        default="reactive",
+        metavar="NAME",
+        help="the agent every other is paired against on the same receivers "
+        "(closed_loop_paired.csv; default reactive; another must be among --agents)",
+    )
+    p.add_argument(
         "--sets",
         nargs="+",
         default=list(SETS),
@@ -378,6 +385,7 @@ def main(args: argparse.Namespace, load_dataset: Callable) -> int:
             workers=workers,
             sensing=getattr(args, "sensing", "paper"),
             person=tuple(args.person),
+            reference=getattr(args, "reference", "reactive"),
         )
         sweep = None
         if args.command == "sensing-sweep":

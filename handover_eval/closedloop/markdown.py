@@ -66,9 +66,10 @@ def _diff_cell(d: dict, digits: int) -> str:
 
 
 def markdown(
-    agg: list[dict], pairs: list[dict], ghost: list[dict], header: str, footer: str = ""
+    agg: list[dict], pairs: list[dict], ghost: list[dict], header: str, footer: str = "",
+    reference: str = "reactive",
 ) -> str:
-    """The whole closed_loop.md."""
+    """The whole closed_loop.md (``pairs`` against the agent ``reference``)."""
 
     def lab(r: dict) -> str:
         return label(r["agent"])
@@ -189,7 +190,8 @@ def markdown(
         }
         by = {(d["agent"], d["set"], d["metric"]): d for d in pairs}
         keys = list(dict.fromkeys((d["agent"], d["set"]) for d in pairs))
-        text += "\n## Paired against the reactive agent (agent - reactive, same receivers)\n\n"
+        ref = "the reactive agent" if reference == "reactive" else label(reference)
+        text += (f"\n## Paired against {ref} (agent - {reference}, same receivers)\n\n")
         text += markdown_table(
             ["agent", "set", "n", *[c.replace("_", " ") for c in cols]],
             [

@@ -104,8 +104,8 @@ def write_closed_loop(
 
     agg = rep.aggregate(run.rows)
     pairs = (
-        rep.paired(run.rows, n_boot=n_boot, seed=seed)
-        if "reactive" in cfg.agents
+        rep.paired(run.rows, reference=cfg.reference, n_boot=n_boot, seed=seed)
+        if cfg.reference in cfg.agents
         else []
     )
     ghost = rep.ghosts(run.rows)
@@ -133,7 +133,8 @@ def write_closed_loop(
     write_csv(timing, out / "closed_loop_timing.csv")
     write_text(
         md.markdown(
-            agg, pairs, ghost, _header("Closed-loop evaluation", dataset, cfg, quick, n_rec), footer
+            agg, pairs, ghost, _header("Closed-loop evaluation", dataset, cfg, quick, n_rec),
+            footer, reference=cfg.reference,
         ),
         out / "closed_loop.md",
     )

@@ -80,6 +80,8 @@ class ClosedLoopEvalConfig:
         person: the person switches set apart from their defaults, as tokens ``NAME``,
             ``NAME=on`` or ``NAME=off`` (:func:`handover_env.person.settings.switch_tokens`; ()
             for the default person).
+        reference: the agent every other is paired against (``closed_loop_paired.csv``; no
+            pairs when it is not among ``agents``).
     """
 
     agents: tuple[str, ...] = field(default_factory=roster.compared_agents)
@@ -96,9 +98,13 @@ class ClosedLoopEvalConfig:
     workers: int = 2
     sensing: str = "paper"
     person: tuple[str, ...] = ()
+    reference: str = "reactive"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "agents", tuple(roster.check_agents(list(self.agents))))
+        if self.reference != "reactive" and self.reference not in self.agents:
+            raise ValueError(f"--reference {self.reference!r} is not among --agents "
+                             f"{list(self.agents)}")
         bad = [s for s in self.sets if s not in SETS]
         if bad or not self.sets:
             raise ValueError(f"unknown receiver set(s) {bad}; choose from {list(SETS)}")

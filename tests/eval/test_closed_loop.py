@@ -380,3 +380,17 @@ def test_mujoco_auto_resets_are_counted(monkeypatch, tmp_path: Path) -> None:
     data.qvel[0] = np.nan
     mujoco.mj_step(model, data)
     assert instabilities(data) == 1 and np.all(np.isfinite(data.qvel))
+
+
+def test_the_paired_reference_is_an_agent_of_the_run(tmp_path: Path) -> None:
+    """--reference pairs every agent against another than reactive, on the same receivers; an
+    agent not in the run is refused by name."""
+    with pytest.raises(ValueError, match="--reference 'cv' is not among --agents"):
+        ClosedLoopEvalConfig(agents=("reactive", "null"), reference="cv")
+    out = tmp_path / "run"
+    assert evaluate.main(["closed-loop", "--quick", "--agents", "cv", "null", "--sets", "id",
+                          "--reference", "cv", "--out", str(out), "--no-progress"]) == 0
+    pairs = _rows(out / "closed_loop_paired.csv")
+    assert pairs and {p["agent"] for p in pairs} == {"null"}
+    assert "## Paired against Constant velocity (agent - cv, same receivers)" in (
+        out / "closed_loop.md").read_text()
