@@ -6,7 +6,10 @@ without unpickling and without writing anything.
   shaping weight, gamma, the action-change and contact penalties' weights), ``"io"`` (the
   observation normalisation per part, the privileged state's for an asymmetric critic, the action
   box), ``"receivers"`` (seed ranges, the warm start's, training folds, the recordings trained on,
-  the base agent's fit), ``"training"`` (env steps, episodes, wall time), ``"versions"}``.
+  the base agent's fit), ``"training"`` (env steps, episodes, wall time), ``"versions"}``
+  (stable_baselines3, torch and handover_env's versions, and the code that trained it: the git
+  ``commit``, whether the tree was ``dirty``, the ``command``; strings and flags only, each at most
+  :data:`MAX_VERSION_CHARS` characters).
 * ``model.safetensors``: ``policy.<key>``, the SB3 policy's state dict; ``io.offset``,
   ``io.scale``.
 * ``training_state/``: ``state.json`` (steps, episodes per env, the learning curve), the
@@ -64,6 +67,8 @@ REWARD_KEYS = ("time_cost", "force_threshold", "force_scale", "success", "failur
 CONFIG_REWARD_KEYS = ("shaping", "gamma", "action_change", "contact_penalty")
 #: A run's wall time may not exceed this (s; ten years); real runs take an hour.
 MAX_WALL_S = 3.2e8
+#: The longest string of the ``versions`` record (a command line with every flag is ~300).
+MAX_VERSION_CHARS = 4096
 #: Bytes of a safetensors header allowed per tensor (our headers hold about 100 per key).
 HEADER_BYTES_PER_KEY = 512
 
@@ -97,10 +102,12 @@ def weights_of(policy: Any, io: PolicyIO) -> dict[str, torch.Tensor]:
 
 
 def record_of(config: RLConfig, io: PolicyIO, reward: dict, receivers: dict,
-              training: dict) -> dict:
-    """The ``config.json`` record (module docstring)."""
+              training: dict, provenance: dict | None = None) -> dict:
+    """The ``config.json`` record (module docstring); ``provenance`` (the commit, dirty flag and
+    command that trained it) goes into ``versions``."""
     import stable_baselines3
 
+    from handover_env import __version__
     from handover_env.envs.observation import ObsLayout
 
     parts = {name: {"offset": list(off), "scale": scale}
@@ -126,7 +133,8 @@ def record_of(config: RLConfig, io: PolicyIO, reward: dict, receivers: dict,
         "receivers": receivers,
         "training": training,
         "versions": {"stable_baselines3": stable_baselines3.__version__,
-                     "torch": torch.__version__},
+                     "torch": torch.__version__, "handover_env": __version__,
+                     **(provenance or {})},
     }
 
 
@@ -167,6 +175,11 @@ def read_record(folder: str | Path) -> tuple[dict, RLConfig]:
     if any(reward[k] != getattr(config, k) for k in CONFIG_REWARD_KEYS):
         raise CheckpointError(f"{path}: reward {'/'.join(CONFIG_REWARD_KEYS)} disagree with its "
                               "config")
+    for key, value in saved["versions"].items():
+        if not (isinstance(value, bool) or isinstance(value, str)
+                and len(value) <= MAX_VERSION_CHARS):
+            raise CheckpointError(f"{path}: versions.{key} must be a string of at most "
+                                  f"{MAX_VERSION_CHARS} characters or a flag")
     for key in ("replay_ids", "base_fit_ids"):
         ids = saved["receivers"].get(key, [])
         if not isinstance(ids, list) or not all(isinstance(i, str) for i in ids):

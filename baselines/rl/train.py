@@ -91,6 +91,8 @@ class TrainingData:
         folds: the training folds they come from (of ``config.folds``, ``config.split_seed``).
         dataset: the dataset's name.
         base_fit: the episodes the SPGP base (``--base ours``) is fitted on.
+        provenance: the code that trains (``commit``, ``dirty``, ``command``), recorded in the
+            checkpoint's ``versions`` (:func:`baselines.rl.files.record_of`).
     """
 
     replays: list = field(default_factory=list)
@@ -98,6 +100,7 @@ class TrainingData:
     folds: tuple[int, ...] = ()
     dataset: str = ""
     base_fit: Any = None
+    provenance: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -267,7 +270,7 @@ def save(out: Path, model: Any, io: PolicyIO, config: RLConfig, data: TrainingDa
     """One checkpoint of the run, written as a unit."""
     record = record_of(config, io, reward, receivers_record(config, data, state),
                        {"steps": state["steps"], "episodes": sum(state["episodes"]),
-                        "wall_time_s": state["wall_time_s"]})
+                        "wall_time_s": state["wall_time_s"]}, data.provenance)
     with staged_write(out) as stage:
         write_checkpoint(stage, model.policy, io, record)
         ts = stage / TRAINING_STATE

@@ -201,7 +201,10 @@ def check_out(out: Path, seeds: list[int], resume: bool, overwrite: bool) -> Non
 
 def run_rl_command(args: argparse.Namespace, load_data: Callable) -> None:
     """``train.py rl``: check the flags and --out, load the data, train, write, print."""
+    from dataclasses import replace
+
     from handover_eval.methods import default_workers
+    from handover_eval.provenance import code_provenance
     from handover_eval.rl.output import write_summary
     from handover_eval.rl.report import summary
     from handover_eval.rl.run import run_training, seed_folders, training_data
@@ -216,7 +219,8 @@ def run_rl_command(args: argparse.Namespace, load_data: Callable) -> None:
         needs_data = config.p_replay > 0 or (config.form == "residual" and config.base == "ours"
                                              ) or config.warm_start == "ours"
         dataset = load_data(args.data, args.quick, 0) if needs_data else None
-        data = training_data(dataset, config)
+        data = replace(training_data(dataset, config), provenance=code_provenance(
+            getattr(args, "argv", None)))
         print(f"[rl] {config.algo} {config.form}"
               f"{' on ' + config.base if config.form == 'residual' else ''}, {config.steps:,} "
               f"steps, {config.n_envs} env(s), seeds {seeds}; {len(data.replays)} training "

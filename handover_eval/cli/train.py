@@ -402,6 +402,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit status (2 for bad input, 130 when interrupted)."""
     hub_offline()
     args = build_parser().parse_args(argv)
+    args.argv = ["train.py", *(sys.argv[1:] if argv is None else argv)]  # as typed (provenance)
     import torch
 
     torch.set_num_threads(max(1, args.threads))

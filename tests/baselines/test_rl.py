@@ -33,6 +33,7 @@ from planted import PAYLOAD, Untouched, plant  # noqa: E402
 from safetensors.torch import load_file, save_file  # noqa: E402
 
 import evaluate  # noqa: E402
+import handover_env  # noqa: E402
 from baselines.checkpoint_io import CheckpointError  # noqa: E402
 from baselines.rl.agent import RLAgent  # noqa: E402
 from baselines.rl.config import (  # noqa: E402
@@ -195,6 +196,24 @@ def test_quick_training_writes_a_checkpoint_curve_and_reward_weights(quick_dir):
     assert record["receivers"]["episode_seeds"][0] >= TRAIN_SEED_START
     assert record["receivers"]["eval_seed_limit"] == EVAL_SEED_LIMIT
     assert (quick_dir / "learning_curve.png").read_bytes()[:4] == b"\x89PNG"
+    versions = record["versions"]  # the code that trained it (handover_eval.provenance)
+    assert versions["handover_env"] == handover_env.__version__
+    assert versions["command"].startswith("python ") and " rl --quick " in versions["command"]
+    assert isinstance(versions["dirty"], bool)
+    if (ROOT / ".git").exists():
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
+                              text=True).stdout.strip()
+        assert versions["commit"] == head
+
+
+def test_provenance_is_the_command_as_typed_and_empty_outside_a_checkout(tmp_path, monkeypatch):
+    from handover_eval import provenance
+
+    assert provenance.command_line(["/x/y/train.py", "rl", "--out", "a b"]) == (
+        "python train.py rl --out 'a b'")
+    monkeypatch.setattr(provenance, "ROOT", tmp_path)  # no .git: an installed package
+    assert provenance.code_provenance(["train.py", "rl"]) == {
+        "commit": "", "dirty": False, "command": "python train.py rl"}
 
 
 def test_the_loaded_agent_acts_as_the_training_wrapper_does(quick_dir):

@@ -169,6 +169,14 @@ def test_a_crafted_training_record_is_refused(scratch, tmp_path, field, value, m
     assert text.startswith(f"{folder / 'config.json'}: ")
 
 
+@pytest.mark.parametrize("value", [["a list"], 7, "x" * 5000])
+def test_a_crafted_versions_record_is_refused(scratch, tmp_path, value):
+    folder = _copy(scratch, tmp_path / "ckpt")
+    edit_config(folder, "versions", "commit", value)
+    text = _timed_refusal(folder, r"versions\.commit must be a string of at most 4096 characters")
+    assert text.startswith(f"{folder / 'config.json'}: ")
+
+
 # ---------------------------------------------------------------------- R5: the weights file
 def _header(folder: Path) -> tuple[int, dict, bytes]:
     raw = (folder / "model.safetensors").read_bytes()
