@@ -37,7 +37,7 @@ from handover_eval.backend import (
     JobError,
     session,
 )
-from handover_eval.cli import benchmark, closedloop, presentation, user_study
+from handover_eval.cli import ablation, benchmark, closedloop, presentation, user_study
 from handover_eval.cli.args import (
     EPOCHS,
     FOLDS,
@@ -220,6 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="test episodes streamed frame by frame to time each variant (default: 20)")
     closedloop.add_parsers(sub)
     presentation.add_parser(sub)
+    ablation.add_parser(sub)
     user_study.add_parser(sub)
     benchmark.add_parsers(sub)
     return parser
@@ -259,6 +260,8 @@ def main(argv: list[str] | None = None) -> int:
         return closedloop.main(args, load_dataset)
     if args.command == presentation.COMMAND:
         return presentation.main(args)
+    if args.command == ablation.COMMAND:
+        return ablation.main(args)
     if args.command == "user-study":
         return user_study.run(args)
     if args.command in benchmark.COMMANDS:

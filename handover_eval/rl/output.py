@@ -58,3 +58,34 @@ def write_seeds(out: Path, states: list[dict], config: RLConfig) -> None:
     write_png(seeds_figure(states, config), out / SEEDS_PNG)
     write_text(json.dumps(finite_or_null(seeds_summary(states)), indent=1, allow_nan=False),
                out / SEEDS_SUMMARY)
+
+
+def write_ablation(rows: list, references: list, summary: list[dict], out: Path) -> list[Path]:
+    """``rl_ablation.md``, ``.csv`` (one line per seed and reference agent) and ``.png``
+    (:mod:`handover_eval.rl.ablation`) into ``out``."""
+    from handover_eval.rl.report import ablation_figure, ablation_markdown
+
+    out.mkdir(parents=True, exist_ok=True)
+    table = []
+    for s in [*references, *[r.scores for r in rows]]:
+        row = next((r for r in rows if r.scores is s), None)
+        flat: dict[str, object] = {"configuration": row.label if row else s.agent,
+                                   "seed": row.seed if row else "", "agent": s.agent}
+        if row:
+            flat.update({f"curve_{k}_{m}": v for k, p in (("start", row.curve_start),
+                                                          ("end", row.curve_end))
+                         for m, v in p.items()})
+            flat.update({"steps": row.steps, "wall_s": row.wall_s, "reference": row.reference})
+        for name, metrics in s.sets.items():
+            flat.update({f"{name}_{m}": v for m, v in metrics.items()})
+        if row:
+            for name, metrics in row.paired.items():
+                for m, (d, lo, hi, _) in metrics.items():
+                    flat.update({f"paired_{name}_{m}": d, f"paired_{name}_{m}_low": lo,
+                                 f"paired_{name}_{m}_high": hi})
+        table.append(flat)
+    keys = list(dict.fromkeys(k for t in table for k in t))
+    table = [{k: t.get(k, "") for k in keys} for t in table]
+    return [write_text(ablation_markdown(rows, references, summary), out / "rl_ablation.md"),
+            write_csv(table, out / "rl_ablation.csv"),
+            write_png(ablation_figure(rows), out / "rl_ablation.png", dpi=110)]

@@ -88,3 +88,108 @@ def seeds_summary(states: list[dict]) -> dict:
             point, low, high = stratified_bootstrap_ci(scores)
             out[f"{at}_{key}"] = {"iqm": point, "ci95": [low, high]}
     return out
+
+
+# ---------------------------------------------------------------------- the ablation table
+def _pct(v: float) -> str:
+    return "–" if not math.isfinite(v) else f"{100 * v:.0f} %"
+
+
+def _s(v: float) -> str:
+    return "–" if not math.isfinite(v) else f"{v:.2f} s"
+
+
+def _diff(d: tuple[float, float, float, bool], scale: float, digits: int) -> str:
+    v, lo, hi, star = d
+    return (f"{scale * v:+.{digits}f} [{scale * lo:+.{digits}f}, {scale * hi:+.{digits}f}]"
+            f"{'*' if star else ''}")
+
+
+def ablation_markdown(rows: list, references: list, summary: list[dict]) -> str:
+    """The ablation's Markdown (:mod:`handover_eval.rl.ablation`): one line per seed and per
+    reference agent, then the per-configuration summary over seeds."""
+    from handover_eval.reporting import markdown_table
+    from handover_eval.rl.ablation import CONTACT_N
+
+    def scores(s) -> list[str]:
+        w_id, w_ood, rep = (s.sets[k] for k in ("walker-id", "walker-ood", "replay-all"))
+        prem = sum(int(v["premature"]) for v in s.sets.values())
+        over = [f"{_pct(v['contact_over'])}" for v in (w_id, w_ood, rep)]
+        return [f"{_pct(w_id['success'])} · {_s(w_id['handover_time'])}",
+                f"{_pct(w_ood['success'])} · {_s(w_ood['handover_time'])}",
+                f"{_pct(rep['success'])} · {_s(rep['handover_time'])}",
+                " / ".join(over), f"{rep['robot_jerk']:.0f}", str(prem)]
+
+    head = ["configuration", "seed", "curve success (start → end)", "curve handover time",
+            "walkers ID", "walkers OOD", "replays", f"contact > {CONTACT_N:.0f} N (ID / OOD / "
+            "replays)", "robot jerk, replays (m/s³)", "premature releases", "Δ success vs ref, "
+            "replays (pp)", "Δ time vs ref, replays (s)", "Δ time vs ref, walkers ID / OOD (s)",
+            "wall (min)", "steps/s"]
+    body = []
+    for ref in references:
+        body.append([f"{ref.agent} (reference)", "–", "–", "–", *scores(ref), "–", "–", "–", "–",
+                     "–"])
+    for r in rows:
+        p = r.paired
+        body.append([
+            r.label, str(r.seed),
+            f"{_pct(r.curve_start['success'])} → {_pct(r.curve_end['success'])}",
+            f"{_s(r.curve_start['handover_time'])} → {_s(r.curve_end['handover_time'])}",
+            *scores(r.scores), _diff(p["replay-all"]["success"], 100, 0),
+            _diff(p["replay-all"]["handover_time"], 1, 2),
+            f"{_diff(p['walker-id']['handover_time'], 1, 2)} / "
+            f"{_diff(p['walker-ood']['handover_time'], 1, 2)}",
+            f"{r.wall_s / 60:.0f}", f"{r.steps_per_s:.0f}"])
+    lines = ["# RL ablation", "",
+             "Each configuration's seeds (`train.py rl`, 1 env each) and their closed loop "
+             "(`evaluate.py closed-loop --rl-checkpoint`, paper profile: 50 ID + 50 OOD scripted "
+             "walkers of the evaluation seeds and the 435 held-out replays). Curve: the fixed "
+             "training receivers. Success · median handover time over the successes. Δ: the RL "
+             "agent minus the run's reference agent, paired on the same receivers, [95 % "
+             "bootstrap CI], * the CI excludes 0.", "",
+             markdown_table(head, body).rstrip("\n"), "",
+             "Over seeds (replays): mean, and IQM [95 % stratified bootstrap CI over seeds].", ""]
+    sum_rows = []
+    for s in summary:
+        su, t = s["success_iqm"], s["handover_time_iqm"]
+        sum_rows.append([s["label"], ", ".join(str(x) for x in s["seeds"]), s["reference"],
+                         f"{100 * s['success_mean']:+.1f}",
+                         f"{100 * su[0]:+.1f} [{100 * su[1]:+.1f}, {100 * su[2]:+.1f}]",
+                         f"{s['handover_time_mean']:+.3f}",
+                         f"{t[0]:+.3f} [{t[1]:+.3f}, {t[2]:+.3f}]"])
+    lines += [markdown_table(["configuration", "seeds", "reference", "Δ success, mean (pp)",
+                              "Δ success, IQM (pp)", "Δ time, mean (s)", "Δ time, IQM (s)"],
+                             sum_rows).rstrip("\n"), ""]
+    flags = dict.fromkeys((r.label, r.flags) for r in rows)
+    lines += ["Flags: " + "; ".join(f"**{label}** `{f}`" for label, f in flags), ""]
+    return "\n".join(lines)
+
+
+def ablation_figure(rows: list) -> Any:
+    """Per seed, the paired handover-time difference against the paired success difference on
+    the replays, with their CIs, one colour per configuration."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    labels = list(dict.fromkeys(r.label for r in rows))
+    for i, label in enumerate(labels):
+        for r in (r for r in rows if r.label == label):
+            (s, slo, shi, _), (t, tlo, thi, _) = (r.paired["replay-all"][m]
+                                                  for m in ("success", "handover_time"))
+            ax.errorbar(100 * s, t, xerr=[[100 * (s - slo)], [100 * (shi - s)]],
+                        yerr=[[t - tlo], [thi - t]], fmt="o", color=f"C{i}", capsize=3,
+                        label=label if r is next(x for x in rows if x.label == label) else None)
+            ax.annotate(f"s{r.seed}", (100 * s, t), textcoords="offset points", xytext=(4, 4),
+                        fontsize=8)
+    ax.axhline(0, color="k", lw=0.8)
+    ax.axvline(0, color="k", lw=0.8)
+    ax.axvline(-1, color="grey", lw=0.8, ls="--")
+    ax.set_xlabel("Δ success vs reference, replays (pp)")
+    ax.set_ylabel("Δ handover time vs reference, replays (s)")
+    ax.set_title("RL agents paired against their reference (435 held-out replays)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig

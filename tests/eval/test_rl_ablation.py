@@ -1,0 +1,147 @@
+"""``evaluate.py rl-ablation``: issue 36's ablation rows from a real (``--quick``) RL checkpoint and
+hand-made closed-loop files whose numbers are known, and its refusals."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import evaluate
+from handover_eval.cli import train
+from handover_eval.closedloop.presentation import QUANTITIES
+from handover_eval.rl.ablation import (
+    AblationError,
+    agent_scores,
+    parse_run,
+    run_ablation,
+    seed_summary,
+)
+from handover_eval.rl.statistics import iqm
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("rl") / "run"
+    assert train.main(["rl", "--quick", "--no-progress", "--out", str(out), "--base", "cv"]) == 0
+    return out
+
+
+def _episode(agent: str, set_: str, k: int, outcome: str, time: float, contact: float,
+             jerk: float) -> dict:
+    row = {"agent": agent, "set": set_, "receiver": f"{set_}-{k}", "seed": str(k),
+           "is_ood": str(set_ == "ood"), "outcome": outcome,
+           "is_success": str(outcome == "success"),
+           "handover_time": "nan" if outcome != "success" else repr(time),
+           "body_contact_force": repr(contact), "robot_jerk_rms": repr(jerk)}
+    return {**row, **dict.fromkeys(QUANTITIES, "0.3")}
+
+
+def _evaluation(folder: Path, rl_time: float, rl_fail: int, paired_time: float) -> Path:
+    """cv and rl-residual, 4 episodes per set; rl-residual fails its first ``rl_fail`` ones
+    prematurely and presses one episode per set at 80 N."""
+    folder.mkdir(parents=True)
+    rows = []
+    for set_ in ("id", "ood", "replay"):
+        for k in range(4):
+            rows.append(_episode("cv", set_, k, "success", 2.0 + k, 0.0, 60.0))
+            outcome = "premature_release" if k < rl_fail else "success"
+            rows.append(_episode("rl-residual", set_, k, outcome, rl_time + k,
+                                 80.0 if k == 3 else 10.0, 100.0 + k))
+    with (folder / "closed_loop_episodes.csv").open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    with (folder / "closed_loop_paired.csv").open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["agent", "set", "metric", "diff", "diff_low", "diff_high",
+                    "ci_excludes_zero"])
+        for set_ in ("walker-id", "walker-ood", "replay-all"):
+            w.writerow(["rl-residual", set_, "success", -rl_fail / 4, -0.5, 0.0, False])
+            w.writerow(["rl-residual", set_, "handover_time", paired_time, paired_time - 0.1,
+                        paired_time + 0.05, paired_time + 0.05 < 0])
+    return folder
+
+
+def test_the_rows_hold_the_curve_the_scores_and_the_paired_differences(checkpoint, tmp_path):
+    a = _evaluation(tmp_path / "a", 1.5, 1, -0.2)
+    b = _evaluation(tmp_path / "b", 2.5, 2, 0.1)
+    rows, refs = run_ablation([parse_run(f"levers={checkpoint}:{a}"),
+                               parse_run(f"levers={checkpoint}:{b}")], ["cv", "reactive"])
+    assert [r.agent for r in refs] == ["cv"]  # reactive ran in neither
+    assert refs[0].sets["replay-all"] == {"n": 4.0, "success": 1.0, "handover_time": 3.5,
+                                          "contact_over": 0.0, "robot_jerk": 60.0,
+                                          "premature": 0.0}
+    first = rows[0]
+    assert first.reference == "cv" and first.flags == "--base cv"
+    assert first.steps == 256 and math.isclose(first.steps_per_s, 256 / first.wall_s)
+    s = first.scores.sets["walker-ood"]
+    # successes k = 1, 2, 3 at 1.5 + k s; one of four over 50 N; jerk 100..103
+    assert s == {"n": 4.0, "success": 0.75, "handover_time": 3.5, "contact_over": 0.25,
+                 "robot_jerk": 101.5, "premature": 1.0}
+    assert first.paired["replay-all"]["handover_time"] == (
+        -0.2, pytest.approx(-0.3), pytest.approx(-0.15), True)
+    (summary,) = seed_summary(rows)
+    assert summary["seeds"] == [first.seed, first.seed]
+    assert summary["handover_time_mean"] == pytest.approx(-0.05)
+    assert summary["handover_time_iqm"][0] == pytest.approx(iqm(np.array([-0.2, 0.1])))
+    assert summary["success_mean"] == pytest.approx(-0.375)
+
+
+def test_the_command_writes_md_csv_png_and_prints_the_table(checkpoint, tmp_path, capsys):
+    a = _evaluation(tmp_path / "a", 1.5, 1, -0.2)
+    out = tmp_path / "out"
+    assert evaluate.main(["rl-ablation", "--run", f"levers={checkpoint}:{a}", "--out",
+                          str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "| levers |" in text and "-0.20 [-0.30, -0.15]*" in text
+    assert (out / "rl_ablation.png").read_bytes()[:4] == b"\x89PNG"
+    with (out / "rl_ablation.csv").open() as fh:
+        table = list(csv.DictReader(fh))
+    assert [t["configuration"] for t in table] == ["cv", "levers"]
+    assert float(table[1]["replay-all_success"]) == 0.75
+
+
+def test_bad_input_is_one_line_naming_what_is_wrong(checkpoint, tmp_path, capsys):
+    a = _evaluation(tmp_path / "a", 1.5, 1, -0.2)
+    cases = {
+        "levers": "expected LABEL=RUN_FOLDER:EVALUATION_FOLDER",
+        f"x={tmp_path / 'none'}:{a}": "not a folder",
+        f"x={a}:{a}": "config.json",  # an evaluation folder is not a checkpoint
+    }
+    for run, message in cases.items():
+        assert evaluate.main(["rl-ablation", "--run", run, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_two_rl_agents_or_a_missing_paired_column_are_refused(checkpoint, tmp_path):
+    a = _evaluation(tmp_path / "a", 1.5, 1, -0.2)
+    text = (a / "closed_loop_episodes.csv").read_text()
+    (a / "closed_loop_episodes.csv").write_text(
+        text + text.splitlines()[2].replace("rl-residual", "rl-scratch", 1) + "\n")
+    with pytest.raises(AblationError, match="expected one RL agent"):
+        run_ablation([parse_run(f"x={checkpoint}:{a}")])
+    b = _evaluation(tmp_path / "b", 1.5, 1, -0.2)
+    (b / "closed_loop_paired.csv").write_text("agent,set\nrl-residual,replay-all\n")
+    with pytest.raises(AblationError, match=r"no rows or no column\(s\)"):
+        run_ablation([parse_run(f"x={checkpoint}:{b}")])
+
+
+def test_a_paired_file_linked_out_of_the_folder_is_refused(checkpoint, tmp_path):
+    a = _evaluation(tmp_path / "a", 1.5, 1, -0.2)
+    outside = tmp_path / "outside.csv"
+    (a / "closed_loop_paired.csv").rename(outside)
+    (a / "closed_loop_paired.csv").symlink_to(outside)
+    with pytest.raises(AblationError, match="closed_loop_paired.csv"):
+        run_ablation([parse_run(f"x={checkpoint}:{a}")])
+
+
+def test_scores_need_every_set():
+    rows = [_episode("cv", "id", 0, "success", 1.0, 0.0, 1.0)]
+    with pytest.raises(AblationError, match="no ood episodes of cv"):
+        agent_scores(rows, "cv", Path("e.csv"))
