@@ -201,13 +201,14 @@ def run_receiver(setting: RowSource, agent: Policy, spec: ReceiverSpec,
     """``spec`` meets ``agent`` in this process's env of ``setting`` (or in ``env``); the
     episode's row.
 
-    ``builtin`` is the agent's roster entry (None: not a built-in): an RL policy first refuses a
-    receiver it trained on, and the giver-replay agent (``replays_only``) is given the recording
-    it replays. ``walker``: further walker reset options; ``on_step(step, info)`` runs after
-    every env step."""
+    ``builtin`` is the agent's roster entry (None: not a built-in). An agent with a
+    ``check_receiver`` (an RL policy) first refuses a receiver it trained on; the giver-replay
+    agent (``replays_only``) is given the recording it replays. ``walker``: further walker reset
+    options; ``on_step(step, info)`` runs after every env step."""
     found = builtin
-    if found is not None and found.rl_form:
-        agent.check_receiver(spec.set, spec.key, spec.seed)  # type: ignore[attr-defined]
+    check = getattr(agent, "check_receiver", None)  # an RL policy, built-in, shipped or plug-in
+    if check is not None:
+        check(spec.set, spec.key, spec.seed)
     options = receiver_options(spec, dataset, setting.hand_mode, walker)
     if found is not None and found.replays_only and spec.set == "replay":
         source = options["episode"]

@@ -123,6 +123,12 @@ def _lagging(options: MethodOptions, params: HandoverParams) -> Policy:
     return DelayedAgent(ReactiveAgent(params), LAG_SECONDS)
 
 
+def _shipped_rl(options: MethodOptions, params: HandoverParams) -> Policy:
+    from baselines.rl.shipped import load_shipped
+
+    return load_shipped(params)
+
+
 # ------------------------------------------------------------------------ the table
 @dataclass(frozen=True)
 class AgentEntry:
@@ -198,6 +204,7 @@ ROSTER: tuple[AgentEntry, ...] = (
                replays_only=True),
     AgentEntry("null", "Null (holds still)", _null),
     AgentEntry("lagging", "Lagging (reactive +0.5 s)", _lagging),
+    AgentEntry("rl", "RL residual on cv (shipped)", _shipped_rl, compared=False),
     AgentEntry("rl-residual", "RL residual", None, rl_form="residual"),
     AgentEntry("rl-scratch", "RL from scratch", None, rl_form="scratch"),
 )

@@ -115,14 +115,36 @@ class RLAgent(Policy):
 
     def check_receiver(self, kind: str, key: str, seed: int) -> None:
         """Refuse (ValueError) a test receiver the policy trained on: a replay of a recording in
-        its training folds, or a walker seed from the training range."""
+        its training folds, or a walker seed of a range its checkpoint records
+        (:meth:`trained_seed_ranges`; the benchmark's test seeds, 2e8 and up, lie outside them)."""
         if kind == "replay" and key in self.trained_replays:
             raise ValueError(
                 f"the RL policy trained on the recording {key!r}; score it on held-out folds only "
                 "(evaluate.py closed-loop --replay-folds of the held-out half)")
-        if kind != "replay" and seed >= TRAIN_SEED_START:
+        if kind == "replay":
+            return
+        ranges = self.trained_seed_ranges()
+        if ranges is None and seed >= TRAIN_SEED_START:
             raise ValueError(f"walker seed {seed} is in the RL training range (>= "
                              f"{TRAIN_SEED_START}); evaluation seeds lie below it")
+        for low, high in ranges or ():
+            if low <= seed <= high:
+                raise ValueError(f"walker seed {seed} is in the RL training range: the policy "
+                                 f"trained on the walkers of seeds {low}..{high}")
+
+    def trained_seed_ranges(self) -> list[tuple[int, int]] | None:
+        """The walker seeds the checkpoint records it met (its learning-curve, episode and
+        warm-start ranges, each taken whole); None for a policy with no record, for which every
+        seed from :data:`TRAIN_SEED_START` on counts as trained on."""
+        receivers = self.record.get("receivers")
+        if not receivers:
+            return None
+        out = []
+        for key in ("curve_seeds", "episode_seeds", "warm_start_seeds"):
+            r = receivers.get(key, [])
+            if r:
+                out.append((min(int(v) for v in r), max(int(v) for v in r)))
+        return out
 
     def reset(self) -> None:
         self.memory.reset()

@@ -60,6 +60,10 @@ class RLBenchmarkAgent(Agent):
     def act(self, obs: np.ndarray) -> np.ndarray:
         return self.agent.act(obs)
 
+    def check_receiver(self, kind: str, key: str, seed: int) -> None:
+        """Refuse a receiver the policy trained on (:meth:`RLAgent.check_receiver`)."""
+        self.agent.check_receiver(kind, key, seed)
+
 
 def rl_agent(checkpoint: str, **unused: Any) -> RLBenchmarkAgent:
     """The benchmark plug-in of the RL checkpoint folder ``checkpoint`` (module docstring)."""

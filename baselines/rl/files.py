@@ -180,6 +180,11 @@ def read_record(folder: str | Path) -> tuple[dict, RLConfig]:
                 and len(value) <= MAX_VERSION_CHARS):
             raise CheckpointError(f"{path}: versions.{key} must be a string of at most "
                                   f"{MAX_VERSION_CHARS} characters or a flag")
+    for key in ("curve_seeds", "episode_seeds", "warm_start_seeds"):
+        r = saved["receivers"].get(key, [])
+        if not (isinstance(r, list) and len(r) in (0, 2)
+                and all(_whole(v) and 0 <= v < 2**63 for v in r)):
+            raise CheckpointError(f"{path}: receivers.{key} must be [] or two whole seeds")
     for key in ("replay_ids", "base_fit_ids"):
         ids = saved["receivers"].get(key, [])
         if not isinstance(ids, list) or not all(isinstance(i, str) for i in ids):

@@ -491,6 +491,13 @@ def test_the_agent_refuses_receivers_it_trained_on(quick_dir):
         agent.check_receiver("id", "id-x", TRAIN_SEED_START)
     agent.check_receiver("replay", "rec-8", 3)
     agent.check_receiver("ood", "ood-0001", 10_001)
+    low, high = agent.record["receivers"]["episode_seeds"]
+    with pytest.raises(ValueError, match="training range"):
+        agent.check_receiver("id", "id-x", high)
+    agent.check_receiver("id", "id-x", 200_000_000)  # a benchmark test seed: never drawn
+    agent.record = {}  # a policy with no record: every seed from TRAIN_SEED_START on
+    with pytest.raises(ValueError, match="training range"):
+        agent.check_receiver("id", "id-x", 200_000_000)
 
 
 def test_closed_loop_refuses_replays_of_the_training_folds(tmp_path, capsys):

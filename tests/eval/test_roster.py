@@ -28,14 +28,15 @@ def test_the_result_files_spellings_and_labels_are_those_they_have_always_printe
         "reactive", "static", "ours", "iaal", "bc-mlp", "act", "giver-replay", "null", "lagging",
         "rl-residual", "rl-scratch")
     assert roster.benchmark_agents() == (
-        "ours", "iaal", "act", "bc_mlp", "cv", "reactive", "null", "lagging")
+        "ours", "iaal", "act", "bc_mlp", "cv", "reactive", "null", "lagging", "rl")
     assert set(PAPER_TABLE1) <= set(METHODS)
     labels = {n: roster.label(n) for n in roster.names()}
     assert labels == {
         "reactive": "Reactive", "static": "Static (Meng et al.)", "ours": "Ours (SPGP)",
         "iaal": "IAAL", "bc_mlp": "BC-MLP", "act": "ACT", "cv": "Constant velocity",
         "giver-replay": "Giver replay (ref.)", "null": "Null (holds still)",
-        "lagging": "Lagging (reactive +0.5 s)", "rl-residual": "RL residual",
+        "lagging": "Lagging (reactive +0.5 s)", "rl": "RL residual on cv (shipped)",
+        "rl-residual": "RL residual",
         "rl-scratch": "RL from scratch"}
     assert roster.label("bc-mlp") == "BC-MLP" and roster.label("all") == "all"
 

@@ -169,6 +169,14 @@ def test_a_crafted_training_record_is_refused(scratch, tmp_path, field, value, m
     assert text.startswith(f"{folder / 'config.json'}: ")
 
 
+@pytest.mark.parametrize("value", [["x", "y"], [1, 2, 3], 5, [-1, 2], [2**70, 2**70]])
+def test_a_crafted_seed_range_is_refused(scratch, tmp_path, value):
+    folder = _copy(scratch, tmp_path / "ckpt")
+    edit_config(folder, "receivers", "episode_seeds", value)
+    text = _timed_refusal(folder, r"receivers\.episode_seeds must be \[\] or two whole seeds")
+    assert text.startswith(f"{folder / 'config.json'}: ")
+
+
 @pytest.mark.parametrize("value", [["a list"], 7, "x" * 5000])
 def test_a_crafted_versions_record_is_refused(scratch, tmp_path, value):
     folder = _copy(scratch, tmp_path / "ckpt")
