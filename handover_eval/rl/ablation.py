@@ -10,7 +10,9 @@ Per row: the learning curve's first and last success rate and handover time on t
 receivers; env steps, wall time and steps/s; and, from the closed loop, on the scripted walkers
 (ID, OOD) and the replays: success, the median handover time over the successes, the share of
 episodes whose body contact (any segment but the receiving hand, filtered) exceeds
-:data:`CONTACT_N`, the median robot TCP jerk (RMS at 30 Hz), the premature releases, and the RL
+:data:`CONTACT_N`, the median robot TCP jerk (RMS at 30 Hz), the premature releases and how many
+of them came before the person began to reach (no reach onset by the release: the wrist force
+that opened the gripper was the robot's own motion's), and the RL
 agent minus the run's reference agent paired on the same receivers (the closed-loop command's
 bootstrap CIs). The reference agents (``cv``, ``reactive``) are rows of their own, from the first
 evaluation folder that ran them. Per configuration: the mean and the IQM over seeds of the paired
@@ -118,13 +120,17 @@ def agent_scores(rows: Sequence[Mapping[str, str]], agent: str, path: Path) -> A
         times = [_float(r, "handover_time", path) for r, s in zip(mine, ok, strict=True) if s]
         contact = [_float(r, "body_contact_force", path) for r in mine]
         jerk = [_float(r, "robot_jerk_rms", path) for r in mine]
+        premature = [r for r in mine if r["outcome"] == "premature_release"]
         out[name] = {
             "n": float(len(mine)),
             "success": float(np.mean(ok)),
             "handover_time": float(np.median(times)) if times else math.nan,
             "contact_over": float(np.mean([c > CONTACT_N for c in contact])),
             "robot_jerk": float(np.median(jerk)),
-            "premature": float(sum(r["outcome"] == "premature_release" for r in mine)),
+            "premature": float(len(premature)),
+            "premature_before_reach": float(sum(
+                not _float(r, "reach_onset_time", path) <= _float(r, "release_time", path)
+                for r in premature)),
         }
     return AgentScores(agent, out)
 

@@ -114,16 +114,17 @@ def ablation_markdown(rows: list, references: list, summary: list[dict]) -> str:
     def scores(s) -> list[str]:
         w_id, w_ood, rep = (s.sets[k] for k in ("walker-id", "walker-ood", "replay-all"))
         prem = sum(int(v["premature"]) for v in s.sets.values())
+        early = sum(int(v["premature_before_reach"]) for v in s.sets.values())
         over = [f"{_pct(v['contact_over'])}" for v in (w_id, w_ood, rep)]
         return [f"{_pct(w_id['success'])} · {_s(w_id['handover_time'])}",
                 f"{_pct(w_ood['success'])} · {_s(w_ood['handover_time'])}",
                 f"{_pct(rep['success'])} · {_s(rep['handover_time'])}",
-                " / ".join(over), f"{rep['robot_jerk']:.0f}", str(prem)]
+                " / ".join(over), f"{rep['robot_jerk']:.0f}", f"{prem} ({early})"]
 
     head = ["configuration", "seed", "curve success (start → end)", "curve handover time",
             "walkers ID", "walkers OOD", "replays", f"contact > {CONTACT_N:.0f} N (ID / OOD / "
-            "replays)", "robot jerk, replays (m/s³)", "premature releases", "Δ success vs ref, "
-            "replays (pp)", "Δ time vs ref, replays (s)", "Δ time vs ref, walkers ID / OOD (s)",
+            "replays)", "robot jerk, replays (m/s³)", "premature releases (before the reach)",
+            "Δ success vs ref, replays (pp)", "Δ time vs ref, replays (s)", "Δ time vs ref, walkers ID / OOD (s)",
             "wall (min)", "steps/s"]
     body = []
     for ref in references:

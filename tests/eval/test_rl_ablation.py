@@ -36,7 +36,8 @@ def _episode(agent: str, set_: str, k: int, outcome: str, time: float, contact: 
            "is_ood": str(set_ == "ood"), "outcome": outcome,
            "is_success": str(outcome == "success"),
            "handover_time": "nan" if outcome != "success" else repr(time),
-           "body_contact_force": repr(contact), "robot_jerk_rms": repr(jerk)}
+           "body_contact_force": repr(contact), "robot_jerk_rms": repr(jerk),
+           "reach_onset_time": "nan" if k == 0 else "0.2", "release_time": "0.3"}
     return {**row, **dict.fromkeys(QUANTITIES, "0.3")}
 
 
@@ -74,14 +75,16 @@ def test_the_rows_hold_the_curve_the_scores_and_the_paired_differences(checkpoin
     assert [r.agent for r in refs] == ["cv"]  # reactive ran in neither
     assert refs[0].sets["replay-all"] == {"n": 4.0, "success": 1.0, "handover_time": 3.5,
                                           "contact_over": 0.0, "robot_jerk": 60.0,
-                                          "premature": 0.0}
+                                          "premature": 0.0, "premature_before_reach": 0.0}
     first = rows[0]
     assert first.reference == "cv" and first.flags == "--base cv"
     assert first.steps == 256 and math.isclose(first.steps_per_s, 256 / first.wall_s)
     s = first.scores.sets["walker-ood"]
-    # successes k = 1, 2, 3 at 1.5 + k s; one of four over 50 N; jerk 100..103
+    # successes k = 1, 2, 3 at 1.5 + k s; one of four over 50 N; jerk 100..103; the premature
+    # release (k = 0) came with no reach onset
     assert s == {"n": 4.0, "success": 0.75, "handover_time": 3.5, "contact_over": 0.25,
-                 "robot_jerk": 101.5, "premature": 1.0}
+                 "robot_jerk": 101.5, "premature": 1.0, "premature_before_reach": 1.0}
+    assert rows[1].scores.sets["replay-all"]["premature_before_reach"] == 1.0  # k = 1 reached
     assert first.paired["replay-all"]["handover_time"] == (
         -0.2, pytest.approx(-0.3), pytest.approx(-0.15), True)
     (summary,) = seed_summary(rows)
