@@ -124,7 +124,8 @@ def ablation_markdown(rows: list, references: list, summary: list[dict]) -> str:
     head = ["configuration", "seed", "curve success (start → end)", "curve handover time",
             "walkers ID", "walkers OOD", "replays", f"contact > {CONTACT_N:.0f} N (ID / OOD / "
             "replays)", "robot jerk, replays (m/s³)", "premature releases (before the reach)",
-            "Δ success vs ref, replays (pp)", "Δ time vs ref, replays (s)", "Δ time vs ref, walkers ID / OOD (s)",
+            "Δ success vs ref, replays (pp)", "Δ time vs ref, replays (s)",
+            "Δ time vs ref, walkers ID / OOD (s)",
             "wall (min)", "steps/s"]
     body = []
     for ref in references:
