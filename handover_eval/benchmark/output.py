@@ -28,7 +28,12 @@ from handover_eval.benchmark.files import (
     write_episodes,
     write_result,
 )
-from handover_eval.benchmark.protocol import BOOTSTRAP, BOOTSTRAP_SEED, PROTOCOL_VERSION
+from handover_eval.benchmark.protocol import (
+    BOOTSTRAP,
+    BOOTSTRAP_SEED,
+    PROTOCOL_VERSION,
+    REFERENCE_AGENT,
+)
 from handover_eval.benchmark.run import BenchmarkRun
 from handover_eval.reporting import write_csv, write_text
 
@@ -36,30 +41,33 @@ TABLE_FILES = {"openloop": "openloop_table.csv", "closedloop": "closedloop_table
 MARKDOWN = "benchmark.md"
 
 
-def metrics_of(track_rows: Mapping[str, list[dict]]) -> dict[str, dict]:
-    """track -> agent -> set -> metrics, from rows read back from the episode files."""
+def metrics_of(track_rows: Mapping[str, list[dict]],
+               reference: str = REFERENCE_AGENT) -> dict[str, dict]:
+    """track -> agent -> set -> metrics, from rows read back from the episode files (the
+    closed-loop track paired against ``reference``)."""
     out = {}
     if "openloop" in track_rows:
         out["openloop"] = tables.openloop_metrics(track_rows["openloop"], BOOTSTRAP,
                                                   BOOTSTRAP_SEED)
     if "closedloop" in track_rows:
         out["closedloop"] = tables.closedloop_metrics(track_rows["closedloop"], BOOTSTRAP,
-                                                      BOOTSTRAP_SEED)
+                                                      BOOTSTRAP_SEED, reference)
     return out
 
 
-def tables_markdown(metrics: Mapping[str, dict]) -> str:
+def tables_markdown(metrics: Mapping[str, dict], reference: str = REFERENCE_AGENT) -> str:
     parts = ["# Benchmark tables (protocol v%d)\n" % PROTOCOL_VERSION]
     if "openloop" in metrics:
         parts.append(tables.openloop_markdown(metrics["openloop"]))
     if "closedloop" in metrics:
-        parts.append(tables.closedloop_markdown(metrics["closedloop"]))
+        parts.append(tables.closedloop_markdown(metrics["closedloop"], reference))
     return "\n".join(parts)
 
 
-def write_tables(track_rows: Mapping[str, list[dict]], out: Path) -> tuple[dict, list[Path]]:
+def write_tables(track_rows: Mapping[str, list[dict]], out: Path,
+                 reference: str = REFERENCE_AGENT) -> tuple[dict, list[Path]]:
     """The tables of ``track_rows`` into ``out``; returns (metrics, the files written)."""
-    metrics = metrics_of(track_rows)
+    metrics = metrics_of(track_rows, reference)
     files = []
     if "openloop" in metrics:
         files.append(write_csv(tables.openloop_table_rows(metrics["openloop"]),
@@ -67,19 +75,47 @@ def write_tables(track_rows: Mapping[str, list[dict]], out: Path) -> tuple[dict,
     if "closedloop" in metrics:
         files.append(write_csv(tables.closedloop_table_rows(metrics["closedloop"]),
                                out / TABLE_FILES["closedloop"]))
-    files.append(write_text(tables_markdown(metrics), out / MARKDOWN))
+    files.append(write_text(tables_markdown(metrics, reference), out / MARKDOWN))
     return metrics, files
 
 
-def rescore(paths: list[Path], out: Path) -> tuple[dict, list[Path]]:
-    """``evaluate.py rescore``: the tables from per-episode files (at most one per track)."""
+def _same(rows: list[dict]) -> list[str]:
+    """``rows`` in a form that compares equal when their values are (NaN equal to NaN)."""
+    return [repr(sorted(r.items())) for r in rows]
+
+
+def _merge(track: str, have: list[dict], rows: list[dict], path: Path) -> list[dict]:
+    """``rows`` of a further episode file of ``track`` added to ``have``: an agent already
+    there must have the very same rows (the reference, run again on the same receivers)."""
+    by_agent: dict[str, list[dict]] = {}
+    for r in rows:
+        by_agent.setdefault(r["agent"], []).append(r)
+    known = {r["agent"] for r in have}
+    for agent, mine in by_agent.items():
+        if agent not in known:
+            have = have + mine
+        elif _same(mine) != _same([r for r in have if r["agent"] == agent]):
+            raise ValueError(f"{path}: {agent}'s {track} episodes differ from an earlier file's "
+                             "(another protocol, receivers or code?)")
+    return have
+
+
+def rescore(paths: list[Path], out: Path, reference: str = REFERENCE_AGENT
+            ) -> tuple[dict, list[Path]]:
+    """``evaluate.py rescore``: the tables from per-episode files, paired against
+    ``reference``. Several files of one track are joined (the closed loop of two benchmark
+    runs: an agent in both must have the same rows, as the reference has); ``reference`` must
+    be an agent of the closed-loop files."""
     track_rows: dict[str, list[dict]] = {}
     for path in paths:
         track, rows = read_episodes(path)
-        if track in track_rows:
-            raise ValueError(f"{path}: a second {track} episode file (give one per track)")
-        track_rows[track] = rows
-    return write_tables(track_rows, out)
+        track_rows[track] = _merge(track, track_rows[track], rows, path) if (
+            track in track_rows) else rows
+    if "closedloop" in track_rows and not any(r["agent"] == reference
+                                              for r in track_rows["closedloop"]):
+        raise ValueError(f"no closed-loop episodes of the reference agent {reference!r} in "
+                         f"{', '.join(str(p) for p in paths)}")
+    return write_tables(track_rows, out, reference)
 
 
 def remove_result(out: Path) -> None:

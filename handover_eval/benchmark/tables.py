@@ -81,8 +81,11 @@ def _groups(rows: Sequence[dict], sets: Sequence[str]) -> dict[tuple[str, str], 
     return out
 
 
-def closedloop_metrics(rows: Sequence[dict], n_boot: int, seed: int) -> dict[str, dict[str, Any]]:
-    """agent -> set -> metrics (module docstring); rows as :func:`.files.read_episodes` gives."""
+def closedloop_metrics(rows: Sequence[dict], n_boot: int, seed: int,
+                       reference: str = REFERENCE_AGENT) -> dict[str, dict[str, Any]]:
+    """agent -> set -> metrics (module docstring), each agent paired against ``reference`` (the
+    protocol's, or another agent of the rows: ``rescore --reference``); rows as
+    :func:`.files.read_episodes` gives."""
     groups = _groups(rows, CLOSEDLOOP_SETS)
     out: dict[str, dict[str, Any]] = {}
     for (agent, rset), mine in groups.items():
@@ -97,8 +100,8 @@ def closedloop_metrics(rows: Sequence[dict], n_boot: int, seed: int) -> dict[str
             "handover_time": _ci(times, "median", n_boot, stable_seed(agent, rset, "t", base=seed)),
             "paired": None,
         }
-        ref = groups.get((REFERENCE_AGENT, rset))
-        if agent != REFERENCE_AGENT and ref is not None:
+        ref = groups.get((reference, rset))
+        if agent != reference and ref is not None:
             for r in mine + ref:
                 r["_success01"] = 1.0 if r["success"] else 0.0
                 r["_time_ok"] = r["handover_time"] if r["success"] else math.nan
@@ -193,7 +196,8 @@ def openloop_table_rows(metrics: dict[str, dict[str, Any]]) -> list[dict]:
     return rows
 
 
-def closedloop_markdown(metrics: dict[str, dict[str, Any]]) -> str:
+def closedloop_markdown(metrics: dict[str, dict[str, Any]],
+                        reference: str = REFERENCE_AGENT) -> str:
     body = []
     for agent, sets in metrics.items():
         for rset, m in sets.items():
@@ -208,13 +212,13 @@ def closedloop_markdown(metrics: dict[str, dict[str, Any]]) -> str:
         "## Closed-loop track\n\n"
         + markdown_table(
             ["agent", "set", "n", "success [95 % Wilson CI]", "first failure",
-             "handover time (s) [95 % CI]", f"success − {REFERENCE_AGENT}",
-             f"handover time − {REFERENCE_AGENT} (s)"],
+             "handover time (s) [95 % CI]", f"success − {reference}",
+             f"handover time − {reference} (s)"],
             body,
         )
         + "\nFirst failure: each failed episode counted once, at the first check it fails "
         "(docs/benchmark.md). Handover time: median over the successes, bootstrap CI. Paired: "
-        f"agent − {REFERENCE_AGENT} on the same receivers, [95 % bootstrap CI over receivers], "
+        f"agent − {reference} on the same receivers, [95 % bootstrap CI over receivers], "
         "* the CI excludes 0.\n"
     )
 

@@ -115,8 +115,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("rescore", help="rebuild the benchmark tables from per-episode CSVs",
                        description="Rebuild benchmark.md and the *_table.csv files from the "
                        "per-episode CSVs of a benchmark run (one per track), without running an "
-                       "episode; byte-identical to the run's tables. " + SECURITY)
-    p.add_argument("episodes", nargs="+", metavar="EPISODES.csv")
+                       "episode; byte-identical to the run's tables. The closed-loop files of "
+                       "several runs are joined (an agent in two of them, such as the reference, "
+                       "must have the same rows), and --reference pairs them against another "
+                       "agent of theirs. " + SECURITY)
+    p.add_argument("episodes", nargs="+", metavar="EPISODES.csv",
+                   help="closedloop_episodes.csv / openloop_episodes.csv of benchmark runs")
+    p.add_argument("--reference", default="reactive", metavar="AGENT",
+                   help="the agent every other is paired against on the same receivers (default: "
+                   "reactive, the protocol's; it must be in one of the closed-loop files)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder (default: results/rescore)")
 
@@ -190,7 +197,7 @@ def _rescore(args: argparse.Namespace) -> int:
     try:
         out = folder_option(args.out, "--out", Path("results") / "rescore")
         with OutputLock(out):
-            _, files = rescore([Path(p) for p in args.episodes], out)
+            _, files = rescore([Path(p) for p in args.episodes], out, args.reference)
     except (ValueError, OSError) as exc:
         return _error(exc)
     print(files[-1].read_text())

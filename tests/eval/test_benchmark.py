@@ -213,6 +213,40 @@ def test_rescore_rebuilds_the_tables_byte_for_byte(plugin_runs, tmp_path, capsys
     assert written[-1].name == "benchmark.md"
 
 
+def test_rescore_joins_runs_and_pairs_against_another_reference(plugin_runs, tmp_path,
+                                                                 capsys) -> None:
+    a, ref = (plugin_runs[k] / "closedloop_episodes.csv" for k in ("a", "reactive"))
+    out = tmp_path / "j"
+    assert evaluate.main(["rescore", str(a), str(ref), "--reference", "ridge", "--out",
+                          str(out)]) == 0
+    assert "success − ridge" in (out / "benchmark.md").read_text()
+    joined = {(r["agent"], r["set"]): r for r in csv.DictReader((out / "closedloop_table.csv"
+                                                                  ).open())}
+    usual = {(r["agent"], r["set"]): r for r in csv.DictReader(
+        (plugin_runs["a"] / "closedloop_table.csv").open())}
+    assert joined.keys() == usual.keys()  # reactive's rows of both files were the same
+    for (agent, rset), row in joined.items():
+        if agent == "ridge":
+            assert row["paired_success_diff"] in ("", "nan")
+        else:  # a mean paired difference changes sign with the reference
+            assert float(row["paired_success_diff"]) == -float(
+                usual[("ridge", rset)]["paired_success_diff"])
+    rows = list(csv.DictReader(ref.open()))
+    rows[0]["handover_time"] = "9.5" if rows[0]["success"] == "True" else rows[0]["handover_time"]
+    rows[0]["seed"] = str(int(rows[0]["seed"]) + 1)
+    other = tmp_path / "other.csv"
+    with other.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    capsys.readouterr()
+    assert evaluate.main(["rescore", str(a), str(other), "--out", str(tmp_path / "k")]) == 2
+    assert "reactive's closedloop episodes differ" in capsys.readouterr().err
+    assert evaluate.main(["rescore", str(ref), "--reference", "cv", "--out",
+                          str(tmp_path / "m")]) == 2
+    assert "no closed-loop episodes of the reference agent 'cv'" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     "column, value, message",
     [
