@@ -22,7 +22,7 @@ from handover_env.atomic_write import UnsafeTargetError, atomic_write, atomic_wr
 
 __all__ = [
     "PAPER_TABLE1", "UnsafeTargetError", "atomic_write_bytes", "markdown_table",
-    "mean_std", "read_csv", "write_csv", "write_png", "write_text",
+    "mean_std", "read_csv", "read_folder_csv", "write_csv", "write_png", "write_text",
 ]
 
 # The paper's Table I (RMS error in mm, mean +- std over a stratified 10-fold split, full public
@@ -66,6 +66,28 @@ def read_csv(path: str | os.PathLike) -> list[dict[str, str]]:
     """Rows of a CSV written by :func:`write_csv` (values as strings)."""
     with Path(path).open(newline="") as fh:
         return list(csv.DictReader(fh))
+
+
+def read_folder_csv(folder: str | os.PathLike, name: str, limit: int, columns: Sequence[str],
+                    error: type[Exception], inside: str = "folder") -> list[dict[str, str]]:
+    """The rows of ``folder/name``, a CSV file we did not just write: a regular UTF-8 file inside
+    ``folder`` (no link out of it) of at most ``limit`` bytes, with at least one row and every
+    one of ``columns``; anything else is one ``error`` naming the file. Nothing is executed."""
+    from handover_env.regular_file import read_regular_file
+
+    path = Path(folder) / name
+    raw = read_regular_file(path, limit, Path(folder), inside=inside, kind="CSV file",
+                            error=error)
+    try:
+        rows = list(csv.DictReader(io.StringIO(raw.decode("utf-8"), newline="")))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise error(f"{path}: not a UTF-8 CSV file ({exc})") from None
+    if not rows:
+        raise error(f"{path}: no rows")
+    missing = [c for c in columns if c not in rows[0]]
+    if missing:
+        raise error(f"{path}: no column(s) {missing}")
+    return rows
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[object]]) -> str:

@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import numpy as np
 
@@ -178,25 +177,17 @@ class PresentationError(ValueError):
 def read_episode_rows(run_folder: str | os.PathLike) -> list[dict[str, str]]:
     """The rows of ``run_folder/closed_loop_episodes.csv``: a regular UTF-8 file inside the
     folder (no link out of it) of at most :data:`MAX_EPISODES_BYTES`; nothing is executed."""
-    import csv
-    import io
+    from handover_eval.reporting import read_folder_csv
 
-    from handover_env.regular_file import read_regular_file
-
-    path = Path(run_folder) / "closed_loop_episodes.csv"
-    raw = read_regular_file(path, MAX_EPISODES_BYTES, Path(run_folder), inside="run folder",
-                            kind="episodes file", error=PresentationError)
     try:
-        rows = list(csv.DictReader(io.StringIO(raw.decode("utf-8"), newline="")))
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise PresentationError(f"{path}: not a UTF-8 CSV file ({exc})") from None
-    if not rows:
-        raise PresentationError(f"{path}: no episode rows")
-    missing = [c for c in ("agent", "set", "is_ood", *QUANTITIES) if c not in rows[0]]
-    if missing:
-        raise PresentationError(f"{path}: no column(s) {missing} (a closed-loop run from before "
-                                "the env stated the presentation at the grasp?)")
-    return rows
+        return read_folder_csv(run_folder, "closed_loop_episodes.csv", MAX_EPISODES_BYTES,
+                               ("agent", "set", "is_ood", *QUANTITIES), PresentationError,
+                               inside="run folder")
+    except PresentationError as exc:
+        if "no column(s)" in str(exc):
+            raise PresentationError(f"{exc} (a closed-loop run from before the env stated the "
+                                    "presentation at the grasp?)") from None
+        raise
 
 
 def run_presentation(

@@ -22,8 +22,6 @@ differences on the replays, with a 95 % stratified bootstrap interval over seeds
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -83,22 +81,6 @@ class AblationRow:
     @property
     def steps_per_s(self) -> float:
         return self.steps / self.wall_s if self.wall_s > 0 else math.nan
-
-
-def _read_csv(folder: Path, name: str, limit: int, columns: Sequence[str]) -> list[dict]:
-    from handover_env.regular_file import read_regular_file
-
-    path = folder / name
-    raw = read_regular_file(path, limit, folder, inside="evaluation folder", kind="CSV file",
-                            error=AblationError)
-    try:
-        rows = list(csv.DictReader(io.StringIO(raw.decode("utf-8"), newline="")))
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise AblationError(f"{path}: not a UTF-8 CSV file ({exc})") from None
-    missing = [c for c in columns if not rows or c not in rows[0]]
-    if missing:
-        raise AblationError(f"{path}: no rows or no column(s) {missing}")
-    return rows
 
 
 def _float(row: Mapping[str, str], key: str, path: Path) -> float:
@@ -186,6 +168,7 @@ def read_row(spec: AblationRun, episodes: list[dict] | None = None) -> tuple[Abl
     from baselines.rl.files import TRAINING_STATE, read_record
     from baselines.rl.train import check_state
     from handover_eval.closedloop.presentation import read_episode_rows
+    from handover_eval.reporting import read_folder_csv
 
     record, config = read_record(spec.run)
     state_file = spec.run / TRAINING_STATE / "state.json"
@@ -198,8 +181,8 @@ def read_row(spec: AblationRun, episodes: list[dict] | None = None) -> tuple[Abl
         raise AblationError(f"{path}: expected one RL agent among {list(RL_AGENTS)}, got "
                             f"{agents}")
     paired_path = spec.evaluation / "closed_loop_paired.csv"
-    paired_rows = _read_csv(spec.evaluation, "closed_loop_paired.csv", MAX_PAIRED_BYTES,
-                            PAIRED_COLUMNS)
+    paired_rows = read_folder_csv(spec.evaluation, "closed_loop_paired.csv", MAX_PAIRED_BYTES,
+                                  PAIRED_COLUMNS, AblationError, inside="evaluation folder")
     references = sorted({r["agent"] for r in rows} - {agents[0]}
                         - {r["agent"] for r in paired_rows})
     row = AblationRow(

@@ -131,7 +131,7 @@ def test_two_rl_agents_or_a_missing_paired_column_are_refused(checkpoint, tmp_pa
         run_ablation([parse_run(f"x={checkpoint}:{a}")])
     b = _evaluation(tmp_path / "b", 1.5, 1, -0.2)
     (b / "closed_loop_paired.csv").write_text("agent,set\nrl-residual,replay-all\n")
-    with pytest.raises(AblationError, match=r"no rows or no column\(s\)"):
+    with pytest.raises(AblationError, match=r"no column\(s\)"):
         run_ablation([parse_run(f"x={checkpoint}:{b}")])
 
 
