@@ -69,10 +69,12 @@ def read_csv(path: str | os.PathLike) -> list[dict[str, str]]:
 
 
 def read_folder_csv(folder: str | os.PathLike, name: str, limit: int, columns: Sequence[str],
-                    error: type[Exception], inside: str = "folder") -> list[dict[str, str]]:
+                    error: type[Exception], inside: str = "folder",
+                    missing_hint: str = "") -> list[dict[str, str]]:
     """The rows of ``folder/name``, a CSV file we did not just write: a regular UTF-8 file inside
     ``folder`` (no link out of it) of at most ``limit`` bytes, with at least one row and every
-    one of ``columns``; anything else is one ``error`` naming the file. Nothing is executed."""
+    one of ``columns``; anything else is one ``error`` naming the file (``missing_hint`` added
+    when columns are missing). Nothing is executed."""
     from handover_env.regular_file import read_regular_file
 
     path = Path(folder) / name
@@ -86,7 +88,7 @@ def read_folder_csv(folder: str | os.PathLike, name: str, limit: int, columns: S
         raise error(f"{path}: no rows")
     missing = [c for c in columns if c not in rows[0]]
     if missing:
-        raise error(f"{path}: no column(s) {missing}")
+        raise error(f"{path}: no column(s) {missing}{missing_hint}")
     return rows
 
 

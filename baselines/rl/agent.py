@@ -136,15 +136,13 @@ class RLAgent(Policy):
         """The walker seeds the checkpoint records it met (its learning-curve, episode and
         warm-start ranges, each taken whole); None for a policy with no record, for which every
         seed from :data:`TRAIN_SEED_START` on counts as trained on."""
+        from baselines.rl.files import SEED_RANGE_KEYS
+
         receivers = self.record.get("receivers")
         if not receivers:
             return None
-        out = []
-        for key in ("curve_seeds", "episode_seeds", "warm_start_seeds"):
-            r = receivers.get(key, [])
-            if r:
-                out.append((min(int(v) for v in r), max(int(v) for v in r)))
-        return out
+        ranges = (receivers.get(key, []) for key in SEED_RANGE_KEYS)
+        return [(min(r), max(r)) for r in ranges if r]  # read_record: [] or two whole seeds
 
     def reset(self) -> None:
         self.memory.reset()

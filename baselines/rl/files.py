@@ -67,6 +67,8 @@ REWARD_KEYS = ("time_cost", "force_threshold", "force_scale", "success", "failur
 CONFIG_REWARD_KEYS = ("shaping", "gamma", "action_change", "contact_penalty")
 #: A run's wall time may not exceed this (s; ten years); real runs take an hour.
 MAX_WALL_S = 3.2e8
+#: The ``receivers`` record's walker seed ranges, each ``[]`` or ``[first, last]``.
+SEED_RANGE_KEYS = ("curve_seeds", "episode_seeds", "warm_start_seeds")
 #: The longest string of the ``versions`` record (a command line with every flag is ~300).
 MAX_VERSION_CHARS = 4096
 #: Bytes of a safetensors header allowed per tensor (our headers hold about 100 per key).
@@ -180,7 +182,7 @@ def read_record(folder: str | Path) -> tuple[dict, RLConfig]:
                 and len(value) <= MAX_VERSION_CHARS):
             raise CheckpointError(f"{path}: versions.{key} must be a string of at most "
                                   f"{MAX_VERSION_CHARS} characters or a flag")
-    for key in ("curve_seeds", "episode_seeds", "warm_start_seeds"):
+    for key in SEED_RANGE_KEYS:
         r = saved["receivers"].get(key, [])
         if not (isinstance(r, list) and len(r) in (0, 2)
                 and all(_whole(v) and 0 <= v < 2**63 for v in r)):

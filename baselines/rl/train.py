@@ -285,6 +285,14 @@ def save(out: Path, model: Any, io: PolicyIO, config: RLConfig, data: TrainingDa
             save_file({"log_ent_coef": model.log_ent_coef.detach().clone()}, ts / "sac.safetensors")
 
 
+def read_state(out: Path, config: RLConfig, record: dict) -> dict:
+    """``out``'s ``training_state/state.json``, checked against its config and its
+    ``config.json`` record (:func:`check_state`); read only."""
+    state_file = out / TRAINING_STATE / "state.json"
+    return check_state(read_json(state_file, "RL training state", root=out), state_file, config,
+                       record["training"])
+
+
 def restore(out: Path, model: Any, config: RLConfig) -> dict:
     """Load the last checkpoint in ``out`` into ``model`` (weights, optimisers); its state."""
     recover(out)  # --resume is the command that wrote it: finish its interrupted commit (checked)
@@ -294,10 +302,8 @@ def restore(out: Path, model: Any, config: RLConfig) -> dict:
                   if k not in RESUMABLE and asdict(saved)[k] != v)
     if diff:
         raise CheckpointError(f"cannot resume from {out}: its config differs in {diff}")
+    state = read_state(out, saved, record)
     ts = out / TRAINING_STATE
-    state_file = ts / "state.json"
-    state = check_state(read_json(state_file, "RL training state", root=out), state_file, saved,
-                        record["training"])
     layout = {k: shape for k, (shape, _) in expected_of(model.policy.state_dict()).items()}
     n = observation_size(config.history, config.form, config.last_actions)
     layout = {**{f"policy.{k}": v for k, v in layout.items()}, "io.offset": (n,), "io.scale": (n,)}

@@ -19,7 +19,7 @@ from handover_eval.benchmark.guard import (
     MAX_EPISODE_LIMIT_S,
     AgentError,
 )
-from handover_eval.benchmark.protocol import PROTOCOL_VERSION
+from handover_eval.benchmark.protocol import PROTOCOL_VERSION, REFERENCE_AGENT
 from handover_eval.cli.args import (
     EPOCHS,
     STEPS,
@@ -121,9 +121,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                        "agent of theirs. " + SECURITY)
     p.add_argument("episodes", nargs="+", metavar="EPISODES.csv",
                    help="closedloop_episodes.csv / openloop_episodes.csv of benchmark runs")
-    p.add_argument("--reference", default="reactive", metavar="AGENT",
+    p.add_argument("--reference", default=REFERENCE_AGENT, metavar="AGENT",
                    help="the agent every other is paired against on the same receivers (default: "
-                   "reactive, the protocol's; it must be in one of the closed-loop files)")
+                   f"{REFERENCE_AGENT}, the protocol's; it must be in one of the closed-loop "
+                   "files)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder (default: results/rescore)")
 

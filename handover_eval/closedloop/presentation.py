@@ -179,15 +179,10 @@ def read_episode_rows(run_folder: str | os.PathLike) -> list[dict[str, str]]:
     folder (no link out of it) of at most :data:`MAX_EPISODES_BYTES`; nothing is executed."""
     from handover_eval.reporting import read_folder_csv
 
-    try:
-        return read_folder_csv(run_folder, "closed_loop_episodes.csv", MAX_EPISODES_BYTES,
-                               ("agent", "set", "is_ood", *QUANTITIES), PresentationError,
-                               inside="run folder")
-    except PresentationError as exc:
-        if "no column(s)" in str(exc):
-            raise PresentationError(f"{exc} (a closed-loop run from before the env stated the "
-                                    "presentation at the grasp?)") from None
-        raise
+    return read_folder_csv(run_folder, "closed_loop_episodes.csv", MAX_EPISODES_BYTES,
+                           ("agent", "set", "is_ood", *QUANTITIES), PresentationError,
+                           inside="run folder", missing_hint=" (a closed-loop run from before "
+                           "the env stated the presentation at the grasp?)")
 
 
 def run_presentation(

@@ -162,19 +162,16 @@ def _flags(config: object) -> str:
     return " ".join(out) or "(the defaults)"
 
 
-def read_row(spec: AblationRun, episodes: list[dict] | None = None) -> tuple[AblationRow, list]:
+def read_row(spec: AblationRun) -> tuple[AblationRow, list]:
     """One :class:`AblationRow` from ``spec``'s folders, and the evaluation's episode rows."""
-    from baselines.checkpoint_io import read_json
-    from baselines.rl.files import TRAINING_STATE, read_record
-    from baselines.rl.train import check_state
+    from baselines.rl.files import read_record
+    from baselines.rl.train import read_state
     from handover_eval.closedloop.presentation import read_episode_rows
     from handover_eval.reporting import read_folder_csv
 
     record, config = read_record(spec.run)
-    state_file = spec.run / TRAINING_STATE / "state.json"
-    state = check_state(read_json(state_file, "RL training state", root=spec.run), state_file,
-                        config, record["training"])
-    rows = episodes if episodes is not None else read_episode_rows(spec.evaluation)
+    state = read_state(spec.run, config, record)
+    rows = read_episode_rows(spec.evaluation)
     path = spec.evaluation / "closed_loop_episodes.csv"
     agents = sorted({r["agent"] for r in rows} & set(RL_AGENTS))
     if len(agents) != 1:

@@ -60,30 +60,34 @@ def write_seeds(out: Path, states: list[dict], config: RLConfig) -> None:
                out / SEEDS_SUMMARY)
 
 
+def _flat_scores(scores: Any) -> dict[str, object]:
+    """An :class:`~handover_eval.rl.ablation.AgentScores` as CSV columns ``<set>_<metric>``."""
+    return {f"{name}_{m}": v for name, metrics in scores.sets.items() for m, v in metrics.items()}
+
+
+def _flat_row(row: Any) -> dict[str, object]:
+    """An :class:`~handover_eval.rl.ablation.AblationRow` as CSV columns."""
+    flat: dict[str, object] = {"configuration": row.label, "seed": row.seed,
+                               "agent": row.scores.agent}
+    flat.update({f"curve_{k}_{m}": v for k, p in (("start", row.curve_start),
+                                                  ("end", row.curve_end)) for m, v in p.items()})
+    flat.update({"steps": row.steps, "wall_s": row.wall_s, "reference": row.reference})
+    flat.update(_flat_scores(row.scores))
+    for name, metrics in row.paired.items():
+        for m, (d, lo, hi, _) in metrics.items():
+            flat.update({f"paired_{name}_{m}": d, f"paired_{name}_{m}_low": lo,
+                         f"paired_{name}_{m}_high": hi})
+    return flat
+
+
 def write_ablation(rows: list, references: list, summary: list[dict], out: Path) -> list[Path]:
-    """``rl_ablation.md``, ``.csv`` (one line per seed and reference agent) and ``.png``
+    """``rl_ablation.md``, ``.csv`` (one line per reference agent and per seed) and ``.png``
     (:mod:`handover_eval.rl.ablation`) into ``out``."""
     from handover_eval.rl.report import ablation_figure, ablation_markdown
 
     out.mkdir(parents=True, exist_ok=True)
-    table = []
-    for s in [*references, *[r.scores for r in rows]]:
-        row = next((r for r in rows if r.scores is s), None)
-        flat: dict[str, object] = {"configuration": row.label if row else s.agent,
-                                   "seed": row.seed if row else "", "agent": s.agent}
-        if row:
-            flat.update({f"curve_{k}_{m}": v for k, p in (("start", row.curve_start),
-                                                          ("end", row.curve_end))
-                         for m, v in p.items()})
-            flat.update({"steps": row.steps, "wall_s": row.wall_s, "reference": row.reference})
-        for name, metrics in s.sets.items():
-            flat.update({f"{name}_{m}": v for m, v in metrics.items()})
-        if row:
-            for name, metrics in row.paired.items():
-                for m, (d, lo, hi, _) in metrics.items():
-                    flat.update({f"paired_{name}_{m}": d, f"paired_{name}_{m}_low": lo,
-                                 f"paired_{name}_{m}_high": hi})
-        table.append(flat)
+    table = [{"configuration": s.agent, "seed": "", "agent": s.agent, **_flat_scores(s)}
+             for s in references] + [_flat_row(r) for r in rows]
     keys = list(dict.fromkeys(k for t in table for k in t))
     table = [{k: t.get(k, "") for k in keys} for t in table]
     return [write_text(ablation_markdown(rows, references, summary), out / "rl_ablation.md"),

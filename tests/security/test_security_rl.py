@@ -5,7 +5,9 @@ Each crafted input is built here, from a checkpoint written in a few seconds wit
 split, network or history, a weights file over its config's exact size or with a lying header,
 a tampered ``training_state/state.json``. Each ends in one ``CheckpointError`` (or one line of
 ``train.py`` / ``evaluate.py``, status 2) naming the file and the field, within a time bound,
-with nothing trained, run or written.
+with nothing trained, run or written. Over 500 lines because every check crafts from the same
+few-second checkpoints and refusal helpers (``scratch``, ``_copy``, ``_timed_refusal``): one
+threat, the RL checkpoint folder, in one file.
 """
 
 from __future__ import annotations
