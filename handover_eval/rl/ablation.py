@@ -6,6 +6,16 @@ it) and the ``--out`` folder of an ``evaluate.py closed-loop --rl-checkpoint`` r
 ``closed_loop_episodes.csv`` and ``closed_loop_paired.csv``, read as regular UTF-8 files inside
 that folder). Rows sharing a label are the seeds of one configuration.
 
+Seeds trained and evaluated at different times are tabled together through an earlier
+``rl_ablation.csv`` of this command (:func:`read_table`, ``--table``). Its rows come back as they
+were written: every float at full precision (a table written before 2026-12-08 holds six
+significant digits), and a paired CI excludes 0 when it lies above or below it (the closed-loop
+command's rule). A reference agent that a new evaluation also ran must have the same scores
+there, or the evaluations did not meet the same receivers. The learning curves of a
+configuration's seeds (every seed and the IQM band) are drawn from their
+``seed-S/train_log.csv`` files (:func:`read_curves`, ``--curves``), the files ``train.py rl``
+writes beside each checkpoint.
+
 Per row: the learning curve's first and last success rate and handover time on the fixed training
 receivers; env steps, wall time and steps/s; and, from the closed loop, on the scripted walkers
 (ID, OOD) and the replays: success, the median handover time over the successes, the share of
@@ -24,6 +34,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +49,18 @@ SETS: dict[str, str] = {"walker-id": "id", "walker-ood": "ood", "replay-all": "r
 PAIRED_COLUMNS = ("agent", "set", "metric", "diff", "diff_low", "diff_high", "ci_excludes_zero")
 #: The agents an RL checkpoint is scored as.
 RL_AGENTS = ("rl-residual", "rl-scratch")
+#: The scores of an agent per set (:func:`agent_scores`), as the table's CSV names them.
+METRICS = ("n", "success", "handover_time", "contact_over", "robot_jerk", "premature",
+           "premature_before_reach")
+#: The paired metrics of a row (:func:`paired_differences`).
+PAIRED_METRICS = ("success", "handover_time")
 MAX_PAIRED_BYTES = 5_000_000
+#: Bytes of an earlier ``rl_ablation.csv`` or of one ``train_log.csv``.
+MAX_TABLE_BYTES = 1_000_000
+#: The columns of a ``train_log.csv`` the curves read.
+CURVE_COLUMNS = ("steps", "success_rate", "handover_time", "return")
+#: A configuration label that names a folder of the curves' output.
+LABEL_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 
 
 class AblationError(ValueError):
@@ -103,7 +125,7 @@ def agent_scores(rows: Sequence[Mapping[str, str]], agent: str, path: Path) -> A
         contact = [_float(r, "body_contact_force", path) for r in mine]
         jerk = [_float(r, "robot_jerk_rms", path) for r in mine]
         premature = [r for r in mine if r["outcome"] == "premature_release"]
-        out[name] = {
+        out[name] = {  # the keys of METRICS
             "n": float(len(mine)),
             "success": float(np.mean(ok)),
             "handover_time": float(np.median(times)) if times else math.nan,
@@ -123,13 +145,12 @@ def paired_differences(rows: Sequence[Mapping[str, str]], agent: str, path: Path
     for success and handover time, from ``closed_loop_paired.csv``."""
     out: dict[str, dict[str, tuple[float, float, float, bool]]] = {}
     for r in rows:
-        if r["agent"] == agent and r["set"] in SETS and r["metric"] in ("success",
-                                                                        "handover_time"):
+        if r["agent"] == agent and r["set"] in SETS and r["metric"] in PAIRED_METRICS:
             out.setdefault(r["set"], {})[r["metric"]] = (
                 _float(r, "diff", path), _float(r, "diff_low", path),
                 _float(r, "diff_high", path), r["ci_excludes_zero"] == "True")
     for name in SETS:
-        if set(out.get(name, {})) != {"success", "handover_time"}:
+        if set(out.get(name, {})) != set(PAIRED_METRICS):
             raise AblationError(f"{path}: no paired success and handover time of {agent} on "
                                 f"{name}")
     return out
@@ -192,24 +213,157 @@ def read_row(spec: AblationRun) -> tuple[AblationRow, list]:
     return row, rows
 
 
-def run_ablation(specs: Sequence[AblationRun], references: Sequence[str] = ("cv", "reactive")
-                 ) -> tuple[list[AblationRow], list[AgentScores]]:
-    """Every row of ``specs`` and the scores of each agent of ``references`` (from the first
-    evaluation that ran it)."""
-    if not specs:
-        raise AblationError("no runs given")
-    rows, refs = [], {}
+def run_ablation(specs: Sequence[AblationRun], references: Sequence[str] = ("cv", "reactive"),
+                 tables: Sequence[Path] = ()) -> tuple[list[AblationRow], list[AgentScores]]:
+    """The rows of every earlier table of ``tables`` (:func:`read_table`), then of every run of
+    ``specs``, and the scores of each agent of ``references`` (from the first table or
+    evaluation that has it; a later evaluation that ran it must agree, :func:`same_scores`).
+    A configuration's seed given twice is refused."""
+    if not specs and not tables:
+        raise AblationError("no runs and no earlier table given")
+    rows: list[AblationRow] = []
+    refs: dict[str, tuple[AgentScores, Path]] = {}
+    for table in tables:
+        earlier, table_refs = read_table(Path(table))
+        rows += earlier
+        for ref in table_refs:
+            if ref.agent in references:
+                refs.setdefault(ref.agent, (ref, Path(table)))
     for spec in specs:
         for folder in (spec.run, spec.evaluation):
             if not Path(folder).is_dir():
                 raise AblationError(f"{folder}: not a folder")
         row, episodes = read_row(spec)
         rows.append(row)
+        path = spec.evaluation / "closed_loop_episodes.csv"
         for name in references:
-            if name not in refs and any(r["agent"] == name for r in episodes):
-                refs[name] = agent_scores(episodes, name,
-                                          spec.evaluation / "closed_loop_episodes.csv")
-    return rows, [refs[n] for n in references if n in refs]
+            if any(r["agent"] == name for r in episodes):
+                mine = agent_scores(episodes, name, path)
+                if name not in refs:
+                    refs[name] = (mine, path)
+                elif not same_scores(mine, refs[name][0]):
+                    raise AblationError(
+                        f"{path}: the reference {name}'s scores differ from those of "
+                        f"{refs[name][1]}: the evaluations did not meet the same receivers")
+    seen: set[tuple[str, int]] = set()
+    for r in rows:
+        if (r.label, r.seed) in seen:
+            raise AblationError(f"configuration {r.label!r} seed {r.seed} is given twice")
+        seen.add((r.label, r.seed))
+    return rows, [refs[n][0] for n in references if n in refs]
+
+
+def same_scores(a: AgentScores, b: AgentScores) -> bool:
+    """Whether two agents' scores agree on every set and metric to six significant digits (an
+    older table's precision; NaN equal to NaN)."""
+    def close(x: float, y: float) -> bool:
+        return (math.isnan(x) and math.isnan(y)) or math.isclose(x, y, rel_tol=1e-5,
+                                                                 abs_tol=1e-9)
+
+    return a.sets.keys() == b.sets.keys() and all(
+        all(close(a.sets[k][m], b.sets[k][m]) for m in METRICS) for k in a.sets)
+
+
+def _table_columns() -> tuple[str, ...]:
+    """The columns of an ``rl_ablation.csv`` that :func:`read_table` reads."""
+    scores = [f"{name}_{m}" for name in SETS for m in METRICS]
+    curve = [f"curve_{at}_{m}" for at in ("start", "end") for m in ("success", "handover_time")]
+    paired = [f"paired_{name}_{m}{end}" for name in SETS for m in PAIRED_METRICS
+              for end in ("", "_low", "_high")]
+    return ("configuration", "seed", "agent", *scores, *curve, "steps", "wall_s", "reference",
+            *paired)
+
+
+def read_table(path: Path) -> tuple[list[AblationRow], list[AgentScores]]:
+    """The seed rows and the reference rows of an earlier ``rl_ablation.csv`` of this command
+    (a regular UTF-8 file inside its folder, at most :data:`MAX_TABLE_BYTES`; every number
+    checked; one :class:`AblationError` naming the file and the field)."""
+    from handover_eval.reporting import read_folder_csv
+
+    path = Path(path)
+    lines = read_folder_csv(path.parent, path.name, MAX_TABLE_BYTES, _table_columns(),
+                            AblationError, inside="table's folder",
+                            missing_hint=" (not an rl_ablation.csv of evaluate.py rl-ablation)")
+
+    def number(line: Mapping[str, str], key: str, finite: bool = True) -> float:
+        v = _float(line, key, path)
+        if finite and not math.isfinite(v):
+            raise AblationError(f"{path}: {key} {line[key]!r} is not a finite number")
+        return v
+
+    def whole(line: Mapping[str, str], key: str) -> int:
+        v = number(line, key)
+        if v != int(v) or v < 0:
+            raise AblationError(f"{path}: {key} {line[key]!r} is not a whole number >= 0")
+        return int(v)
+
+    def scores(line: Mapping[str, str]) -> AgentScores:
+        return AgentScores(line["agent"], {
+            name: {m: number(line, f"{name}_{m}", finite=m != "handover_time") for m in METRICS}
+            for name in SETS})
+
+    rows, refs = [], []
+    for line in lines:
+        if line["seed"] == "":
+            refs.append(scores(line))
+            continue
+        if line["agent"] not in RL_AGENTS:
+            raise AblationError(f"{path}: agent {line['agent']!r} of a seed row is not one of "
+                                f"{list(RL_AGENTS)}")
+        paired: dict[str, dict[str, tuple[float, float, float, bool]]] = {}
+        for name in SETS:
+            for m in PAIRED_METRICS:
+                d, lo, hi = (number(line, f"paired_{name}_{m}{end}")
+                             for end in ("", "_low", "_high"))
+                paired.setdefault(name, {})[m] = (d, lo, hi, lo > 0 or hi < 0)
+        rows.append(AblationRow(
+            label=line["configuration"], seed=whole(line, "seed"), flags=line.get("flags", ""),
+            curve_start={m: number(line, f"curve_start_{m}", m == "success")
+                         for m in ("success", "handover_time")},
+            curve_end={m: number(line, f"curve_end_{m}", m == "success")
+                       for m in ("success", "handover_time")},
+            steps=whole(line, "steps"), wall_s=number(line, "wall_s"), scores=scores(line),
+            reference=line["reference"], paired=paired))
+    return rows, refs
+
+
+def read_curves(folder: Path) -> list[tuple[int, list[dict[str, float]]]]:
+    """``(seed, curve)`` of every ``seed-S/train_log.csv`` in ``folder`` (a ``train.py rl
+    --seeds`` output folder, or the same layout of committed logs), in seed order; each
+    ``train_log.csv`` a regular UTF-8 file inside its folder, its success rate and return
+    finite."""
+    from handover_eval.reporting import read_folder_csv
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise AblationError(f"{folder}: not a folder")
+    seeds = sorted((int(p.name[5:]), p) for p in folder.iterdir()
+                   if re.fullmatch(r"seed-[0-9]{1,9}", p.name) and p.is_dir())
+    if not seeds:
+        raise AblationError(f"{folder}: no seed-S folders")
+    out = []
+    for seed, sub in seeds:
+        lines = read_folder_csv(sub, "train_log.csv", MAX_TABLE_BYTES, CURVE_COLUMNS,
+                                AblationError, inside="seed folder")
+        path = sub / "train_log.csv"
+        curve = []
+        for line in lines:
+            point = {k: _float(line, k, path) for k in CURVE_COLUMNS}
+            if not all(math.isfinite(point[k]) for k in ("steps", "success_rate", "return")):
+                raise AblationError(f"{path}: steps, success_rate and return must be finite")
+            curve.append(point)
+        out.append((seed, curve))
+    return out
+
+
+def parse_curves(text: str) -> tuple[str, Path]:
+    """``LABEL=FOLDER`` (the ``--curves`` flag): the label names the output's folder, so it is
+    letters, digits, ``_``, ``.`` and ``-`` only (:data:`LABEL_PATTERN`)."""
+    label, sep, folder = text.partition("=")
+    if not (sep and folder) or not LABEL_PATTERN.fullmatch(label) or label in (".", ".."):
+        raise AblationError(f"--curves {text!r}: expected LABEL=FOLDER, LABEL of letters, "
+                            "digits, _ . -")
+    return label, Path(os.path.expanduser(folder))
 
 
 def seed_summary(rows: Sequence[AblationRow]) -> list[dict[str, object]]:
@@ -243,4 +397,5 @@ def parse_run(text: str) -> AblationRun:
 
 
 __all__ = ["AblationError", "AblationRow", "AblationRun", "AgentScores", "agent_scores",
-           "paired_differences", "parse_run", "read_row", "run_ablation", "seed_summary"]
+           "paired_differences", "parse_curves", "parse_run", "read_curves", "read_row",
+           "read_table", "run_ablation", "same_scores", "seed_summary"]

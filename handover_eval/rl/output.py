@@ -13,7 +13,12 @@ from typing import Any
 
 from baselines.rl.config import RLConfig
 from handover_eval.reporting import write_csv, write_png, write_text
-from handover_eval.rl.report import curve_figure, seeds_figure, seeds_summary
+from handover_eval.rl.report import (
+    ablation_figure,
+    curve_figure,
+    seeds_figure,
+    seeds_summary,
+)
 
 CURVE_CSV = "train_log.csv"
 CURVE_PNG = "learning_curve.png"
@@ -68,7 +73,7 @@ def _flat_scores(scores: Any) -> dict[str, object]:
 def _flat_row(row: Any) -> dict[str, object]:
     """An :class:`~handover_eval.rl.ablation.AblationRow` as CSV columns."""
     flat: dict[str, object] = {"configuration": row.label, "seed": row.seed,
-                               "agent": row.scores.agent}
+                               "agent": row.scores.agent, "flags": row.flags}
     flat.update({f"curve_{k}_{m}": v for k, p in (("start", row.curve_start),
                                                   ("end", row.curve_end)) for m, v in p.items()})
     flat.update({"steps": row.steps, "wall_s": row.wall_s, "reference": row.reference})
@@ -80,16 +85,30 @@ def _flat_row(row: Any) -> dict[str, object]:
     return flat
 
 
-def write_ablation(rows: list, references: list, summary: list[dict], out: Path) -> list[Path]:
+def write_ablation(rows: list, references: list, summary: list[dict], out: Path,
+                   curves: dict[str, list] | None = None) -> list[Path]:
     """``rl_ablation.md``, ``.csv`` (one line per reference agent and per seed) and ``.png``
-    (:mod:`handover_eval.rl.ablation`) into ``out``."""
-    from handover_eval.rl.report import ablation_figure, ablation_markdown
+    (:mod:`handover_eval.rl.ablation`) into ``out``; and per label of ``curves`` (``{label:
+    [(seed, curve), ...]}``, :func:`~handover_eval.rl.ablation.read_curves`)
+    ``out/<label>/learning_curves.png`` and ``seeds_summary.json``, the files a ``train.py rl
+    --seeds`` run writes beside its seed folders."""
+    from handover_eval.rl.report import ablation_markdown, curves_figure
 
     out.mkdir(parents=True, exist_ok=True)
     table = [{"configuration": s.agent, "seed": "", "agent": s.agent, **_flat_scores(s)}
              for s in references] + [_flat_row(r) for r in rows]
     keys = list(dict.fromkeys(k for t in table for k in t))
-    table = [{k: t.get(k, "") for k in keys} for t in table]
-    return [write_text(ablation_markdown(rows, references, summary), out / "rl_ablation.md"),
-            write_csv(table, out / "rl_ablation.csv"),
-            write_png(ablation_figure(rows), out / "rl_ablation.png", dpi=110)]
+    # every float at full precision (repr), so that --table reads back the numbers written
+    table = [{k: repr(v) if isinstance(v := t.get(k, ""), float) else v for k in keys}
+             for t in table]
+    written = [write_text(ablation_markdown(rows, references, summary), out / "rl_ablation.md"),
+               write_csv(table, out / "rl_ablation.csv"),
+               write_png(ablation_figure(rows), out / "rl_ablation.png", dpi=110)]
+    for label, seeds in (curves or {}).items():
+        title = f"{label}: seeds {', '.join(str(s) for s, _ in seeds)}, fixed training receivers"
+        states = [{"curve": c} for _, c in seeds]
+        written += [write_png(curves_figure([c for _, c in seeds], title),
+                              out / label / SEEDS_PNG),
+                    write_text(json.dumps(finite_or_null(seeds_summary(states)), indent=1,
+                                          allow_nan=False), out / label / SEEDS_SUMMARY)]
+    return written

@@ -47,8 +47,18 @@ def summary(state: dict) -> str:
 
 
 def seeds_figure(states: list[dict], config: RLConfig) -> Any:
-    """Success rate and return against env steps for every seed (thin lines) and their IQM with
-    its 95 % stratified bootstrap band (:func:`handover_eval.rl.statistics.curve_band`)."""
+    """Success rate and return against env steps for every seed of one run's ``states``
+    (:func:`curves_figure`)."""
+    form = f"residual on {config.base}" if config.form == "residual" else "from scratch"
+    return curves_figure([s["curve"] for s in states],
+                         f"{config.algo.upper()} {form}: {config.curve_episodes} fixed training "
+                         "receivers")
+
+
+def curves_figure(curves: list[list[dict]], title: str) -> Any:
+    """Success rate and return against env steps for every seed's curve (thin lines) and their
+    IQM with its 95 % stratified bootstrap band (:func:`handover_eval.rl.statistics.curve_band`)
+    over the points the seeds share."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -59,20 +69,18 @@ def seeds_figure(states: list[dict], config: RLConfig) -> Any:
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), constrained_layout=True)
     for ax, (key, label) in zip(axes, (("success_rate", "success rate"),
                                        ("return", "return (HandoverReward)")), strict=True):
-        curves = [[r[key] for r in s["curve"]] for s in states]
-        steps = [r["steps"] for r in min((s["curve"] for s in states), key=len)]
-        for c, s in zip(curves, states, strict=True):
-            ax.plot([r["steps"] for r in s["curve"]], c, lw=0.8, alpha=0.5)
-        mid, low, high = curve_band(curves)
-        ax.plot(steps, mid, color="k", lw=2, label=f"IQM of {len(states)} seeds")
+        values = [[r[key] for r in c] for c in curves]
+        steps = [r["steps"] for r in min(curves, key=len)]
+        for v, c in zip(values, curves, strict=True):
+            ax.plot([r["steps"] for r in c], v, lw=0.8, alpha=0.5)
+        mid, low, high = curve_band(values)
+        ax.plot(steps, mid, color="k", lw=2, label=f"IQM of {len(curves)} seeds")
         ax.fill_between(steps, low, high, color="k", alpha=0.15, label="95 % CI (bootstrap)")
         ax.set_xlabel("env steps")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     axes[0].legend(loc="lower right", fontsize=8)
-    form = f"residual on {config.base}" if config.form == "residual" else "from scratch"
-    fig.suptitle(f"{config.algo.upper()} {form}: {config.curve_episodes} fixed training "
-                 "receivers")
+    fig.suptitle(title)
     return fig
 
 
@@ -162,8 +170,11 @@ def ablation_markdown(rows: list, references: list, summary: list[dict]) -> str:
     lines += [markdown_table(["configuration", "seeds", "reference", "Δ success, mean (pp)",
                               "Δ success, IQM (pp)", "Δ time, mean (s)", "Δ time, IQM (s)"],
                              sum_rows).rstrip("\n"), ""]
-    flags = dict.fromkeys((r.label, r.flags) for r in rows)
-    lines += ["Flags: " + "; ".join(f"**{label}** `{f}`" for label, f in flags), ""]
+    flags = {label: next((r.flags for r in rows if r.label == label and r.flags), "")
+             for label in dict.fromkeys(r.label for r in rows)}
+    lines += ["Flags: " + "; ".join(f"**{label}** `{f}`" if f else
+                                    f"**{label}** (not recorded in the earlier table)"
+                                    for label, f in flags.items()), ""]
     return "\n".join(lines)
 
 
