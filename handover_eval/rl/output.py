@@ -107,7 +107,8 @@ def write_ablation(rows: list, references: list, summary: list[dict], out: Path,
     for label, seeds in (curves or {}).items():
         title = f"{label}: seeds {', '.join(str(s) for s, _ in seeds)}, fixed training receivers"
         states = [{"curve": c} for _, c in seeds]
-        written += [write_png(curves_figure([c for _, c in seeds], title),
+        written += [write_png(curves_figure([c for _, c in seeds], title,
+                                            [f"seed {s}" for s, _ in seeds]),
                               out / label / SEEDS_PNG),
                     write_text(json.dumps(finite_or_null(seeds_summary(states)), indent=1,
                                           allow_nan=False), out / label / SEEDS_SUMMARY)]

@@ -55,10 +55,11 @@ def seeds_figure(states: list[dict], config: RLConfig) -> Any:
                          "receivers")
 
 
-def curves_figure(curves: list[list[dict]], title: str) -> Any:
-    """Success rate and return against env steps for every seed's curve (thin lines) and their
-    IQM with its 95 % stratified bootstrap band (:func:`handover_eval.rl.statistics.curve_band`)
-    over the points the seeds share."""
+def curves_figure(curves: list[list[dict]], title: str,
+                  labels: list[str] | None = None) -> Any:
+    """Success rate and return against env steps for every seed's curve (thin lines, named by
+    ``labels`` in the legend) and their IQM with its 95 % stratified bootstrap band
+    (:func:`handover_eval.rl.statistics.curve_band`) over the points the seeds share."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -71,8 +72,8 @@ def curves_figure(curves: list[list[dict]], title: str) -> Any:
                                        ("return", "return (HandoverReward)")), strict=True):
         values = [[r[key] for r in c] for c in curves]
         steps = [r["steps"] for r in min(curves, key=len)]
-        for v, c in zip(values, curves, strict=True):
-            ax.plot([r["steps"] for r in c], v, lw=0.8, alpha=0.5)
+        for v, c, name in zip(values, curves, labels or [None] * len(curves), strict=True):
+            ax.plot([r["steps"] for r in c], v, lw=0.8, alpha=0.6, label=name)
         mid, low, high = curve_band(values)
         ax.plot(steps, mid, color="k", lw=2, label=f"IQM of {len(curves)} seeds")
         ax.fill_between(steps, low, high, color="k", alpha=0.15, label="95 % CI (bootstrap)")
