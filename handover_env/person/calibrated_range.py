@@ -155,10 +155,20 @@ def check(
     return out
 
 
+def _decimals(value: float, low: float, high: float) -> int:
+    """The fewest decimals, 2 to 6, at which ``value`` reads apart from both bounds (a body
+    height of 1.7604 m is outside [1.68, 1.76] only at four)."""
+    for d in range(2, 6):
+        if f"{value:.{d}f}" not in (f"{low:.{d}f}", f"{high:.{d}f}"):
+            return d
+    return 6
+
+
 def warning_text(outside: list[tuple[str, float, tuple[float, float]]], what: str) -> str:
-    """One warning naming every field outside the range, e.g. for ``what = "walker (seed 3)"``."""
-    parts = [f"{FIELDS[n][0]} ({n}) {v:.2f} {FIELDS[n][1]} outside [{lo:.2f}, {hi:.2f}]"
-             for n, v, (lo, hi) in outside]
+    """One warning naming every field outside the range, e.g. for ``what = "walker (seed 3)"``;
+    each value and its range at the decimals that tell them apart (:func:`_decimals`)."""
+    parts = [f"{FIELDS[n][0]} ({n}) {v:.{d}f} {FIELDS[n][1]} outside [{lo:.{d}f}, {hi:.{d}f}]"
+             for n, v, (lo, hi) in outside for d in (_decimals(v, lo, hi),)]
     return (f"{what} is outside the walks the simulated person was calibrated on: "
             + "; ".join(parts)
             + " (docs/calibration/calibrated_range.md); the person's behaviour there is "

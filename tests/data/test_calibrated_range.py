@@ -86,6 +86,9 @@ def test_check_names_the_field_value_and_range() -> None:
     text = warning_text(outside, "walker (seed 3)")
     assert "walker (seed 3)" in text and "speed" in text and "1.60 m/s outside [0.60, 1.10]" in text
     assert "pause" in text and "calibrated_range.md" in text
+    # a value just past a bound reads apart from it
+    text = warning_text([("height", 1.7604, (1.68, 1.76))], "walker (seed 4)")
+    assert "1.7604 m outside [1.6800, 1.7600]" in text, text
     with pytest.raises(ValueError, match="unknown calibrated-range field"):
         check({"sped": 1.0}, rng)
     with pytest.raises(ValueError, match="low <= high"):
