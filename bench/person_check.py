@@ -7,7 +7,8 @@ public-dataset folder) and prints, per agent and receiver set (``walker-id``, ``
 * the reach statistic (right shoulder to the object when the person took it, ``reach_distance``,
   episodes with a grasp): median and SD; on replays beside the recorded reach of the same
   recordings (``object_shoulder_transfer``,
-  :func:`handover_eval.closedloop.reach_check.reach_agreement`) and their ratio;
+  :func:`handover_eval.closedloop.reach_check.reach_agreement`), their ratio, and the median's
+  difference with its 95 % bootstrap interval over the recordings (:func:`median_difference_ci`);
 * success with its Wilson 95 % interval; on replays the median |Δt| and |Δx| of the grasp against
   the recorded transfer;
 * ``missed`` episodes and how many ended before the recorded transfer (replays);
@@ -73,6 +74,7 @@ def summarise(rows: list[dict[str, str]], recorded: dict[str, dict[str, float]],
                 row["rec_n"] = int(paired.sum())
                 row["sim_median_paired"] = float(np.median(reach[paired]))
                 row["rec_median"] = float(np.median(rec[paired]))
+                row["median_diff_ci"] = median_difference_ci(reach[paired], rec[paired])
                 row["sim_sd_paired"] = float(np.std(reach[paired], ddof=1))
                 row["rec_sd"] = float(np.std(rec[paired], ddof=1))
                 dt = np.abs([_f(r["delta_t"]) for r in sel])
@@ -97,6 +99,20 @@ def summarise(rows: list[dict[str, str]], recorded: dict[str, dict[str, float]],
     return out
 
 
+def median_difference_ci(sim: np.ndarray, rec: np.ndarray, reps: int = 10_000,
+                         seed: int = 0) -> tuple[float, float, float]:
+    """``(d, low, high)``: the simulated minus the recorded median over the same recordings, and
+    its 95 % percentile interval over ``reps`` bootstrap resamples of the recordings (each
+    resample keeps a recording's simulated and recorded reach together)."""
+    sim, rec = np.asarray(sim, dtype=np.float64), np.asarray(rec, dtype=np.float64)
+    if sim.shape != rec.shape or sim.ndim != 1 or sim.size < 2:
+        return math.nan, math.nan, math.nan
+    idx = np.random.default_rng(seed).integers(0, sim.size, size=(reps, sim.size))
+    diffs = np.median(sim[idx], axis=1) - np.median(rec[idx], axis=1)
+    low, high = np.percentile(diffs, [2.5, 97.5])
+    return float(np.median(sim) - np.median(rec)), float(low), float(high)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("run", help="an evaluate.py closed-loop output folder")
@@ -117,7 +133,9 @@ def main() -> None:
         if "rec_sd" in s:
             line += (f" | paired n={s['rec_n']} sim {s['sim_median_paired']:.3f}/"
                      f"{s['sim_sd_paired']:.3f} rec {s['rec_median']:.3f}/{s['rec_sd']:.3f} "
-                     f"SD ratio {s['sim_sd_paired'] / s['rec_sd']:.2f}  |dt| "
+                     f"SD ratio {s['sim_sd_paired'] / s['rec_sd']:.2f}  median sim - rec "
+                     f"{s['median_diff_ci'][0]:+.3f} [{s['median_diff_ci'][1]:+.3f}, "
+                     f"{s['median_diff_ci'][2]:+.3f}] m  |dt| "
                      f"{s['abs_dt_median']:.3f} s |dx| {s['abs_dx_median']:.3f} m  missed "
                      f"{s['missed']} ({s['missed_before_transfer']} before the transfer)")
         line += (f" | penetration max {1000 * s['penetration_max']:.1f} mm | contact > "
