@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 from html import escape
 from typing import Any
 
-from handover_eval.benchmark.leaderboard import rank_key
+from handover_eval.benchmark.leaderboard import ci_cell, rank_key
 from handover_eval.benchmark.outcomes import CHECKS
 from handover_eval.benchmark.protocol import (
     CLOSEDLOOP_SETS,
@@ -121,17 +121,6 @@ def pct(c: dict | None) -> str:
     return f"{100 * c['value']:.0f} % [{100 * c['low']:.0f}, {100 * c['high']:.0f}]"
 
 
-def ci(c: dict | None, digits: int, key: str = "value") -> str:
-    """'2.31 [2.20, 2.45]', or for a paired difference ('diff') '+0.04 [+0.02, +0.07] *' with
-    the star when the CI excludes 0 (the Markdown table's cell)."""
-    if c is None or c.get(key) is None or c.get("low") is None:
-        return NONE
-    sign = "+" if key == "diff" else ""
-    star = " *" if key == "diff" and (c["low"] > 0 or c["high"] < 0) else ""
-    return (f"{c[key]:{sign}.{digits}f} [{c['low']:{sign}.{digits}f}, "
-            f"{c['high']:{sign}.{digits}f}]{star}")
-
-
 def _td(text: str, sort: str | None = None, cls: str = "", inner: str | None = None) -> str:
     """One cell: ``text`` escaped (or ``inner``, already HTML), ``sort`` its data-sort value."""
     attrs = (f' class="{cls}"' if cls else "") + (
@@ -191,12 +180,12 @@ def _ranking(results: Sequence[tuple[str, dict]]) -> str:
             c = _get(cl, s, "success")
             cells.append(_td_ci(pct(c), _num(_get(c, "value"))))
         c = _get(cl, "all", "handover_time")
-        cells.append(_td_ci(ci(c, 2), _num(_get(c, "value"))))
+        cells.append(_td_ci(ci_cell(c, 2), _num(_get(c, "value"))))
         c = _get(cl, "far-pass", "paired", "success")
-        cells.append(_td_ci(ci(c, 2, "diff"), _num(_get(c, "diff"))))
+        cells.append(_td_ci(ci_cell(c, 2, "diff"), _num(_get(c, "diff"))))
         for m in ("rms_now_axis_mm", "ade_10_mm", "fde_10_mm"):
             c = _get(ol, "all", m)
-            cells.append(_td_ci(ci(c, 1), _num(_get(c, "value"))))
+            cells.append(_td_ci(ci_cell(c, 1), _num(_get(c, "value"))))
         rows.append(f'<tr id="rank-{i}">' + "".join(cells) + "</tr>")
     return _table(RANK_HEADER, rows, "ranking", text=(1,))
 
@@ -220,9 +209,9 @@ def _closed_rows(cl: dict, rank: int) -> str:
         cells = [_td(s, s, "text"), _td(str(m["n"]), _num(m["n"])),
                  _td_ci(pct(succ), _num(_get(succ, "value"))),
                  _td(str(_get(succ, "k")), _num(_get(succ, "k"))),
-                 _td_ci(ci(ht, 2), _num(_get(ht, "value"))),
-                 _td_ci(ci(ps, 2, "diff"), _num(_get(ps, "diff"))),
-                 _td_ci(ci(pt, 2, "diff"), _num(_get(pt, "diff")))]
+                 _td_ci(ci_cell(ht, 2), _num(_get(ht, "value"))),
+                 _td_ci(ci_cell(ps, 2, "diff"), _num(_get(ps, "diff"))),
+                 _td_ci(ci_cell(pt, 2, "diff"), _num(_get(pt, "diff")))]
         ff = m.get("first_failure") or {}
         cells += [_td(str(ff.get(c, NONE)), _num(ff.get(c))) for c in CHECKS]
         rows.append(f'<tr data-set="{escape(s)}">' + "".join(cells) + "</tr>")
@@ -242,7 +231,7 @@ def _open_rows(ol: dict, rank: int) -> str:
             folds = (f"folds {c['fold_mean']:.1f} ± {c['fold_std']:.1f}"
                      if c and c.get("fold_mean") is not None and c.get("fold_std") is not None
                      else "")
-            cells.append(_td_ci(ci(c, 1), _num(_get(c, "value")),
+            cells.append(_td_ci(ci_cell(c, 1), _num(_get(c, "value")),
                                 f' <small class="sub">{escape(folds)}</small>' if folds else ""))
         rows.append(f'<tr data-set="{escape(s)}">' + "".join(cells) + "</tr>")
     return _table(["set", "episodes", *(f"{v} (mm)" for v in OPENLOOP_METRICS.values())], rows,

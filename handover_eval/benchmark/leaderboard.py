@@ -28,6 +28,7 @@ from handover_eval.benchmark.files import (
     sha256_episode_file,
 )
 from handover_eval.benchmark.protocol import CLOSEDLOOP_SETS, REFERENCE_AGENT, TRACKS
+from handover_eval.closedloop.stats import ci_excludes_zero
 from handover_eval.reporting import markdown_table
 
 
@@ -134,11 +135,14 @@ def _pct(c: dict | None) -> str:
     return f"{100 * c['value']:.0f} % [{100 * c['low']:.0f}, {100 * c['high']:.0f}]"
 
 
-def _ci(c: dict | None, digits: int, key: str = "value") -> str:
+def ci_cell(c: dict | None, digits: int, key: str = "value") -> str:
+    """'2.31 [2.20, 2.45]', or for a paired difference ('diff') '+0.04 [+0.02, +0.07] *' with
+    the star when the CI excludes 0; '–' when there is none (the leaderboard's cell, on the
+    Markdown table and the HTML page alike)."""
     if c is None or c.get(key) is None or c.get("low") is None:
         return "–"
     sign = "+" if key == "diff" else ""
-    star = " *" if key == "diff" and (c["low"] > 0 or c["high"] < 0) else ""
+    star = " *" if key == "diff" and ci_excludes_zero(c["low"], c["high"]) else ""
     return f"{c[key]:{sign}.{digits}f} [{c['low']:{sign}.{digits}f}, " \
            f"{c['high']:{sign}.{digits}f}]{star}"
 
@@ -155,11 +159,11 @@ def leaderboard_markdown(results: list[tuple[str, dict]]) -> str:
             r["agent"]["name"] + (" (quick)" if r["quick"] else ""),
             _pct(_get(cl, "all", "success")),
             *(_pct(_get(cl, s, "success")) for s in CLOSEDLOOP_SETS),
-            _ci(_get(cl, "all", "handover_time"), 2),
-            _ci(_get(cl, "far-pass", "paired", "success"), 2, "diff"),
-            _ci(_get(ol, "all", "rms_now_axis_mm"), 1),
-            _ci(_get(ol, "all", "ade_10_mm"), 1),
-            _ci(_get(ol, "all", "fde_10_mm"), 1),
+            ci_cell(_get(cl, "all", "handover_time"), 2),
+            ci_cell(_get(cl, "far-pass", "paired", "success"), 2, "diff"),
+            ci_cell(_get(ol, "all", "rms_now_axis_mm"), 1),
+            ci_cell(_get(ol, "all", "ade_10_mm"), 1),
+            ci_cell(_get(ol, "all", "fde_10_mm"), 1),
         ])
     header = ["rank", "agent", "success, all", *(f"success, {s}" for s in CLOSEDLOOP_SETS),
               "handover time (s)", f"far-pass success − {REFERENCE_AGENT}",

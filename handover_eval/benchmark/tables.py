@@ -30,6 +30,7 @@ from handover_eval.benchmark.protocol import (
 )
 from handover_eval.closedloop.stats import (
     bootstrap_ci,
+    ci_excludes_zero,
     pair_up,
     paired_difference,
     stable_seed,
@@ -157,7 +158,7 @@ def ci_text(c: dict | None, digits: int, key: str = "value") -> str:
     """'1.82 [1.75, 1.90]' or '–'."""
     if c is None or c.get(key) is None or not math.isfinite(c[key]):
         return "–"
-    star = " *" if key == "diff" and (c["low"] > 0 or c["high"] < 0) else ""
+    star = " *" if key == "diff" and ci_excludes_zero(c["low"], c["high"]) else ""
     sign = "+" if key == "diff" else ""
     return (f"{c[key]:{sign}.{digits}f} [{c['low']:{sign}.{digits}f}, "
             f"{c['high']:{sign}.{digits}f}]{star}")

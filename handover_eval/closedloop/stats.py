@@ -146,7 +146,12 @@ class PairedDifference:
     @property
     def excludes_zero(self) -> bool:
         """True when the CI lies entirely above or below 0."""
-        return self.n > 0 and (self.low > 0 or self.high < 0)
+        return self.n > 0 and ci_excludes_zero(self.low, self.high)
+
+
+def ci_excludes_zero(low: float, high: float) -> bool:
+    """True when the interval [low, high] lies entirely above or below 0 (the tables' star)."""
+    return low > 0 or high < 0
 
 
 def paired_difference(

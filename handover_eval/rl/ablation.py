@@ -52,6 +52,8 @@ RL_AGENTS = ("rl-residual", "rl-scratch")
 #: The scores of an agent per set (:func:`agent_scores`), as the table's CSV names them.
 METRICS = ("n", "success", "handover_time", "contact_over", "robot_jerk", "premature",
            "premature_before_reach")
+#: A row's learning-curve metrics at its start and end (:func:`_curve_point`).
+CURVE_METRICS = ("success", "handover_time")
 #: The paired metrics of a row (:func:`paired_differences`).
 PAIRED_METRICS = ("success", "handover_time")
 MAX_PAIRED_BYTES = 5_000_000
@@ -157,6 +159,7 @@ def paired_differences(rows: Sequence[Mapping[str, str]], agent: str, path: Path
 
 
 def _curve_point(point: Mapping[str, float]) -> dict[str, float]:
+    """A learning-curve point as the row's :data:`CURVE_METRICS`."""
     return {"success": float(point["success_rate"]), "handover_time": float(point["handover_time"])}
 
 
@@ -267,7 +270,7 @@ def same_scores(a: AgentScores, b: AgentScores) -> bool:
 def _table_columns() -> tuple[str, ...]:
     """The columns of an ``rl_ablation.csv`` that :func:`read_table` reads."""
     scores = [f"{name}_{m}" for name in SETS for m in METRICS]
-    curve = [f"curve_{at}_{m}" for at in ("start", "end") for m in ("success", "handover_time")]
+    curve = [f"curve_{at}_{m}" for at in ("start", "end") for m in CURVE_METRICS]
     paired = [f"paired_{name}_{m}{end}" for name in SETS for m in PAIRED_METRICS
               for end in ("", "_low", "_high")]
     return ("configuration", "seed", "agent", *scores, *curve, "steps", "wall_s", "reference",
@@ -278,6 +281,7 @@ def read_table(path: Path) -> tuple[list[AblationRow], list[AgentScores]]:
     """The seed rows and the reference rows of an earlier ``rl_ablation.csv`` of this command
     (a regular UTF-8 file inside its folder, at most :data:`MAX_TABLE_BYTES`; every number
     checked; one :class:`AblationError` naming the file and the field)."""
+    from handover_eval.closedloop.stats import ci_excludes_zero
     from handover_eval.reporting import read_folder_csv
 
     path = Path(path)
@@ -297,6 +301,10 @@ def read_table(path: Path) -> tuple[list[AblationRow], list[AgentScores]]:
             raise AblationError(f"{path}: {key} {line[key]!r} is not a whole number >= 0")
         return int(v)
 
+    def curve(line: Mapping[str, str], at: str) -> dict[str, float]:
+        return {m: number(line, f"curve_{at}_{m}", finite=m == "success")
+                for m in CURVE_METRICS}
+
     def scores(line: Mapping[str, str]) -> AgentScores:
         return AgentScores(line["agent"], {
             name: {m: number(line, f"{name}_{m}", finite=m != "handover_time") for m in METRICS}
@@ -315,13 +323,10 @@ def read_table(path: Path) -> tuple[list[AblationRow], list[AgentScores]]:
             for m in PAIRED_METRICS:
                 d, lo, hi = (number(line, f"paired_{name}_{m}{end}")
                              for end in ("", "_low", "_high"))
-                paired.setdefault(name, {})[m] = (d, lo, hi, lo > 0 or hi < 0)
+                paired.setdefault(name, {})[m] = (d, lo, hi, ci_excludes_zero(lo, hi))
         rows.append(AblationRow(
             label=line["configuration"], seed=whole(line, "seed"), flags=line.get("flags", ""),
-            curve_start={m: number(line, f"curve_start_{m}", m == "success")
-                         for m in ("success", "handover_time")},
-            curve_end={m: number(line, f"curve_end_{m}", m == "success")
-                       for m in ("success", "handover_time")},
+            curve_start=curve(line, "start"), curve_end=curve(line, "end"),
             steps=whole(line, "steps"), wall_s=number(line, "wall_s"), scores=scores(line),
             reference=line["reference"], paired=paired))
     return rows, refs
